@@ -13,7 +13,7 @@ Example::
     (1.5, 1.0, 'scara_left_gripper_joint')
 """
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cached_property, lru_cache
 import io
 from pathlib import Path
 from typing import Dict, Optional, Tuple, Union
@@ -65,6 +65,8 @@ class ArmModel:
     :ivar link_1, link_2, quill: mass properties of the moving links.
     :ivar link_radius: radius of the link cylinders (half the profile thickness), m.
     :ivar quill_radius, quill_length: the quill rod, m (it rises from the tool tip).
+    :ivar reach_min, reach_max: allowed tool distance from the shoulder axis, m (the geometric
+        annulus |L1 - L2| .. L1 + L2 shrunk by the cell's safety epsilon).
     """
 
     name: str
@@ -87,6 +89,8 @@ class ArmModel:
     link_radius: float
     quill_radius: float
     quill_length: float
+    reach_min: float
+    reach_max: float
 
     @property
     def base_position(self) -> np.ndarray:
@@ -97,6 +101,19 @@ class ArmModel:
     def tool_z0(self) -> float:
         """Tool tip height in the base frame at ``d3 = 0``, m."""
         return self.shoulder_height + self.elbow_rise
+
+    @cached_property
+    def constants(self) -> Tuple[float, ...]:
+        """Plain-float copies for scalar hot paths (IK in a few microseconds).
+
+        ``(l1, l2, tool_z0, reach_min, reach_max, R00, R01, R02, R10, R11, R12, R20, R21, R22,
+        bx, by, bz, lo1, hi1, lo2, hi2, lo3, hi3)``: lengths, reach window, base rotation
+        (row-major), base origin and the joint position limits.
+        """
+        return (self.l1, self.l2, self.tool_z0, self.reach_min, self.reach_max,
+                *map(float, self.base[:3, :3].ravel()),
+                *map(float, self.base[:3, 3]),
+                *(float(v) for pair in zip(self.lower, self.upper) for v in pair))
 
     @property
     def moving_mass(self) -> float:
@@ -205,7 +222,8 @@ def _cylinder(urdf: yourdfpy.URDF, link: str):
     return float(geom.radius), float(geom.length)
 
 
-def _arm_from_urdf(urdf: yourdfpy.URDF, name: str, acceleration: np.ndarray) -> ArmModel:
+def _arm_from_urdf(urdf: yourdfpy.URDF, name: str, acceleration: np.ndarray,
+                   reach: Tuple[float, float]) -> ArmModel:
     jn = (f'{name}_joint_1', f'{name}_joint_2', f'{name}_gripper_joint')
     joints = [urdf.joint_map[j] for j in jn]
     base = np.asarray(urdf.joint_map[f'{name}_base_joint'].origin, dtype=float)
@@ -225,14 +243,16 @@ def _arm_from_urdf(urdf: yourdfpy.URDF, name: str, acceleration: np.ndarray) -> 
         max_velocity=_frozen([j.limit.velocity for j in joints]),
         max_acceleration=_frozen(acceleration),
         max_effort=_frozen([j.limit.effort for j in joints]),
-        viscous=_frozen([j.dynamics.damping or 0.0 for j in joints]),
-        coulomb=_frozen([j.dynamics.friction or 0.0 for j in joints]),
+        viscous=_frozen([(j.dynamics.damping if j.dynamics else None) or 0.0 for j in joints]),
+        coulomb=_frozen([(j.dynamics.friction if j.dynamics else None) or 0.0 for j in joints]),
         link_1=_link_inertia(urdf, f'{name}_link_1'),
         link_2=_link_inertia(urdf, f'{name}_link_2'),
         quill=_link_inertia(urdf, f'{name}_quill'),
         link_radius=link_radius,
         quill_radius=quill_radius,
         quill_length=quill_length,
+        reach_min=float(reach[0]),
+        reach_max=float(reach[1]),
     )
 
 
@@ -248,7 +268,8 @@ def _load_cell(profile: Optional[str], config_path: str) -> CellModel:
     lim = cfg['joints']
     acc = [lim['revolute_acceleration'], lim['revolute_acceleration'], lim['quill_acceleration']]
     names = tuple(cfg['robots']['names'])
-    arms = tuple(_arm_from_urdf(urdf, n, acc) for n in names)
+    reach = (cfg['reach']['min_radius'], cfg['reach']['max_radius'])
+    arms = tuple(_arm_from_urdf(urdf, n, acc, reach) for n in names)
     classes = tuple(cfg['items']['classes'])
     bins = {(n, c): _frozen(np.asarray(urdf.joint_map[f'{n}_bin_{c}_joint'].origin)[:3, 3])
             for n in names for c in classes}

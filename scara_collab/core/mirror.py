@@ -1,0 +1,43 @@
+"""Leader-follower mirroring across the conveyor.
+
+A leader target ``P_L`` (world) maps to the follower target
+``P_R = B_R + diag(1, -1, 1) (P_L - B_L)``: the same move relative to each base, reflected
+across the base's x axis, z unchanged (both bases at the same height). In joint space the
+reflection negates both angles: ``(theta1, theta2, d3) -> (-theta1, -theta2, d3)``.
+
+Example (the seeds' case study 3)::
+
+    >>> mirror_point(cell.leader, cell.follower, [2.0, -3.0, 0.3])
+    array([2. , 1. , 0.3])
+"""
+from typing import Union
+
+import numpy as np
+
+from scara_collab.core.model import ArmModel
+
+ArrayLike = Union[np.ndarray, list, tuple]
+_REFLECT = np.array([1.0, -1.0, 1.0])
+
+
+def mirror_point(src: ArmModel, dst: ArmModel, p: ArrayLike) -> np.ndarray:
+    """Mirror world point(s) ``(..., 3)`` relative to ``src``'s base onto ``dst``'s base.
+
+    The reflection is taken in the base frames (so it also holds for rotated bases):
+    ``p_dst_base = diag(1, -1, 1) p_src_base``. Applying it twice (src -> dst -> src) is the
+    identity.
+    """
+    p = np.asarray(p, dtype=float)
+    local = (p - src.base[:3, 3]) @ src.base[:3, :3]
+    return (local * _REFLECT) @ dst.base[:3, :3].T + dst.base[:3, 3]
+
+
+def mirror_joints(q: ArrayLike) -> np.ndarray:
+    """Joint-space mirror ``(..., 3)``: negate theta1 and theta2, keep d3.
+
+    For two arms with the same geometry, ``fk(dst, mirror_joints(q)) ==
+    mirror_point(src, dst, fk(src, q))``; elbow up maps to elbow down, which is the mirror
+    image of the leader's posture.
+    """
+    q = np.asarray(q, dtype=float)
+    return q * np.array([-1.0, -1.0, 1.0])

@@ -1,0 +1,336 @@
+"""Trajectories: joint interpolation (the baseline) and the straight Cartesian line.
+
+The straight line follows the Lagrange-multiplier note (seeds/003): at every point the joint
+velocity is the minimum-norm solution of ``J q_dot = v``,
+
+    min 1/2 |q_dot|^2  s.t.  J q_dot = v   ->   q_dot = J^T (J J^T)^-1 v,
+
+damped near singularity (DLS), with closed-loop correction of the drift: each step adds
+``J^+ (p_line - fk(q))`` and repeats it (Newton) until the tool is on the line, so the planned
+path stays on the line to ~1e-12 m instead of accumulating integration error.
+
+Both paths are timed the same way: a time-optimal parameterisation ``s(t)`` of the geometric
+path (forward-backward integration in the phase plane ``(s, s_dot^2)``) under every joint's
+velocity and acceleration limit, starting and ending at rest. The result is sampled at the
+controller period.
+
+Example::
+
+    >>> traj = line_move(arm, q0, target)            # world-frame target
+    >>> path_metrics(traj, fk(arm, q0), target).max_deviation < 1e-9
+    True
+"""
+from dataclasses import asdict, dataclass
+from typing import Optional, Union
+
+import numpy as np
+
+from scara_collab.core.kinematics import (
+    dls_solve, fk, ik, IKError, jacobian, JOINT_LIMIT, within_limits, world_to_base)
+from scara_collab.core.model import ArmModel
+
+ArrayLike = Union[np.ndarray, list, tuple]
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A timed joint trajectory of one arm, sampled at a fixed period.
+
+    :ivar t: ``(N,)`` time from the start of the move, s (``t[0] = 0``).
+    :ivar q, qd, qdd: ``(N, 3)`` joint positions, velocities, accelerations.
+    :ivar p: ``(N, 3)`` tool-tip positions in world, m.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    p: np.ndarray
+
+    @property
+    def duration(self) -> float:
+        """Total time, s."""
+        return float(self.t[-1])
+
+    def sample(self, t: ArrayLike) -> np.ndarray:
+        """Joint positions at time(s) ``t`` (held before the start and after the end)."""
+        t = np.asarray(t, dtype=float)
+        return np.stack([np.interp(t, self.t, self.q[:, j]) for j in range(3)], axis=-1)
+
+
+@dataclass(frozen=True)
+class PathMetrics:
+    """How a tool path compares with the straight segment between its ends.
+
+    :ivar max_deviation: largest distance of the tool from the segment, m.
+    :ivar path_length: length of the tool path, m.
+    :ivar straight_length: length of the segment, m.
+    :ivar duration: s.
+    :ivar peak_speed: ``(3,)`` peak absolute joint velocity.
+    :ivar peak_acceleration: ``(3,)`` peak absolute joint acceleration.
+    :ivar rms_jerk: RMS norm of the tool's jerk, m/s^3 (smoothness).
+    """
+
+    max_deviation: float
+    path_length: float
+    straight_length: float
+    duration: float
+    peak_speed: np.ndarray
+    peak_acceleration: np.ndarray
+    rms_jerk: float
+
+    def as_dict(self) -> dict:
+        """Plain-Python copy (lists, floats) for JSON reports."""
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else float(v))
+                for k, v in asdict(self).items()}
+
+
+def segment_deviation(p: ArrayLike, a: ArrayLike, b: ArrayLike) -> np.ndarray:
+    """Distance of point(s) ``p`` ``(..., 3)`` from the segment ``a``-``b``, m."""
+    p, a, b = (np.asarray(x, dtype=float) for x in (p, a, b))
+    ab = b - a
+    denom = float(ab @ ab)
+    s = np.clip(((p - a) @ ab) / denom, 0.0, 1.0) if denom > 0 else np.zeros(p.shape[:-1])
+    return np.linalg.norm(p - (a + s[..., None] * ab), axis=-1)
+
+
+def path_metrics(traj: Trajectory, start: Optional[ArrayLike] = None,
+                 end: Optional[ArrayLike] = None) -> PathMetrics:
+    """Deviation from the straight line, length, duration, peak joint rates, jerk."""
+    p = traj.p
+    start = p[0] if start is None else np.asarray(start, dtype=float)
+    end = p[-1] if end is None else np.asarray(end, dtype=float)
+    jerk = np.zeros(1)
+    if len(traj.t) > 3:
+        dt = np.diff(traj.t).mean()
+        jerk = np.linalg.norm(np.diff(p, n=3, axis=0), axis=1) / dt ** 3
+    return PathMetrics(
+        max_deviation=float(segment_deviation(p, start, end).max()),
+        path_length=float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()),
+        straight_length=float(np.linalg.norm(end - start)),
+        duration=traj.duration,
+        peak_speed=np.abs(traj.qd).max(axis=0),
+        peak_acceleration=np.abs(traj.qdd).max(axis=0),
+        rms_jerk=float(np.sqrt(np.mean(jerk ** 2))),
+    )
+
+
+def _accel_bounds(dq, d2q, x, amax):
+    """Bounds on s_ddot from ``|dq s_ddot + d2q x| <= amax`` per joint; arrays ``(M, 3)``."""
+    moving = np.abs(dq) > 1e-12
+    safe = np.where(moving, dq, 1.0)
+    lo = np.where(moving, (-amax - d2q * x[:, None]) / safe, -np.inf)
+    hi = np.where(moving, (amax - d2q * x[:, None]) / safe, np.inf)
+    lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
+    # a joint that does not move along the path still feels d2q x: bound x instead (below)
+    return lo.max(axis=1), hi.min(axis=1)
+
+
+def _max_sdot_sq(dq, d2q, vmax, amax):
+    """Largest ``x = s_dot^2`` per grid point allowed by velocity and acceleration limits."""
+    with np.errstate(divide='ignore'):
+        xv = np.min(np.where(np.abs(dq) > 1e-12, (vmax / np.abs(dq)) ** 2, np.inf), axis=1)
+    # acceleration: the interval of s_ddot must be non-empty; feasibility shrinks with x
+    lo_x, hi_x = np.zeros(len(dq)), np.where(np.isfinite(xv), xv, 1e6)
+    for _ in range(60):  # bisection, vectorised over the grid
+        mid = 0.5 * (lo_x + hi_x)
+        umin, umax = _accel_bounds(dq, d2q, mid, amax)
+        ok = umin <= umax
+        lo_x, hi_x = np.where(ok, mid, lo_x), np.where(ok, hi_x, mid)
+    return np.minimum(xv, lo_x)
+
+
+def time_optimal_scaling(s: np.ndarray, dq: np.ndarray, d2q: np.ndarray, vmax: ArrayLike,
+                         amax: ArrayLike) -> np.ndarray:
+    """Fastest ``s_dot`` along a path ``q(s)`` under joint velocity and acceleration limits.
+
+    Classic phase-plane forward-backward integration on ``x = s_dot^2`` (Bobrow, Shin and
+    McKay): the backward pass decelerates as hard as allowed into the end (``x = 0``), the
+    forward pass accelerates as hard as allowed from rest, each capped by the maximum
+    velocity curve. Between grid points ``x`` changes linearly in ``s`` (constant
+    ``s_ddot``).
+
+    :param s: ``(M,)`` increasing path parameter.
+    :param dq: ``(M, 3)`` ``dq/ds``; :param d2q: ``(M, 3)`` ``d2q/ds2``.
+    :param vmax, amax: ``(3,)`` joint limits.
+    :return: ``(M,)`` ``s_dot`` (0 at both ends).
+    """
+    vmax, amax = np.asarray(vmax, float), np.asarray(amax, float)
+    xmax = _max_sdot_sq(dq, d2q, vmax, amax)
+    ds = np.diff(s)
+    m = len(s)
+    back = np.empty(m)
+    back[-1] = 0.0
+    for i in range(m - 2, -1, -1):
+        umin, _ = _accel_bounds(dq[i + 1:i + 2], d2q[i + 1:i + 2], back[i + 1:i + 2], amax)
+        back[i] = min(xmax[i], back[i + 1] - 2.0 * ds[i] * min(umin[0], 0.0))
+    x = np.empty(m)
+    x[0] = 0.0
+    for i in range(m - 1):
+        _, umax = _accel_bounds(dq[i:i + 1], d2q[i:i + 1], x[i:i + 1], amax)
+        x[i + 1] = min(back[i + 1], xmax[i + 1], x[i] + 2.0 * ds[i] * max(umax[0], 0.0))
+    return np.sqrt(np.maximum(x, 0.0))
+
+
+def _interp_rows(x, xp, fp):
+    """Linear interpolation of each column of ``fp`` ``(M, 3)`` at ``x``."""
+    return np.stack([np.interp(x, xp, fp[:, j]) for j in range(fp.shape[1])], axis=-1)
+
+
+def _timed(arm: ArmModel, s, q_of_s, dq, d2q, dt: float, refine=None) -> Trajectory:
+    """Time a geometric path ``q(s)``, sample it every ``dt``, and check the limits.
+
+    Between grid points ``s_ddot`` is constant, so ``s(t)`` is evaluated exactly (piecewise
+    quadratic) and ``q_dot = q' s_dot``, ``q_ddot = q' s_ddot + q'' s_dot^2`` come from the
+    path derivatives, not from finite differences. If a sampled rate still exceeds a limit by
+    more than rounding (the grid is finite), time is stretched uniformly until none does.
+    """
+    vmax, amax = arm.max_velocity, arm.max_acceleration
+    sdot = time_optimal_scaling(s, dq, d2q, vmax, amax)
+    ds = np.diff(s)
+    seg = 2.0 * ds / np.maximum(sdot[:-1] + sdot[1:], 1e-12)
+    u = (sdot[1:] ** 2 - sdot[:-1] ** 2) / (2.0 * ds)  # s_ddot on each interval
+    t_grid = np.concatenate(([0.0], np.cumsum(seg)))
+    stretch = 1.0
+    for _ in range(20):
+        total = t_grid[-1] * stretch
+        n = max(int(np.ceil(total / dt - 1e-9)), 1)
+        t = np.linspace(0.0, total, n + 1)
+        tau = t / stretch
+        i = np.clip(np.searchsorted(t_grid, tau, side='right') - 1, 0, len(u) - 1)
+        h = tau - t_grid[i]
+        s_t = np.minimum(s[i] + sdot[i] * h + 0.5 * u[i] * h * h, s[-1])
+        sd_t = np.maximum(sdot[i] + u[i] * h, 0.0) / stretch
+        sdd_t = u[i] / stretch ** 2
+        sd_t[[0, -1]] = 0.0
+        q = _interp_rows(s_t, s, q_of_s)
+        if refine is not None:
+            q = refine(s_t, q)
+        dq_t, d2q_t = _interp_rows(s_t, s, dq), _interp_rows(s_t, s, d2q)
+        qd = dq_t * sd_t[:, None]
+        qdd = dq_t * sdd_t[:, None] + d2q_t * (sd_t ** 2)[:, None]
+        ratio = max(np.max(np.abs(qd) / vmax), np.sqrt(np.max(np.abs(qdd) / amax)))
+        if ratio <= 1.0:
+            break
+        stretch *= ratio * (1.0 + 1e-6)
+    return Trajectory(t=t, q=q, qd=qd, qdd=qdd, p=fk(arm, q))
+
+
+def _grid(length: float, step: float = 0.002, minimum: int = 200) -> np.ndarray:
+    return np.linspace(0.0, 1.0, max(minimum, int(np.ceil(length / step)) + 1))
+
+
+def joint_move(arm: ArmModel, q0: ArrayLike, q1: ArrayLike, dt: float = 0.01) -> Trajectory:
+    """Baseline: straight in joint space, all joints synchronised, time-optimal.
+
+    :param q0, q1: start and goal joint vectors ``(3,)`` (inside the limits).
+    :param dt: sample period, s.
+    :raises IKError: if an end is outside the joint limits.
+    """
+    q0, q1 = np.asarray(q0, float), np.asarray(q1, float)
+    if not (within_limits(arm, q0) and within_limits(arm, q1)):
+        raise IKError(JOINT_LIMIT, 'joint move end outside the limits')
+    s = _grid(float(np.linalg.norm(q1 - q0)))
+    dq = np.broadcast_to(q1 - q0, (len(s), 3)).copy()
+    if not np.any(dq):  # nothing to move: hold for one sample
+        q = np.stack([q0, q0])
+        zeros = np.zeros((2, 3))
+        return Trajectory(t=np.array([0.0, dt]), q=q, qd=zeros, qdd=zeros, p=fk(arm, q))
+    return _timed(arm, s, q0 + s[:, None] * (q1 - q0), dq, np.zeros_like(dq), dt)
+
+
+def _closest_to_axis(arm: ArmModel, a: np.ndarray, b: np.ndarray) -> float:
+    """Smallest horizontal distance of the segment a-b (base frame) from the shoulder axis."""
+    a2, b2 = a[:2], b[:2]
+    ab = b2 - a2
+    denom = float(ab @ ab)
+    s = 0.0 if denom == 0 else float(np.clip(-(a2 @ ab) / denom, 0.0, 1.0))
+    return float(np.linalg.norm(a2 + s * ab))
+
+
+def follow_line(arm: ArmModel, q0: np.ndarray, points: np.ndarray, velocity_dir: np.ndarray,
+                threshold: float, max_damping: float, iterations: int = 3):
+    """Track world points along a line with min-norm (DLS) steps and Newton correction.
+
+    :param q0: ``(3,)`` joint state at ``points[0]``.
+    :param points: ``(M, 3)`` desired tool positions.
+    :param velocity_dir: ``(3,)`` ``dp/ds`` (constant along a line).
+    :return: ``(q (M, 3), dq_ds (M, 3))``.
+    """
+    q = np.empty((len(points), 3))
+    q[0] = q0
+    for i in range(1, len(points)):
+        qi = q[i - 1]
+        for _ in range(iterations):
+            qi = qi + dls_solve(arm, qi, points[i] - fk(arm, qi), threshold, max_damping)
+        q[i] = qi
+    dq = dls_solve(arm, q, np.broadcast_to(velocity_dir, q.shape), threshold, max_damping)
+    return q, dq
+
+
+def line_move(arm: ArmModel, q0: ArrayLike, target: ArrayLike, dt: float = 0.01,
+              frame: str = 'world', dls_threshold: float = 0.5,
+              dls_max_damping: float = 0.15) -> Trajectory:
+    """Straight Cartesian line from the current state to ``target``, time-optimal.
+
+    :param q0: current joint state ``(3,)``.
+    :param target: goal tool position ``(3,)`` in ``frame`` (``'world'`` or ``'base'``).
+    :param dt: sample period, s.
+    :param dls_threshold, dls_max_damping: see :func:`scara_collab.core.kinematics.dls_damping`.
+    :raises IKError: the goal is refused (reason in the exception), the line passes inside
+        the inner reach, or the line leaves the joint limits.
+    """
+    q0 = np.asarray(q0, dtype=float)
+    goal = ik(arm, target, q_current=q0, frame=frame)
+    goal.unwrap()
+    p0 = fk(arm, q0)
+    p1 = fk(arm, goal.q)  # world frame either way
+    a, b = world_to_base(arm, p0), world_to_base(arm, p1)
+    inner = _closest_to_axis(arm, a, b)
+    if inner < arm.reach_min:
+        raise IKError(JOINT_LIMIT, f'the line passes {inner:.3f} m from the shoulder axis, '
+                      f'inside the inner reach {arm.reach_min} m')
+    delta = p1 - p0
+    length = float(np.linalg.norm(delta))
+    if length < 1e-9:
+        return joint_move(arm, q0, goal.q, dt)
+    s = _grid(length)
+    points = p0 + s[:, None] * delta
+    q_s, dq = follow_line(arm, q0, points, delta, dls_threshold, dls_max_damping)
+    if not np.all(within_limits(arm, q_s, tol=1e-6)):
+        raise IKError(JOINT_LIMIT, 'the straight line leaves the joint limits; '
+                      'use a joint move or an intermediate point')
+    d2q = np.gradient(dq, s, axis=0, edge_order=2)
+
+    def refine(s_t, q):  # exact closed-loop correction at every output sample
+        pts = p0 + s_t[:, None] * delta
+        for _ in range(3):
+            q = q + dls_solve(arm, q, pts - fk(arm, q), dls_threshold, dls_max_damping)
+        return q
+
+    return _timed(arm, s, q_s, dq, d2q, dt, refine=refine)
+
+
+def resolved_rate(arm: ArmModel, q0: ArrayLike, p_ref: ArrayLike, v_ref: ArrayLike, dt: float,
+                  gain: float = 0.0, dls_threshold: float = 0.5,
+                  dls_max_damping: float = 0.15) -> np.ndarray:
+    """Run the seeds' differential-kinematics loop at a fixed timing (no re-timing).
+
+    ``q_dot_k = J^+_dls(q_k) (v_ref_k + gain (p_ref_k - fk(q_k)))``, ``q_{k+1} = q_k +
+    q_dot_k dt``. With ``dls_max_damping = 0`` this is the plain pseudo-inverse of
+    seeds/003, whose joint speed blows up near a singularity; DLS bounds it.
+
+    :param p_ref, v_ref: ``(N, 3)`` desired tool positions and velocities (world).
+    :return: ``(N, 3)`` joint velocities commanded at each step (positions by cumsum).
+    """
+    q = np.asarray(q0, dtype=float).copy()
+    p_ref, v_ref = np.asarray(p_ref, float), np.asarray(v_ref, float)
+    qd = np.empty_like(p_ref)
+    for k in range(len(p_ref)):
+        v = v_ref[k] + gain * (p_ref[k] - fk(arm, q))
+        if dls_max_damping > 0:
+            qd[k] = dls_solve(arm, q, v, dls_threshold, dls_max_damping)
+        else:
+            qd[k] = np.linalg.pinv(jacobian(arm, q)) @ v
+        q = q + qd[k] * dt
+    return qd
