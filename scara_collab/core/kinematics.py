@@ -186,8 +186,9 @@ def ik(arm: ArmModel, target: ArrayLike, q_current: Optional[ArrayLike] = None,
     if frame == 'base':  # identity base: same formula, base-frame numbers
         k = k[:5] + (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0) + k[17:]
     tgt = target if type(target) in (tuple, list) else np.asarray(target, dtype=float)
-    if len(tgt) == 3 and np.ndim(tgt[0]) == 0:
-        x, y, z = map(float, tgt)
+    if len(tgt) == 3 and (tgt.ndim == 1 if type(tgt) is np.ndarray
+                          else not hasattr(tgt[0], '__len__')):
+        x, y, z = float(tgt[0]), float(tgt[1]), float(tgt[2])
         c1, c2 = (0.0, 0.0) if q_current is None else (float(q_current[0]),
                                                        float(q_current[1]))
         t1, t2, d3, code, elbow = _ik_core(_ScalarOps, k, x, y, z, c1, c2,

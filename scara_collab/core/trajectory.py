@@ -21,12 +21,14 @@ Example::
     True
 """
 from dataclasses import asdict, dataclass
+import math
 from typing import Optional, Union
 
 import numpy as np
 
 from scara_collab.core.kinematics import (
-    dls_solve, fk, ik, IKError, jacobian, JOINT_LIMIT, within_limits, world_to_base)
+    dls_solve, fk, ik, IKError, jacobian, JOINT_LIMIT, manipulability, within_limits,
+    world_to_base)
 from scara_collab.core.model import ArmModel
 
 ArrayLike = Union[np.ndarray, list, tuple]
@@ -156,19 +158,30 @@ def time_optimal_scaling(s: np.ndarray, dq: np.ndarray, d2q: np.ndarray, vmax: A
     :return: ``(M,)`` ``s_dot`` (0 at both ends).
     """
     vmax, amax = np.asarray(vmax, float), np.asarray(amax, float)
-    xmax = _max_sdot_sq(dq, d2q, vmax, amax)
-    ds = np.diff(s)
+    xmax = _max_sdot_sq(dq, d2q, vmax, amax).tolist()
+    ds = np.diff(s).tolist()
+    a_list, b_list, lim = dq.tolist(), d2q.tolist(), amax.tolist()
     m = len(s)
-    back = np.empty(m)
-    back[-1] = 0.0
+
+    def bounds(i, x):  # s_ddot interval at grid point i for s_dot^2 = x (plain floats: fast)
+        lo, hi = -math.inf, math.inf
+        for a, b, am in zip(a_list[i], b_list[i], lim):
+            if abs(a) > 1e-12:
+                u1, u2 = (-am - b * x) / a, (am - b * x) / a
+                if u1 > u2:
+                    u1, u2 = u2, u1
+                lo, hi = max(lo, u1), min(hi, u2)
+        return lo, hi
+
+    back = [0.0] * m
     for i in range(m - 2, -1, -1):
-        umin, _ = _accel_bounds(dq[i + 1:i + 2], d2q[i + 1:i + 2], back[i + 1:i + 2], amax)
-        back[i] = min(xmax[i], back[i + 1] - 2.0 * ds[i] * min(umin[0], 0.0))
-    x = np.empty(m)
-    x[0] = 0.0
+        umin = bounds(i + 1, back[i + 1])[0]
+        back[i] = min(xmax[i], back[i + 1] - 2.0 * ds[i] * min(umin, 0.0))
+    x = [0.0] * m
     for i in range(m - 1):
-        _, umax = _accel_bounds(dq[i:i + 1], d2q[i:i + 1], x[i:i + 1], amax)
-        x[i + 1] = min(back[i + 1], xmax[i + 1], x[i] + 2.0 * ds[i] * max(umax[0], 0.0))
+        umax = bounds(i, x[i])[1]
+        x[i + 1] = min(back[i + 1], xmax[i + 1], x[i] + 2.0 * ds[i] * max(umax, 0.0))
+    x = np.asarray(x)
     return np.sqrt(np.maximum(x, 0.0))
 
 
@@ -268,6 +281,25 @@ def follow_line(arm: ArmModel, q0: np.ndarray, points: np.ndarray, velocity_dir:
     return q, dq
 
 
+def _line_path(arm: ArmModel, q0: np.ndarray, points: np.ndarray, delta: np.ndarray,
+               threshold: float, max_damping: float):
+    """Joint path along the line: the integral curve of the min-norm velocity field.
+
+    The arm is not redundant in (x, y, z), so where no damping acts (manipulability above
+    ``threshold`` everywhere) the integral curve of ``q' = J^-1 delta`` through ``q0`` is the
+    IK branch that stays continuous with ``q0``: it is evaluated in closed form for all points
+    at once (with one vectorised correction step). Where damping would act, the sequential
+    DLS integration of :func:`follow_line` is used instead.
+    """
+    sol = ik(arm, points, q_current=q0)
+    if np.all(sol.ok) and np.all(sol.elbow == sol.elbow[0]) \
+            and np.min(manipulability(arm, sol.q)) > threshold:
+        q = sol.q + dls_solve(arm, sol.q, points - fk(arm, sol.q), threshold, max_damping)
+        dq = dls_solve(arm, q, np.broadcast_to(delta, q.shape), threshold, max_damping)
+        return q, dq
+    return follow_line(arm, q0, points, delta, threshold, max_damping)
+
+
 def line_move(arm: ArmModel, q0: ArrayLike, target: ArrayLike, dt: float = 0.01,
               frame: str = 'world', dls_threshold: float = 0.5,
               dls_max_damping: float = 0.15) -> Trajectory:
@@ -296,7 +328,7 @@ def line_move(arm: ArmModel, q0: ArrayLike, target: ArrayLike, dt: float = 0.01,
         return joint_move(arm, q0, goal.q, dt)
     s = _grid(length)
     points = p0 + s[:, None] * delta
-    q_s, dq = follow_line(arm, q0, points, delta, dls_threshold, dls_max_damping)
+    q_s, dq = _line_path(arm, q0, points, delta, dls_threshold, dls_max_damping)
     if not np.all(within_limits(arm, q_s, tol=1e-6)):
         raise IKError(JOINT_LIMIT, 'the straight line leaves the joint limits; '
                       'use a joint move or an intermediate point')
