@@ -20,6 +20,9 @@ def test_all_files_load_with_spec_defaults():
         0.05, 0.10, 0.15]
     assert sim['physics_rate'] == 1000.0 and sim['solver_iterations'] == 50
     assert sim['gravity'] == [0.0, 0.0, -9.81]
+    assert sim['servo_rate'] == 1000.0 and sim['item_rate'] == 100.0
+    assert sim['feed_interval'] == 3.0 and sim['feed_pattern'] == 'random'
+    assert sim['lateral_jitter'] == 0.3 and sim['grasp_tolerance'] == 0.06
     assert ctl['control_rate'] == 100.0
     assert ctl['pid']['planar'] == {'kp': 15.0, 'ki': 0.5, 'kd': 2.0}
     assert ctl['pid']['quill'] == {'kp': 10.0, 'ki': 0.1, 'kd': 1.0}
@@ -55,6 +58,16 @@ def test_other_files_are_validated():
     sim['physics_rate'] = 5.0
     with pytest.raises(ConfigError, match='physics_rate must be in'):
         validate('simulation', sim)
+    for key, value, message in (('feed_pattern', 'zigzag', "feed_pattern must be 'random'"),
+                                ('feed_interval', -1.0, 'feed_interval must be a number >= 0'),
+                                ('servo_rate', 0.0, 'servo_rate must be a number > 0')):
+        sim = copy.deepcopy(load_config('simulation'))
+        sim[key] = value
+        with pytest.raises(ConfigError, match=message):
+            validate('simulation', sim)
+    sim = copy.deepcopy(load_config('simulation'))
+    sim['feed_interval'] = 0.0  # no automatic feed
+    validate('simulation', sim)
     ctl = copy.deepcopy(load_config('controllers'))
     ctl['control_mode'] = 'bang_bang'
     with pytest.raises(ConfigError, match="control_mode must be 'pid' or 'computed_torque'"):

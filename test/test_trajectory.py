@@ -101,6 +101,8 @@ def test_bad_targets_are_refused_with_reasons():
         line_move(ARM, ik(ARM, start).unwrap(), ARM.base_position + [-1.0, 0.1, 0.2])
     with pytest.raises(IKError, match='joint limit'):
         joint_move(ARM, q0, [3.0, 0.0, 0.0])
+    with pytest.raises(IKError, match='outside the reach window'):  # stretched out: singular
+        line_move(ARM, np.zeros(3), SEEDS_MOVE[1])
 
 
 def test_zero_length_move_is_a_hold():

@@ -318,6 +318,10 @@ def line_move(arm: ArmModel, q0: ArrayLike, target: ArrayLike, dt: float = 0.01,
     p0 = fk(arm, q0)
     p1 = fk(arm, goal.q)  # world frame either way
     a, b = world_to_base(arm, p0), world_to_base(arm, p1)
+    if np.hypot(a[0], a[1]) > arm.reach_max + 1e-9:
+        raise IKError(JOINT_LIMIT, f'the start is {np.hypot(a[0], a[1]):.3f} m from the '
+                      f'shoulder axis, outside the reach window ({arm.reach_max} m): no '
+                      'straight line from there; use a joint move')
     inner = _closest_to_axis(arm, a, b)
     if inner < arm.reach_min:
         raise IKError(JOINT_LIMIT, f'the line passes {inner:.3f} m from the shoulder axis, '

@@ -1,0 +1,200 @@
+"""Message <-> numpy conversions, in one place so no node repeats them."""
+import math
+from typing import Dict, List, Optional, Sequence, Tuple
+
+from builtin_interfaces.msg import Duration, Time
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point, PointStamped, Pose, PoseStamped
+from nav_msgs.msg import Path
+import numpy as np
+from sensor_msgs.msg import JointState
+from std_msgs.msg import ColorRGBA, Header
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import Marker, MarkerArray
+
+LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
+          'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
+
+
+class MessageError(ValueError):
+    """A message was refused; the text says why."""
+
+
+def to_sec(stamp) -> float:
+    """``builtin_interfaces/Time`` or ``Duration`` -> seconds."""
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def to_time(seconds: float) -> Time:
+    """Seconds -> ``builtin_interfaces/Time`` (rounded to the nanosecond)."""
+    ns = int(round(seconds * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def to_duration(seconds: float) -> Duration:
+    """Seconds -> ``builtin_interfaces/Duration``."""
+    ns = int(round(seconds * 1e9))
+    return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def joint_state(stamp: float, names: Sequence[str], position, velocity, effort) -> JointState:
+    """Build a ``sensor_msgs/JointState``."""
+    msg = JointState()
+    msg.header.stamp = to_time(stamp)
+    msg.name = list(names)
+    msg.position = [float(v) for v in position]
+    msg.velocity = [float(v) for v in velocity]
+    msg.effort = [float(v) for v in effort]
+    return msg
+
+
+def joint_state_arrays(msg: JointState, names: Sequence[str]) -> Tuple[np.ndarray, np.ndarray]:
+    """Positions and velocities of ``names`` from a ``JointState`` (any order).
+
+    :raises MessageError: a name is missing or the arrays are inconsistent.
+    """
+    index = {n: i for i, n in enumerate(msg.name)}
+    missing = [n for n in names if n not in index]
+    if missing:
+        raise MessageError(f'joint_states lacks {missing}')
+    if len(msg.position) != len(msg.name):
+        raise MessageError('joint_states: position and name lengths differ')
+    idx = [index[n] for n in names]
+    pos = np.asarray(msg.position, dtype=float)[idx]
+    vel = (np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) == len(msg.name)
+           else np.zeros(len(names)))
+    return pos, vel
+
+
+def trajectory_msg(names: Sequence[str], t: np.ndarray, q: np.ndarray,
+                   qd: Optional[np.ndarray] = None, qdd: Optional[np.ndarray] = None,
+                   start: float = 0.0, frame_id: str = '') -> JointTrajectory:
+    """Arrays -> ``JointTrajectory``; ``t`` are times from start, ``start`` the stamp (s)."""
+    msg = JointTrajectory()
+    msg.header.stamp = to_time(start)
+    msg.header.frame_id = frame_id
+    msg.joint_names = list(names)
+    for k in range(len(t)):
+        pt = JointTrajectoryPoint()
+        pt.positions = [float(v) for v in q[k]]
+        if qd is not None:
+            pt.velocities = [float(v) for v in qd[k]]
+        if qdd is not None:
+            pt.accelerations = [float(v) for v in qdd[k]]
+        pt.time_from_start = to_duration(float(t[k]))
+        msg.points.append(pt)
+    return msg
+
+
+def trajectory_arrays(msg: JointTrajectory, names: Sequence[str]):
+    """``JointTrajectory`` -> ``(stamp, t, q, qd or None, qdd or None)`` in ``names`` order.
+
+    ``stamp`` is the header stamp in seconds (0 = start now); ``t`` the times from start.
+
+    :raises MessageError: unknown or missing joint names, mismatched lengths, no points,
+        non-monotonic times, non-finite numbers.
+    """
+    names = list(names)
+    if sorted(msg.joint_names) != sorted(names):
+        raise MessageError(f'joint names {list(msg.joint_names)} do not match this arm '
+                           f'{names}')
+    if len(set(msg.joint_names)) != len(msg.joint_names):
+        raise MessageError('duplicate joint names')
+    if not msg.points:
+        raise MessageError('trajectory has no points')
+    order = [list(msg.joint_names).index(n) for n in names]
+    n = len(names)
+
+    def column(field: str, required: bool):
+        rows = [getattr(p, field) for p in msg.points]
+        if all(len(r) == 0 for r in rows) and not required:
+            return None
+        bad = [k for k, r in enumerate(rows) if len(r) != n]
+        if bad:
+            raise MessageError(f'point {bad[0]} has {len(rows[bad[0]])} {field} for {n} joints')
+        arr = np.asarray(rows, dtype=float)[:, order]
+        if not np.all(np.isfinite(arr)):
+            raise MessageError(f'non-finite {field}')
+        return arr
+
+    q = column('positions', True)
+    qd = column('velocities', False)
+    qdd = column('accelerations', False)
+    t = np.array([to_sec(p.time_from_start) for p in msg.points])
+    if np.any(t < 0) or np.any(np.diff(t) <= 0):
+        raise MessageError('time_from_start must be >= 0 and strictly increasing')
+    return to_sec(msg.header.stamp), t, q, qd, qdd
+
+
+def point_stamped(msg: PointStamped) -> Tuple[str, np.ndarray, float]:
+    """``PointStamped`` -> ``(frame_id, xyz (3,), stamp s)`` (the point may be non-finite)."""
+    p = msg.point
+    return msg.header.frame_id, np.array([p.x, p.y, p.z], dtype=float), to_sec(msg.header.stamp)
+
+
+def make_point_stamped(xyz, frame_id: str = 'world', stamp: float = 0.0) -> PointStamped:
+    """``(3,)`` -> ``PointStamped``."""
+    msg = PointStamped()
+    msg.header.frame_id = frame_id
+    msg.header.stamp = to_time(stamp)
+    msg.point = Point(x=float(xyz[0]), y=float(xyz[1]), z=float(xyz[2]))
+    return msg
+
+
+def path_msg(points: np.ndarray, stamp: float, frame_id: str = 'world') -> Path:
+    """``(N, 3)`` positions -> ``nav_msgs/Path`` (identity orientation)."""
+    msg = Path()
+    msg.header = Header(stamp=to_time(stamp), frame_id=frame_id)
+    for p in points:
+        pose = PoseStamped()
+        pose.header = msg.header
+        pose.pose.position = Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+        pose.pose.orientation.w = 1.0
+        msg.poses.append(pose)
+    return msg
+
+
+def status(name: str, level: str, message: str, values: Optional[Dict] = None,
+           hardware_id: str = '') -> DiagnosticStatus:
+    """Build a ``DiagnosticStatus``; ``level`` is ``'OK'``, ``'WARN'``, ``'ERROR'``."""
+    msg = DiagnosticStatus(level=LEVELS[level], name=name, message=message,
+                           hardware_id=hardware_id)
+    msg.values = [KeyValue(key=str(k), value=str(v)) for k, v in (values or {}).items()]
+    return msg
+
+
+def status_values(msg: DiagnosticStatus) -> Dict[str, str]:
+    """``DiagnosticStatus.values`` -> dict."""
+    return {kv.key: kv.value for kv in msg.values}
+
+
+_COLOURS = [(0.85, 0.15, 0.15), (0.15, 0.35, 0.9), (0.2, 0.75, 0.2), (0.9, 0.8, 0.1)]
+
+
+def item_markers(items: List, classes: Sequence[str], size: float, stamp: float,
+                 frame_id: str = 'world') -> MarkerArray:
+    """Items -> ``MarkerArray``: a DELETEALL, then one CUBE per item (``ns`` = class).
+
+    :param items: objects with ``id``, ``cls``, ``position`` (3,).
+    """
+    header = Header(stamp=to_time(stamp), frame_id=frame_id)
+    out = MarkerArray()
+    out.markers.append(Marker(header=header, action=Marker.DELETEALL))
+    for it in items:
+        r, g, b = _COLOURS[list(classes).index(it.cls) % len(_COLOURS)] if it.cls in classes \
+            else (0.5, 0.5, 0.5)
+        m = Marker(header=header, ns=it.cls, id=int(it.id), type=Marker.CUBE,
+                   action=Marker.ADD, text=it.cls)
+        m.pose = Pose()
+        m.pose.position = Point(x=float(it.position[0]), y=float(it.position[1]),
+                                z=float(it.position[2]))
+        m.pose.orientation.w = 1.0
+        m.scale.x = m.scale.y = m.scale.z = float(size)
+        m.color = ColorRGBA(r=r, g=g, b=b, a=1.0)
+        out.markers.append(m)
+    return out
+
+
+def finite(xyz) -> bool:
+    """Return ``True`` if every coordinate is finite."""
+    return all(math.isfinite(float(v)) for v in xyz)

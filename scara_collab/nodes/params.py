@@ -1,0 +1,100 @@
+"""Declare the ``config/*.yaml`` keys as ROS parameters, read them back, validate them.
+
+A node calls :func:`declare_config` with the config files it uses. Every key of those files
+becomes a parameter (nested keys joined with dots, e.g. ``pid.planar.kp``) whose default is
+the package's file, so ``--ros-args --params-file config/<file>.yaml`` (or ``-p key:=value``)
+overrides it. The values are re-assembled into the nested tree the core expects and
+validated with :func:`scara_collab.core.config.validate`; an invalid value stops the node
+with the file's error message. Later changes go through the same validation in an
+on-set-parameters callback and are refused unless the key is listed as dynamic.
+"""
+import copy
+from typing import Callable, Dict, Iterable, Optional, Sequence
+
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.node import Node
+
+from scara_collab.core.config import ConfigError, load_config, validate
+
+
+def flatten(tree: dict, prefix: str = '') -> Dict[str, object]:
+    """Flatten a tree: ``{"a": {"b": 1}}`` -> ``{"a.b": 1}``."""
+    out = {}
+    for key, value in tree.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, dict):
+            out.update(flatten(value, name + '.'))
+        else:
+            out[name] = value
+    return out
+
+
+def unflatten(flat: Dict[str, object]) -> dict:
+    """Inverse of :func:`flatten`."""
+    tree: dict = {}
+    for name, value in flat.items():
+        node = tree
+        *parents, leaf = name.split('.')
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[leaf] = value
+    return tree
+
+
+def _plain(value):
+    """ROS array parameters come back as array.array / numpy: make them lists."""
+    if isinstance(value, (str, bool, int, float)) or value is None:
+        return value
+    return list(value)
+
+
+def declare_config(node: Node, names: Sequence[str], dynamic: Iterable[str] = (),
+                   on_change: Optional[Callable[[str, dict], None]] = None) -> Dict[str, dict]:
+    """Declare every key of the named config files and return the validated trees.
+
+    :param node: the node that owns the parameters.
+    :param names: config files, e.g. ``('simulation', 'controllers')``.
+    :param dynamic: keys that may change while the node runs (others are read-only).
+    :param on_change: called with ``(file name, new tree)`` after an accepted change.
+    :return: ``{file name: nested parameter tree}``.
+    :raises ConfigError: if an overridden value is invalid.
+    """
+    dynamic = set(dynamic)
+    owners: Dict[str, str] = {}
+    trees: Dict[str, dict] = {}
+    for name in names:
+        defaults = flatten(load_config(name))
+        for key, value in defaults.items():
+            owners[key] = name
+            desc = ParameterDescriptor(dynamic_typing=True, read_only=key not in dynamic,
+                                       description=f'config/{name}.yaml: {key}')
+            node.declare_parameter(key, value, desc)
+        flat = {k: _plain(node.get_parameter(k).value) for k in defaults}
+        trees[name] = validate(name, unflatten(flat), where=f'{node.get_name()} ({name})')
+
+    def check(params):
+        changed: Dict[str, dict] = {}
+        for p in params:
+            file = owners.get(p.name)
+            if file is None:
+                continue  # not one of ours (use_sim_time, ...)
+            tree = changed.setdefault(file, copy.deepcopy(trees[file]))
+            node_ = tree
+            *parents, leaf = p.name.split('.')
+            for part in parents:
+                node_ = node_[part]
+            node_[leaf] = _plain(p.value)
+        try:
+            for file, tree in changed.items():
+                validate(file, tree, where=f'{node.get_name()} ({file})')
+        except ConfigError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        for file, tree in changed.items():
+            trees[file].clear()
+            trees[file].update(tree)
+            if on_change is not None:
+                on_change(file, trees[file])
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(check)
+    return trees

@@ -1,0 +1,226 @@
+"""``pybullet_bridge``: the simulated cell, standing in for Gazebo and ros2_control.
+
+It is the clock: it steps PyBullet at the physics rate and publishes ``/clock``, so the graph
+runs on sim time, at ``real_time_factor`` times real time, or as fast as the machine allows
+(``real_time_factor: 0``).
+
+Publishes ``/clock``, ``/joint_states`` (all six joints, ``state_rate``), ``/conveyor/items``
+(MarkerArray), ``/conveyor/events`` (one DiagnosticStatus per item event: spawned, grasped,
+released, sorted, wrong_bin, missed, dropped) and ``/<robot>/execution_status``. Subscribes
+``/<robot>/joint_trajectory`` (executed like ros2_control's joint trajectory controller: stamp
+zero = start now, else at the stamp; a new trajectory replaces the running one; a bad one is
+refused with the reason and the arm holds) and ``/emergency_stop`` (transient local; true =
+both arms hold). Serves ``/<robot>/gripper`` (std_srvs/SetBool: true = grasp, false = release).
+"""
+import math
+import time
+from typing import Dict, Optional
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+import rclpy
+from rclpy.clock import Clock, ClockType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
+from std_srvs.srv import SetBool
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
+
+from scara_collab.core.kinematics import within_limits
+from scara_collab.core.mirror import mirror_joints
+from scara_collab.core.model import load_cell
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.params import declare_config
+from scara_collab.sim.cell_sim import CellSim
+
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+STATE_QOS = QoSProfile(depth=10)
+EVENTS_QOS = QoSProfile(depth=100)
+
+
+class PyBulletBridge(Node):
+    """The simulator node. ``sim`` is the :class:`CellSim` it owns."""
+
+    def __init__(self, **kwargs):
+        super().__init__('pybullet_bridge', **kwargs)
+        cfg = declare_config(self, ('simulation', 'controllers'),
+                             dynamic=('real_time_factor',), on_change=self._on_config)
+        self.declare_parameter('profile', '')
+        self.declare_parameter('clock_rate', 100.0)
+        self.declare_parameter('markers_rate', 10.0)
+        self.declare_parameter('step_chunk', 0.01)
+        self.declare_parameter('home', [0.0, 1.5708, 0.0])  # leader joints; follower mirrored
+        sim_cfg, ctl_cfg = cfg['simulation'], cfg['controllers']
+        profile = self.get_parameter('profile').value or None
+        self.cell = load_cell(profile)
+        self.sim = CellSim(self.cell, sim_cfg, ctl_cfg, gui=bool(sim_cfg['gui']))
+        home = np.asarray(self.get_parameter('home').value, dtype=float)
+        for arm, q in zip(self.cell.arms, (home, mirror_joints(home))):
+            if not within_limits(arm, q):
+                raise ValueError(f'home {q.tolist()} is outside the joint limits of {arm.name}')
+            self.sim.reset_arm(arm.name, q)
+        self.dt = 1.0 / float(sim_cfg['physics_rate'])
+        self._rtf = float(sim_cfg['real_time_factor'])
+        self._periods = {
+            'state': 1.0 / float(sim_cfg['state_rate']),
+            'clock': 1.0 / float(self.get_parameter('clock_rate').value),
+            'markers': 1.0 / float(self.get_parameter('markers_rate').value),
+        }
+        self._next = {k: 0.0 for k in self._periods}
+        self._chunk = max(1, int(round(float(self.get_parameter('step_chunk').value) / self.dt)))
+        self._anchor: Optional[tuple] = None  # (wall, sim) at the last rate change
+
+        self.clock_pub = self.create_publisher(ClockMsg, '/clock', STATE_QOS)
+        self.state_pub = self.create_publisher(JointState, 'joint_states', STATE_QOS)
+        self.items_pub = self.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
+        self.events_pub = self.create_publisher(DiagnosticStatus, 'conveyor/events', EVENTS_QOS)
+        self.status_pub: Dict[str, object] = {}
+        for arm in self.cell.arms:
+            name = arm.name
+            self.status_pub[name] = self.create_publisher(
+                DiagnosticStatus, f'{name}/execution_status', EVENTS_QOS)
+            self.create_subscription(JointTrajectory, f'{name}/joint_trajectory',
+                                     lambda msg, n=name: self._on_trajectory(n, msg), 10)
+            self.create_service(SetBool, f'{name}/gripper',
+                                lambda req, res, n=name: self._on_gripper(n, req, res))
+        self.create_subscription(Bool, 'emergency_stop', self._on_estop, LATCHED)
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(0.0 if self._rtf == 0 else 0.002, self._tick, clock=self._steady)
+        self._publish_all()
+        self.get_logger().info(
+            f'cell ready: {len(self.sim.joint_state()[0])} joints, physics '
+            f'{sim_cfg["physics_rate"]:.0f} Hz, control {ctl_cfg["control_mode"]}, '
+            f'real-time factor {self._rtf or "unthrottled"}')
+
+    # --- stepping -------------------------------------------------------------------------
+    def _on_config(self, name: str, tree: dict) -> None:
+        if name == 'simulation':
+            self._rtf = float(tree['real_time_factor'])
+            self._anchor = None
+
+    def _steps_due(self) -> int:
+        if self._rtf <= 0:
+            return self._chunk
+        wall = time.monotonic()
+        if self._anchor is None:
+            self._anchor = (wall, self.sim.time)
+        target = self._anchor[1] + (wall - self._anchor[0]) * self._rtf
+        due = int((target - self.sim.time) / self.dt)
+        if due > 10 * self._chunk:  # the machine cannot keep up: do not try to catch up
+            self._anchor = (wall, self.sim.time)
+            due = self._chunk
+        return max(due, 0)
+
+    def _tick(self) -> None:
+        due = self._steps_due()
+        while due > 0:
+            t = self.sim.time
+            to_next = min(self._next.values()) - t
+            n = min(due, max(1, int(math.ceil(to_next / self.dt - 1e-6))))
+            self.sim.step(n)
+            due -= n
+            self._publish_due()
+
+    def _publish_due(self) -> None:
+        t = self.sim.time + 1e-9
+        if t >= self._next['clock']:
+            self.clock_pub.publish(ClockMsg(clock=conv.to_time(self.sim.time)))
+            self._next['clock'] += self._periods['clock']
+        if t >= self._next['state']:
+            names, pos, vel, eff = self.sim.joint_state()
+            self.state_pub.publish(conv.joint_state(self.sim.time, names, pos, vel, eff))
+            self._next['state'] += self._periods['state']
+        if t >= self._next['markers']:
+            self.items_pub.publish(conv.item_markers(self.sim.items(), self.cell.item_classes,
+                                                     self.cell.item_size, self.sim.time))
+            self._next['markers'] += self._periods['markers']
+        for ev in self.sim.pop_events():
+            self.events_pub.publish(conv.status(
+                ev.kind, 'OK', f'item {ev.item} ({ev.cls}) {ev.kind}',
+                {'item': ev.item, 'class': ev.cls, 'robot': ev.robot, 'time': f'{ev.time:.3f}'}))
+
+    def _publish_all(self) -> None:
+        for k in self._next:
+            self._next[k] = self.sim.time
+        self._publish_due()
+
+    # --- callbacks ------------------------------------------------------------------------
+    def _report(self, robot: str, level: str, message: str) -> None:
+        if level != 'OK':
+            self.get_logger().warning(f'{robot}: {message}')
+        self.status_pub[robot].publish(conv.status(f'{robot}/execution', level, message,
+                                                   {'time': f'{self.sim.time:.3f}'}))
+
+    def _on_trajectory(self, robot: str, msg: JointTrajectory) -> None:
+        arm = self.cell.arm(robot)
+        try:
+            stamp, t, q, qd, qdd = conv.trajectory_arrays(msg, arm.joint_names)
+        except conv.MessageError as exc:
+            self._report(robot, 'ERROR', f'trajectory refused: {exc}; holding')
+            return
+        now = self.sim.time
+        start = now if stamp == 0.0 else stamp
+        if start + t[-1] < now:
+            self._report(robot, 'ERROR', f'trajectory refused: it ended {now - start - t[-1]:.3f}'
+                         ' s ago; holding')
+            return
+        if start < now - self.dt:
+            self._report(robot, 'WARN', f'start {start:.3f} s is {now - start:.3f} s late; '
+                         'starting now')
+            start = now
+        if t[0] > 0.0:  # like ros2_control: move from the current state to the first point
+            q_now, qd_now = self.sim.arm_state(robot)
+            t = np.concatenate(([0.0], t))
+            q = np.vstack([q_now, q])
+            qd = None if qd is None else np.vstack([qd_now, qd])
+            qdd = None if qdd is None else np.vstack([np.zeros(3), qdd])
+        try:
+            self.sim.execute(robot, start + t, q, qd, qdd)
+        except ValueError as exc:
+            self._report(robot, 'ERROR', f'trajectory refused: {exc}; holding')
+            return
+        self._report(robot, 'OK', f'executing {len(t)} points from t={start:.3f} s '
+                     f'for {t[-1]:.3f} s')
+
+    def _on_gripper(self, robot: str, req: SetBool.Request, res: SetBool.Response):
+        ok, message = self.sim.grasp(robot) if req.data else self.sim.release(robot)
+        res.success, res.message = bool(ok), message
+        if not ok:
+            self.get_logger().warning(f'{robot} gripper: {message}')
+        return res
+
+    def _on_estop(self, msg: Bool) -> None:
+        self.sim.set_estop(bool(msg.data))
+        level = 'WARN' if msg.data else 'OK'
+        for arm in self.cell.arms:
+            self._report(arm.name, level, 'emergency stop: holding' if msg.data
+                         else 'emergency stop cleared')
+
+    def destroy_node(self) -> bool:
+        """Close the simulator with the node."""
+        self.sim.close()
+        return super().destroy_node()
+
+
+def main(args=None) -> None:
+    """Run the bridge (``ros2 run scara_collab pybullet_bridge``)."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = PyBulletBridge()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,140 @@
+"""The bridge node in-process: clock, joint states, trajectory execution, refusals, e-stop."""
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+import pytest
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from ros_harness import Graph, params_args
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
+from std_srvs.srv import SetBool
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
+
+from scara_collab.core.trajectory import joint_move
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.pybullet_bridge import PyBulletBridge
+
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+
+
+@pytest.fixture
+def graph():
+    g = Graph()
+    g.bridge = g.add(PyBulletBridge(
+        context=g.context,
+        cli_args=params_args('simulation', 'controllers',
+                             overrides={'real_time_factor': 0.0, 'feed_interval': 0.0})))
+    g.states = g.collect(JointState, '/joint_states')
+    g.status = {a.name: g.collect(DiagnosticStatus, f'/{a.name}/execution_status')
+                for a in g.bridge.cell.arms}
+    yield g
+    g.close()
+
+
+def sim_time(g):
+    return g.bridge.sim.time
+
+
+def left_q(g):
+    names, pos = g.states[-1].name, g.states[-1].position
+    arm = g.bridge.cell.leader
+    return np.array([pos[list(names).index(n)] for n in arm.joint_names])
+
+
+def test_clock_and_joint_states_in_sim_time(graph):
+    clocks = graph.collect(Clock, '/clock')
+    assert graph.spin_until(lambda: len(graph.states) >= 30 and len(clocks) >= 10)
+    names = list(graph.states[-1].name)
+    assert len(names) == 6 and set(names) == {
+        n for a in graph.bridge.cell.arms for n in a.joint_names}
+    stamps = np.array([conv.to_sec(m.header.stamp) for m in graph.states])
+    assert np.all(np.diff(stamps) > 0)
+    assert np.allclose(np.diff(stamps)[1:], 0.01, atol=1e-6), 'state_rate is 100 Hz sim time'
+    ticks = [conv.to_sec(c.clock) for c in clocks]
+    assert ticks == sorted(ticks) and ticks[-1] > ticks[0]
+    for m in graph.states[-3:]:
+        assert len(m.position) == len(m.velocity) == len(m.effort) == 6
+
+
+def test_a_trajectory_is_tracked(graph):
+    arm = graph.bridge.cell.leader
+    assert graph.spin_until(lambda: len(graph.states) > 5)
+    q0 = left_q(graph)
+    goal = q0 + np.array([0.4, -0.3, 0.2])
+    traj = joint_move(arm, q0, goal)
+    pub = graph.probe.create_publisher(JointTrajectory, f'/{arm.name}/joint_trajectory', 10)
+    assert graph.spin_until(lambda: pub.get_subscription_count() > 0)
+    pub.publish(conv.trajectory_msg(arm.joint_names, traj.t, traj.q, traj.qd, traj.qdd))
+    assert graph.spin_until(lambda: any(s.level == DiagnosticStatus.OK
+                                        for s in graph.status[arm.name]))
+    start = float(graph.status[arm.name][-1].values[0].value)
+    end = start + traj.duration + 0.5
+    assert graph.spin_until(lambda: sim_time(graph) > end, timeout=60)
+    errors = []
+    for m in graph.states:
+        t = conv.to_sec(m.header.stamp) - start
+        if 0 <= t <= traj.duration:
+            q = np.array([m.position[list(m.name).index(n)] for n in arm.joint_names])
+            errors.append(np.abs(q - traj.sample(t)).max())
+    assert errors, 'joint states were received during the move'
+    print(f'\nbridge tracking: max joint error {max(errors) * 1e3:.3f} mrad/mm during a '
+          f'{traj.duration:.2f} s joint move')
+    assert max(errors) < 5e-3
+    np.testing.assert_allclose(left_q(graph), goal, atol=1e-3)
+
+
+@pytest.mark.parametrize('mutate, reason', [
+    (lambda m: setattr(m, 'joint_names', ['a', 'b', 'c']), 'do not match'),
+    (lambda m: m.points[1].time_from_start.__setattr__('sec', 0), 'strictly increasing'),
+    (lambda m: setattr(m.points[1], 'positions', [0.1, 0.2]), 'positions'),
+    (lambda m: m.points[1].positions.__setitem__(0, float('nan')), 'non-finite'),
+    (lambda m: m.points[1].positions.__setitem__(0, 3.0), 'limit'),
+])
+def test_bad_trajectories_are_refused_and_nothing_moves(graph, mutate, reason):
+    arm = graph.bridge.cell.leader
+    assert graph.spin_until(lambda: len(graph.states) > 5)
+    q0 = left_q(graph)
+    t = np.array([0.5, 1.0, 1.5])
+    msg = conv.trajectory_msg(arm.joint_names, t, np.stack([q0, q0 + 0.05, q0 + 0.1]))
+    mutate(msg)
+    pub = graph.probe.create_publisher(JointTrajectory, f'/{arm.name}/joint_trajectory', 10)
+    assert graph.spin_until(lambda: pub.get_subscription_count() > 0)
+    pub.publish(msg)
+    assert graph.spin_until(lambda: any(s.level == DiagnosticStatus.ERROR
+                                        for s in graph.status[arm.name]))
+    err = [s for s in graph.status[arm.name] if s.level == DiagnosticStatus.ERROR][-1]
+    assert reason in err.message and 'holding' in err.message
+    later = sim_time(graph) + 2.0
+    assert graph.spin_until(lambda: sim_time(graph) > later, timeout=60)
+    np.testing.assert_allclose(left_q(graph), q0, atol=1e-4)
+
+
+def test_emergency_stop_holds_both_arms(graph):
+    arm = graph.bridge.cell.leader
+    assert graph.spin_until(lambda: len(graph.states) > 5)
+    q0 = left_q(graph)
+    estop = graph.probe.create_publisher(Bool, '/emergency_stop', LATCHED)
+    estop.publish(Bool(data=True))
+    assert graph.spin_until(lambda: any('emergency stop' in s.message
+                                        for s in graph.status[arm.name]))
+    traj = joint_move(arm, q0, q0 + np.array([0.5, 0.0, 0.0]))
+    pub = graph.probe.create_publisher(JointTrajectory, f'/{arm.name}/joint_trajectory', 10)
+    assert graph.spin_until(lambda: pub.get_subscription_count() > 0)
+    pub.publish(conv.trajectory_msg(arm.joint_names, traj.t, traj.q, traj.qd))
+    later = sim_time(graph) + traj.duration + 0.5
+    assert graph.spin_until(lambda: sim_time(graph) > later, timeout=60)
+    np.testing.assert_allclose(left_q(graph), q0, atol=1e-4)
+    assert graph.status[arm.name][-1].level == DiagnosticStatus.ERROR
+
+
+def test_gripper_refuses_with_nothing_to_grasp_and_items_are_published(graph):
+    res = graph.call(SetBool, '/scara_left/gripper', SetBool.Request(data=True))
+    assert not res.success and res.message
+    res = graph.call(SetBool, '/scara_left/gripper', SetBool.Request(data=False))
+    assert not res.success and res.message
+    items = graph.collect(MarkerArray, '/conveyor/items')
+    graph.bridge.sim.spawn_item()
+    classes = set(graph.bridge.cell.item_classes)
+    assert graph.spin_until(lambda: any(m.ns in classes for a in items for m in a.markers))
