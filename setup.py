@@ -8,6 +8,11 @@ package_name = 'scara_collab'
 
 # One entry per executable of SPEC section 3; each is added by the change that builds its node.
 console_scripts = [
+    'pybullet_bridge = scara_collab.nodes.pybullet_bridge:main',
+    'left_planner = scara_collab.nodes.planner:main_left',
+    'right_planner = scara_collab.nodes.planner:main_right',
+    'replication_manager = scara_collab.nodes.replication_manager:main',
+    'collision_monitor = scara_collab.nodes.collision_monitor:main',
 ]
 
 

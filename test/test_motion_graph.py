@@ -1,0 +1,159 @@
+"""The motion graph in-process on sim time: mirroring, straight lines, yielding, bad input."""
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PointStamped
+import numpy as np
+import pytest
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from ros_harness import Graph, params_args
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64
+from std_srvs.srv import SetBool
+from trajectory_msgs.msg import JointTrajectory
+
+from scara_collab.core.kinematics import fk
+from scara_collab.core.mirror import mirror_point
+from scara_collab.core.trajectory import segment_deviation
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.collision_monitor import CollisionMonitor
+from scara_collab.nodes.planner import Planner
+from scara_collab.nodes.pybullet_bridge import PyBulletBridge
+from scara_collab.nodes.replication_manager import ReplicationManager
+
+SIM = {'use_sim_time': 'true'}
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+
+
+@pytest.fixture
+def cell():
+    g = Graph()
+    ctx = g.context
+    g.bridge = g.add(PyBulletBridge(context=ctx, cli_args=params_args(
+        'simulation', 'controllers', overrides={'real_time_factor': 0.0, 'feed_interval': 0.0,
+                                                **SIM})))
+    g.left = g.add(Planner('scara_left', 'left_planner', context=ctx,
+                           cli_args=params_args('controllers', overrides=SIM)))
+    g.right = g.add(Planner('scara_right', 'right_planner', context=ctx,
+                            cli_args=params_args('controllers', overrides=SIM)))
+    g.replicator = g.add(ReplicationManager(context=ctx, cli_args=params_args(overrides=SIM)))
+    g.monitor = g.add(CollisionMonitor(context=ctx, cli_args=params_args(overrides=SIM)))
+    g.states = g.collect(JointState, '/joint_states')
+    g.status = {n: g.collect(DiagnosticStatus, f'/{n}/planner_status')
+                for n in ('scara_left', 'scara_right')}
+    g.trajs = {n: g.collect(JointTrajectory, f'/{n}/joint_trajectory')
+               for n in ('scara_left', 'scara_right')}
+    g.distance = g.collect(Float64, '/collision_monitor/min_distance')
+    g.estop = g.collect(Bool, '/emergency_stop', LATCHED)
+    assert g.spin_until(lambda: g.left.q is not None and g.right.q is not None
+                        and g.left._now() > 0.1 and g.right._now() > 0.1)
+    yield g
+    g.close()
+
+
+def publish(g, topic, xyz, frame='world', stamp=0.0):
+    pub = g.probe.create_publisher(PointStamped, topic, 10)
+    assert g.spin_until(lambda: pub.get_subscription_count() > 0)
+    pub.publish(conv.make_point_stamped(xyz, frame, stamp))
+
+
+def run_until(g, t):
+    assert g.spin_until(lambda: g.bridge.sim.time > t, timeout=120)
+
+
+def tool_paths(g, t0=0.0):
+    left, right = g.bridge.cell.arms
+    t, ql, qr = [], [], []
+    for m in g.states:
+        ts = conv.to_sec(m.header.stamp)
+        if ts >= t0:
+            t.append(ts)
+            ql.append(conv.joint_state_arrays(m, left.joint_names)[0])
+            qr.append(conv.joint_state_arrays(m, right.joint_names)[0])
+    return np.array(t), fk(left, np.array(ql)), fk(right, np.array(qr))
+
+
+def last_end(g, robot):
+    ok = [s for s in g.status[robot] if 'end' in conv.status_values(s)]
+    return float(conv.status_values(ok[-1])['end'])
+
+
+def test_collab_target_moves_both_arms_mirrored_and_straight(cell):
+    left, right = cell.bridge.cell.arms
+    p0 = fk(left, cell.left.q)
+    target = np.array([2.7, -0.7, 0.4])
+    publish(cell, '/collab/target', target)
+    assert cell.spin_until(lambda: all(cell.status[n] for n in cell.status))
+    for n in cell.status:
+        assert cell.status[n][-1].level == DiagnosticStatus.OK, cell.status[n][-1].message
+    run_until(cell, max(last_end(cell, n) for n in cell.status) + 0.3)
+    # both trajectories carry the same start stamp: zero lag by construction ...
+    stamps = [conv.to_sec(cell.trajs[n][-1].header.stamp) for n in cell.trajs]
+    assert stamps[0] == stamps[1] > 0
+    # ... and measured: the follower's tool is the mirror of the leader's throughout
+    t, pl, pr = tool_paths(cell)
+    err = np.linalg.norm(pr - mirror_point(left, right, pl), axis=1)
+    dev = segment_deviation(pl, p0, target)
+    moving = np.linalg.norm(pl - p0, axis=1) > 1e-4
+    onset = t[np.argmax(moving)]
+    print(f'\nmirror error max {err.max() * 1e3:.3f} mm, leader line deviation '
+          f'{dev.max() * 1e3:.3f} mm, start stamps {stamps}, onset {onset:.3f} s')
+    assert err.max() <= 1e-3
+    assert dev.max() <= 1e-3
+    np.testing.assert_allclose(pl[-1], target, atol=1e-3)
+    np.testing.assert_allclose(pr[-1], mirror_point(left, right, target), atol=1e-3)
+    assert min(m.data for m in cell.distance) >= cell.bridge.cell.safety_margin
+    assert not any(m.data for m in cell.estop)
+
+
+def test_meeting_on_the_belt_centre_line_makes_the_right_arm_wait(cell):
+    margin = cell.bridge.cell.safety_margin
+    publish(cell, '/collab/target', [2.6, -0.03, 0.4])  # mirrors to (2.6, 0.03): they'd meet
+    assert cell.spin_until(lambda: cell.status['scara_right'] and cell.status['scara_left'])
+    assert cell.spin_until(lambda: any('waiting' in s.message
+                                       for s in cell.status['scara_right']))
+    assert cell.status['scara_left'][-1].level == DiagnosticStatus.OK  # the leader goes
+    run_until(cell, last_end(cell, 'scara_left') + 0.2)
+    publish(cell, '/scara_left/target', [3.3, -1.2, 0.6])  # the leader leaves the belt
+    assert cell.spin_until(lambda: any(s.level == DiagnosticStatus.WARN and 'delayed' in
+                                       s.message for s in cell.status['scara_right']))
+    run_until(cell, last_end(cell, 'scara_right') + 0.3)
+    right = cell.bridge.cell.follower
+    np.testing.assert_allclose(fk(right, cell.right.q), [2.6, 0.03, 0.4], atol=1e-3)
+    low = min(m.data for m in cell.distance)
+    print(f'\ncentre-line meeting: right arm waited, then '
+          f'{cell.status["scara_right"][-1].message}; min separation {low:.3f} m')
+    assert low >= margin
+    assert not any(m.data for m in cell.estop)
+
+
+@pytest.mark.parametrize('xyz, frame, reason', [
+    ([float('nan'), -1.0, 0.4], 'world', 'non-finite'),
+    ([9.0, -2.0, 0.4], 'world', 'outer reach'),
+    ([2.0, -2.0, 0.4], 'world', 'inner reach'),
+    ([3.0, -1.0, 1.5], 'world', 'quill travel'),
+    ([-0.3, -2.0, 0.4], 'world', 'joint limit'),
+    ([3.0, -1.0, 0.4], 'map', 'unknown frame'),
+])
+def test_bad_targets_are_refused_and_nothing_moves(cell, xyz, frame, reason):
+    q0 = cell.left.q.copy()
+    publish(cell, '/scara_left/target', xyz, frame)
+    assert cell.spin_until(lambda: cell.status['scara_left'])
+    last = cell.status['scara_left'][-1]
+    assert last.level == DiagnosticStatus.ERROR and reason in last.message, last.message
+    run_until(cell, cell.bridge.sim.time + 1.0)
+    np.testing.assert_allclose(cell.left.q, q0, atol=1e-4)
+    assert not cell.trajs['scara_left']
+
+
+def test_base_frame_targets_and_mirroring_off(cell):
+    left = cell.bridge.cell.leader
+    res = cell.call(SetBool, '/replication_manager/enable', SetBool.Request(data=False))
+    assert res.success
+    q_right = cell.right.q.copy()
+    publish(cell, '/collab/target', [0.8, 1.3, 0.2], frame='scara_left_base')
+    assert cell.spin_until(lambda: cell.status['scara_left'])
+    run_until(cell, last_end(cell, 'scara_left') + 0.3)
+    np.testing.assert_allclose(fk(left, cell.left.q), left.base_position + [0.8, 1.3, 0.2],
+                               atol=1e-3)
+    np.testing.assert_allclose(cell.right.q, q_right, atol=1e-4)
+    assert not cell.status['scara_right']
