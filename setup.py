@@ -13,6 +13,7 @@ console_scripts = [
     'right_planner = scara_collab.nodes.planner:main_right',
     'replication_manager = scara_collab.nodes.replication_manager:main',
     'collision_monitor = scara_collab.nodes.collision_monitor:main',
+    'automation_manager = scara_collab.nodes.automation_manager:main',
 ]
 
 

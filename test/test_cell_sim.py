@@ -223,7 +223,7 @@ def test_estop_holds_both_arms_and_refuses_trajectories(cell):
         assert not sim.active(LEFT) and not sim.active(RIGHT)
         with pytest.raises(TrajectoryError, match='emergency stop'):
             sim.execute(LEFT, sim.time + trajs[LEFT].t, trajs[LEFT].q)
-        sim.step(500)  # braking from speed
+        sim.step(1000)  # braking from speed
         stopped = sim.joint_state().position
         sim.step(500)
         state = sim.joint_state()

@@ -21,7 +21,7 @@ def test_all_files_load_with_spec_defaults():
     assert sim['physics_rate'] == 1000.0 and sim['solver_iterations'] == 50
     assert sim['gravity'] == [0.0, 0.0, -9.81]
     assert sim['servo_rate'] == 1000.0 and sim['item_rate'] == 100.0
-    assert sim['feed_interval'] == 3.0 and sim['feed_pattern'] == 'random'
+    assert sim['feed_interval'] == 1.8 and sim['feed_pattern'] == 'random'
     assert sim['lateral_jitter'] == 0.3 and sim['grasp_tolerance'] == 0.06
     assert ctl['control_rate'] == 100.0
     assert ctl['pid']['planar'] == {'kp': 15.0, 'ki': 0.5, 'kd': 2.0}

@@ -139,7 +139,11 @@ SCHEMAS = {
              "must be 'single', 'collaborative' or 'mirrored'"),
         Rule('payload_tiers', 'list', lambda v: all(_num(x) and x >= 0 for x in v),
              'must be masses >= 0'),
-        Rule('approach_height', 'positive'),
+        Rule('pick_clearance', 'nonneg'),
+        Rule('grasp_reach', 'positive'),
+        Rule('drop_clearance', 'nonneg'),
+        Rule('start_lead', 'positive'),
+        Rule('move_timeout', 'positive'),
     ],
 }
 

@@ -1,7 +1,7 @@
 """Planner node (executables ``left_planner`` and ``right_planner``): one per arm.
 
-Parameter ``mode``: ``line`` (default: straight lines only), ``joint``, or ``line_or_joint``
-(a joint move when the goal is reachable but the straight line is not).
+Parameter ``mode``: ``line`` (straight lines only), ``joint``, or ``line_or_joint`` (default:
+the line, or a joint move when the goal is reachable but the straight line is not).
 
 Keeps its arm's state from ``/joint_states``; on ``/<robot>/target`` (PointStamped, frame
 ``world`` or ``<robot>_base``; a non-zero stamp is the requested start time) it plans the
@@ -11,11 +11,12 @@ priority rule of :mod:`scara_collab.core.planning`, and publishes ``/<robot>/joi
 stamped with its start, ``/<robot>/planned_path`` and ``/<robot>/planner_status`` (OK, WARN
 when delayed, ERROR with the reason when refused; the arm then stays where it is).
 
-A target that arrives while the arm's own move is still running is queued behind it (planned
-from that move's end). The follower re-times its not-yet-started move when a new leader move
-would conflict with it. When the other arm's resting pose blocks a move (no delay helps until
-that arm moves again), the planner reports WARN "waiting", retries whenever the other arm
-commits a new move, and refuses after ``max_wait`` seconds.
+A target that arrives while the arm's own move is still running is queued and planned when
+that move ends (the bridge replaces a running trajectory, so it is not published earlier).
+The follower re-times its not-yet-started move when a new leader move would conflict with it.
+When the other arm's resting pose blocks a move (no delay helps until that arm moves again),
+the planner reports WARN "waiting", retries whenever the other arm commits a new move, and
+refuses after ``max_wait`` seconds.
 """
 from typing import Optional
 
@@ -45,9 +46,9 @@ class Planner(Node):
         cfg = declare_config(self, ('controllers',))['controllers']
         self.declare_parameter('robot', robot)
         self.declare_parameter('profile', '')
-        self.declare_parameter('mode', 'line')
+        self.declare_parameter('mode', 'line_or_joint')
         self.declare_parameter('start_lead', 0.05)
-        self.declare_parameter('planning_buffer', 0.02)
+        self.declare_parameter('planning_buffer', 0.03)
         self.declare_parameter('max_delay', 30.0)
         self.declare_parameter('max_wait', 60.0)
         self.cell = load_cell(self.get_parameter('profile').value or None)
@@ -72,6 +73,8 @@ class Planner(Node):
         self.mine: Optional[Plan] = None            # my committed move
         self.pending_target = None                  # (xyz, frame, asked) of my move
         self.theirs: Optional[Timeline] = None      # the other arm's committed move
+        self.theirs_before: Optional[Timeline] = None  # ... and the one it replaced
+        self.queued = None                          # (xyz, frame, stamp) after my move
         self.waiting = None                         # (xyz, frame, asked): blocked target
 
         r, o = self.arm.name, self.other.name
@@ -81,6 +84,8 @@ class Planner(Node):
         self.create_subscription(JointState, '/joint_states', self._on_state, 10)
         self.create_subscription(PointStamped, f'/{r}/target', self._on_target, 10)
         self.create_subscription(JointTrajectory, f'/{o}/joint_trajectory', self._on_other, 10)
+        self.create_subscription(DiagnosticStatus, f'/{o}/execution_status',
+                                 self._on_other_execution, 10)
         self.get_logger().info(f'{r} planner ready ({self.mode} moves, '
                                f'{"leader" if self.leader else "follower, yields to " + o})')
 
@@ -116,6 +121,11 @@ class Planner(Node):
             self.q_other, _ = conv.joint_state_arrays(msg, self.other.joint_names)
         except conv.MessageError as exc:
             self.get_logger().warning(f'ignoring joint_states: {exc}', throttle_duration_sec=5.0)
+            return
+        if self.queued is not None and (self.mine is None or self._now() >= self.mine.end):
+            xyz, frame, stamp = self.queued
+            self.queued = None
+            self._plan(xyz, frame, stamp)
 
     def _on_target(self, msg: PointStamped) -> None:
         frame, xyz, stamp = conv.point_stamped(msg)
@@ -131,6 +141,13 @@ class Planner(Node):
             self._status('ERROR', f'refused: unknown frame {frame!r}; use world or '
                          f'{self.arm.name}_base')
             return
+        self.waiting = None  # a new target supersedes one that was waiting
+        if self.mine is not None and self.mine.end > self._now():
+            # the bridge replaces a running trajectory: hold this one until mine has ended
+            self.queued = (xyz, frames[frame], stamp)
+            self._status('OK', f'queued behind the running move (ends t={self.mine.end:.3f} s)',
+                         target=xyz.tolist())
+            return
         self._plan(xyz, frames[frame], stamp)
 
     def _plan(self, xyz: np.ndarray, frame: str, stamp: float,
@@ -138,11 +155,8 @@ class Planner(Node):
         now = self._now()
         start = max(stamp, now + self.lead) if stamp > 0 else now + self.lead
         asked = start if asked is None else asked  # when the move was first wanted
-        q_start = self.q
-        if self.mine is not None and self.mine.end > start:  # queue behind my running move
-            start, q_start = self.mine.end, self.mine.traj.q[-1]
         try:
-            traj = plan_path(self.arm, q_start, xyz, frame, self.mode,
+            traj = plan_path(self.arm, self.q, xyz, frame, self.mode,
                              dt=self.traj_cfg['sample_period'],
                              dls_threshold=self.traj_cfg['dls_threshold'],
                              dls_max_damping=self.traj_cfg['dls_max_damping'])
@@ -162,6 +176,11 @@ class Planner(Node):
         kind = 'line' if path_metrics(traj).max_deviation < 1e-4 else 'joint move'
         self._publish(plan, f'moving to {np.round(xyz, 4).tolist()} ({kind}, '
                       f'{traj.duration:.2f} s)')
+
+    def _on_other_execution(self, msg: DiagnosticStatus) -> None:
+        """Forget a trajectory of the other arm that the bridge refused (the prior one runs)."""
+        if msg.level == DiagnosticStatus.ERROR and 'refused' in msg.message:
+            self.theirs = self.theirs_before
 
     def _wait(self, xyz: np.ndarray, frame: str, asked: float) -> None:
         """Wait for the other arm: it blocks the move even after its committed motion."""
@@ -185,7 +204,7 @@ class Planner(Node):
         start = stamp if stamp > 0 else now
         if t[0] > 0 and self.q_other is not None:
             t, q = np.concatenate(([0.0], t)), np.vstack([self.q_other, q])
-        self.theirs = Timeline(start + t, q)
+        self.theirs_before, self.theirs = self.theirs, Timeline(start + t, q)
         if self.waiting is not None:  # the other arm moves: maybe it clears the way
             xyz, frame, asked = self.waiting
             self._plan(xyz, frame, 0.0, asked)

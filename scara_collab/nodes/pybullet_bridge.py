@@ -9,8 +9,9 @@ Publishes ``/clock``, ``/joint_states`` (all six joints, ``state_rate``), ``/con
 released, sorted, wrong_bin, missed, dropped) and ``/<robot>/execution_status``. Subscribes
 ``/<robot>/joint_trajectory`` (executed like ros2_control's joint trajectory controller: stamp
 zero = start now, else at the stamp; a new trajectory replaces the running one; a bad one is
-refused with the reason and the arm holds) and ``/emergency_stop`` (transient local; true =
-both arms hold). Serves ``/<robot>/gripper`` (std_srvs/SetBool: true = grasp, false = release).
+refused with the reason and the arm keeps its current command) and ``/emergency_stop``
+(transient local; true = both arms hold). Serves ``/<robot>/gripper`` (std_srvs/SetBool:
+true = grasp, false = release).
 """
 import math
 import time
@@ -156,18 +157,20 @@ class PyBulletBridge(Node):
         self.status_pub[robot].publish(conv.status(f'{robot}/execution', level, message,
                                                    {'time': f'{self.sim.time:.3f}'}))
 
+    _keeps = 'not executed: the arm keeps its current command'
+
     def _on_trajectory(self, robot: str, msg: JointTrajectory) -> None:
         arm = self.cell.arm(robot)
         try:
             stamp, t, q, qd, qdd = conv.trajectory_arrays(msg, arm.joint_names)
         except conv.MessageError as exc:
-            self._report(robot, 'ERROR', f'trajectory refused: {exc}; holding')
+            self._report(robot, 'ERROR', f'trajectory refused: {exc}; {self._keeps}')
             return
         now = self.sim.time
         start = now if stamp == 0.0 else stamp
         if start + t[-1] < now:
             self._report(robot, 'ERROR', f'trajectory refused: it ended {now - start - t[-1]:.3f}'
-                         ' s ago; holding')
+                         f' s ago; {self._keeps}')
             return
         if start < now - self.dt:
             self._report(robot, 'WARN', f'start {start:.3f} s is {now - start:.3f} s late; '
@@ -182,7 +185,7 @@ class PyBulletBridge(Node):
         try:
             self.sim.execute(robot, start + t, q, qd, qdd)
         except ValueError as exc:
-            self._report(robot, 'ERROR', f'trajectory refused: {exc}; holding')
+            self._report(robot, 'ERROR', f'trajectory refused: {exc}; {self._keeps}')
             return
         self._report(robot, 'OK', f'executing {len(t)} points from t={start:.3f} s '
                      f'for {t[-1]:.3f} s')

@@ -1,0 +1,162 @@
+"""Sorting decisions without ROS.
+
+Where a moving item will be met, where it is dropped, which item an arm takes next.
+
+Items ride the belt along +x at ``belt.speed``. An arm that starts moving at ``t_start`` meets
+an item where the item will be when the tool arrives: the fixed point of
+``T = t_start + duration(move to p(T))``, ``p(T) = p_seen + v (T - t_seen)``. Since ``p``
+moves at 0.2 m/s and a move's duration changes by well under 1 s per metre, the iteration is
+a contraction and converges in a few steps.
+"""
+from dataclasses import dataclass
+from typing import Callable, Dict, Iterable, List, Optional, Sequence
+
+import numpy as np
+
+from scara_collab.core.kinematics import ik
+from scara_collab.core.model import ArmModel, CellModel
+from scara_collab.core.trajectory import Trajectory
+
+
+@dataclass(frozen=True)
+class SeenItem:
+    """An item on the belt as last seen.
+
+    :ivar id: item id; :ivar cls: class; :ivar position: ``(3,)`` centre in world, m;
+    :ivar stamp: when it was seen, s (sim time).
+    """
+
+    id: int
+    cls: str
+    position: np.ndarray
+    stamp: float
+
+
+@dataclass(frozen=True)
+class Intercept:
+    """Where and when a tool meets an item.
+
+    ``target`` (tool tip, world), ``arrive`` (s), the planned ``traj`` and when it must
+    ``start`` (s) to arrive then.
+    """
+
+    target: np.ndarray
+    arrive: float
+    traj: Trajectory
+    start: float
+
+
+def predict(cell: CellModel, item: SeenItem, t: float) -> np.ndarray:
+    """Return the item centre at time ``t`` if it stays on the belt."""
+    return item.position + np.array([cell.belt.speed * (t - item.stamp), 0.0, 0.0])
+
+
+def pick_height(cell: CellModel, clearance: float) -> float:
+    """Return the tool-tip height for a grasp: ``clearance`` above an item's top."""
+    return cell.belt.top_z + cell.item_size + clearance
+
+
+def drop_point(cell: CellModel, robot: str, cls: str, clearance: float) -> np.ndarray:
+    """Return the tool-tip position above the bin of ``cls`` of ``robot``.
+
+    The held item clears the walls by ``clearance``.
+    """
+    floor = cell.bins[(robot, cls)]
+    wall = float(cell.config['bins']['size'][2])
+    return np.array([floor[0], floor[1], floor[2] + wall + cell.item_size + clearance])
+
+
+def joint_time(arm: ArmModel, q0, q1) -> float:
+    """Return a lower bound on a move's duration: the slowest joint's trapezoid, s."""
+    d = np.abs(np.asarray(q1, float) - np.asarray(q0, float))
+    v, a = arm.max_velocity, arm.max_acceleration
+    t = np.where(d > v * v / a, d / v + v / a, 2.0 * np.sqrt(d / a))
+    return float(t.max())
+
+
+def intercept(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: float,
+              z: float, plan: Callable[[np.ndarray, np.ndarray], Trajectory],
+              iterations: int = 8, tol: float = 0.003) -> Optional[Intercept]:
+    """Plan the move from ``q_start`` (at rest, free from ``t_start``) that meets ``item``.
+
+    The meeting time ``T`` is the earliest at which the item is in reach and the tool can be
+    there: starting from when the item enters the arm's reach, ``T`` is raised to
+    ``t_start + duration(move to p(T))`` until it settles (within ``tol`` of belt travel).
+    If the tool would be early (the item is still upstream), the move starts later.
+
+    :param z: tool-tip height at the meeting point (see :func:`pick_height`).
+    :param plan: ``plan(q_start, target) -> Trajectory`` (raises ``ValueError`` if refused).
+    :return: the :class:`Intercept`, or None if the item leaves the arm's reach first.
+    """
+    speed = max(cell.belt.speed, 1e-9)
+    p0 = predict(cell, item, t_start)
+    x_in = reach_entry_x(arm, p0[1], z, p0[0], cell.belt.x_end)
+    if not np.isfinite(x_in):
+        return None
+    arrive = max(t_start, t_start + (x_in - p0[0]) / speed)
+    for _ in range(iterations):
+        p = predict(cell, item, arrive)
+        p[2] = z
+        try:
+            traj = plan(q_start, p)
+        except ValueError:
+            return None  # out of reach by then
+        earliest = t_start + traj.duration
+        if earliest <= arrive + tol / speed:  # converged (the item moves < tol meanwhile)
+            start = max(t_start, arrive - traj.duration)
+            return Intercept(p, start + traj.duration, traj, start)
+        arrive = earliest
+    return None
+
+
+def reach_entry_x(arm: ArmModel, y: float, z: float, x_from: float, x_to: float,
+                  step: float = 0.02) -> float:
+    """Return the smallest x on ``[x_from, x_to]`` (lateral ``y``, height ``z``) in reach."""
+    xs = np.arange(x_from, x_to + step, step)
+    ok = ik(arm, np.stack([xs, np.full_like(xs, y), np.full_like(xs, z)], axis=1)).ok
+    return float(xs[ok].min()) if np.any(ok) else float('inf')
+
+
+def reach_exit_x(arm: ArmModel, y: float, z: float, x_from: float, x_to: float,
+                 step: float = 0.02) -> float:
+    """Return the largest x on ``[x_from, x_to]`` (lateral ``y``, height ``z``) in reach."""
+    xs = np.arange(x_from, x_to + step, step)
+    ok = ik(arm, np.stack([xs, np.full_like(xs, y), np.full_like(xs, z)], axis=1)).ok
+    return float(xs[ok].max()) if np.any(ok) else float('-inf')
+
+
+def order_candidates(cell: CellModel, arm: ArmModel, items: Iterable[SeenItem], now: float,
+                     z: float, own_side: Optional[bool], steal: bool) -> List[SeenItem]:
+    """Return the items an arm may take next, most urgent first (closest to leaving reach).
+
+    :param own_side: ``True`` to keep items on the arm's half of the belt, ``None`` for all.
+    :param steal: also offer items on the other half (the other arm is busy).
+    """
+    side = np.sign(arm.base_position[1] - cell.belt.centre_y)
+    out = []
+    for it in items:
+        p = predict(cell, it, now)
+        mine = np.sign(p[1] - cell.belt.centre_y) in (side, 0.0)
+        if own_side is not None and not mine and not steal:
+            continue
+        exit_x = reach_exit_x(arm, p[1], z, p[0], cell.belt.x_end)
+        if exit_x <= p[0]:
+            continue  # already past this arm
+        slack = (exit_x - p[0]) / max(cell.belt.speed, 1e-9)
+        out.append((0 if mine or own_side is None else 1, slack, it))
+    out.sort(key=lambda e: (e[0], e[1]))
+    return [e[2] for e in out]
+
+
+def mirror_partner(cell: CellModel, item: SeenItem, others: Sequence[SeenItem],
+                   tol: float = 0.03) -> Optional[SeenItem]:
+    """Return the item spawned as ``item``'s mirror image (same x and class, y mirrored)."""
+    want = item.position * np.array([1.0, -1.0, 1.0]) + [0.0, 2 * cell.belt.centre_y, 0.0]
+    best: Dict[float, SeenItem] = {}
+    for o in others:
+        if o.id == item.id or o.cls != item.cls:
+            continue
+        d = float(np.linalg.norm(predict(cell, o, item.stamp) - want))
+        if d < tol:
+            best[d] = o
+    return best[min(best)] if best else None

@@ -1,0 +1,657 @@
+"""Launch the whole cell on sim time, run the job, record it, report it (``launch_cell.py``).
+
+Stages, in order, each a separate process (``python -m scara_collab.run.child
+<module>:<function> --ros-args -p use_sim_time:=true --params-file config/<file>.yaml ...``),
+each started only when the previous one is *ready* on the graph:
+
+=====================  ==================================================================
+pybullet_bridge        ``/clock`` messages arrive (sim time advances)
+left_planner           node ``left_planner`` listed, subscribed to ``/scara_left/target``
+right_planner          node ``right_planner`` listed, subscribed to ``/scara_right/target``
+replication_manager    service ``/replication_manager/enable`` available
+collision_monitor      service ``/collision_monitor/clear`` available
+automation_manager     service ``/automation_manager/start`` available; then ``start`` is
+                       called (not in ``--mode idle``)
+=====================  ==================================================================
+
+Every wait has a timeout that ends the launch with an error naming the stage, and a node
+process that dies ends it at once (its name, exit code and the tail of its log are printed).
+
+The bridge is the clock and steps from the moment it starts. So that the launch does not burn
+sim time (and items) at full speed, the bridge starts at ``--launch-rtf`` (default 1.0) and is
+set to ``--rtf`` (its dynamic parameter ``real_time_factor``) when the job starts. The bridge
+picks its tick at start-up (2 ms when throttled) and steps ``step_chunk`` per tick, so when it
+will be released to more than 4x (or unthrottled) the launcher also passes ``step_chunk``
+0.02 s, which allows up to 10x real time (``--step-chunk`` to change it; ``--launch-rtf 0``
+starts the bridge at ``--rtf`` directly, without the hold).
+
+The run ends after ``--duration`` sim seconds of job, on SIGINT / SIGTERM, or when a node
+process dies: the bridge is slowed back to the launch pace, the job is stopped
+(``/automation_manager/stop``), the children get SIGINT in reverse order (SIGTERM if still
+starting), what remains after a grace period is killed, and the run files are written
+(:mod:`scara_collab.run.recorder`). Exit status: 0 clean run, 1 a node died / was not ready /
+refused to start, 2 bad arguments, 130 SIGINT, 143 SIGTERM.
+"""
+import argparse
+from dataclasses import dataclass, field
+import datetime
+import importlib.util
+import json
+import os
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+import traceback
+from typing import Callable, Dict, IO, List, Optional, Sequence, Tuple
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import NodeNameNonExistentError
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rclpy.signals import SignalHandlerOptions
+from std_srvs.srv import SetBool, Trigger
+
+from scara_collab.core.config import load_config
+from scara_collab.core.paths import config_dir
+from scara_collab.run.recorder import RunRecorder
+from scara_collab.run.report import format_progress, format_report
+
+RUN_MODES = ('idle', 'single', 'collaborative', 'mirrored')
+AUTOMATION_MODULE = 'scara_collab.nodes.automation_manager'
+EXIT_FAILED = 1
+EXIT_USAGE = 2
+FAST_CHUNK = 0.02  # s: with the bridge's 2 ms tick, up to 10x real time
+
+
+@dataclass
+class Stage:
+    """One node process of the graph and what "ready" means for it."""
+
+    name: str                   # node name = log file name
+    entry: str                  # module:function
+    configs: Tuple[str, ...]    # config/<name>.yaml files passed with --params-file
+    ready: str                  # what the launcher waits for, for messages
+    params: Dict[str, str] = field(default_factory=dict)
+
+
+@dataclass
+class Child:
+    """A started stage."""
+
+    stage: Stage
+    proc: subprocess.Popen
+    log_path: Path
+    log_file: IO
+    started: float
+    ready_after: Optional[float] = None
+
+
+class RunEnd(Exception):
+    """The run ends early: ``reason`` for the summary, ``code`` for the exit status."""
+
+    def __init__(self, reason: str, code: int = EXIT_FAILED, details: str = ''):
+        super().__init__(reason)
+        self.reason, self.code, self.details = reason, code, details
+
+
+def tail(path: Path, lines: int = 20) -> str:
+    """Last ``lines`` lines of a text file ('' if unreadable)."""
+    try:
+        with open(path, 'rb') as f:
+            f.seek(0, os.SEEK_END)
+            f.seek(max(0, f.tell() - 16384))
+            text = f.read().decode('utf-8', 'replace')
+    except OSError:
+        return ''
+    return '\n'.join(text.splitlines()[-lines:])
+
+
+def describe_exit(code: int) -> str:
+    """``-9`` -> ``'code -9 (SIGKILL)'``."""
+    if code is not None and code < 0:
+        try:
+            return f'code {code} ({signal.Signals(-code).name})'
+        except ValueError:
+            pass
+    return f'code {code}'
+
+
+def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
+    """Command line of ``scripts/launch_cell.py``."""
+    profiles = sorted(load_config('cell')['profiles'])
+    p = argparse.ArgumentParser(
+        prog='launch_cell.py',
+        description='Start the scara_collab graph (bridge, planners, replication manager, '
+        'collision monitor, automation manager) on sim time, run the sorting job, record '
+        'and report it.')
+    p.add_argument('--mode', choices=RUN_MODES, default='collaborative',
+                   help='job mode; idle = the graph without the automation job '
+                   '(default: %(default)s)')
+    p.add_argument('--duration', type=float, default=180.0, metavar='SIM_SECONDS',
+                   help='sim seconds of job before a clean stop (default: %(default)s)')
+    p.add_argument('--rtf', type=float, default=None, metavar='FACTOR',
+                   help='real-time factor of the bridge, 0 = as fast as possible '
+                   '(default: config/simulation.yaml)')
+    p.add_argument('--launch-rtf', type=float, default=1.0, metavar='FACTOR',
+                   help='real-time factor while the graph starts, at most --rtf; 0 = start '
+                   'the bridge at --rtf at once (default: %(default)s)')
+    p.add_argument('--step-chunk', type=float, default=None, metavar='SIM_SECONDS',
+                   help='bridge step_chunk: sim time stepped per 2 ms bridge tick, which '
+                   'bounds the real-time factor at step_chunk / 0.002 (default: '
+                   f'{FAST_CHUNK} when the bridge is released to more than 4x, else the '
+                   'bridge default)')
+    p.add_argument('--gui', action='store_true', help='PyBullet GUI (bridge gui:=true)')
+    p.add_argument('--output', type=Path, default=None, metavar='DIR',
+                   help='run folder (default: runs/<timestamp>_<mode>)')
+    p.add_argument('--profile', choices=profiles, default=None,
+                   help='link profile (default: config/cell.yaml)')
+    p.add_argument('--seed', type=int, default=None, help='item feed seed (bridge item_seed)')
+    p.add_argument('--quiet', action='store_true',
+                   help='no stage or progress lines; errors and the report only')
+    p.add_argument('--ready-timeout', type=float, default=60.0, metavar='S',
+                   help='wall seconds each stage may take to become ready (default: '
+                   '%(default)s)')
+    p.add_argument('--stall-timeout', type=float, default=30.0, metavar='S',
+                   help='end the run if sim time stands still this many wall seconds '
+                   '(default: %(default)s)')
+    p.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
+    args = p.parse_args(argv)
+    if not args.duration > 0:
+        p.error('--duration must be > 0')
+    if args.rtf is not None and args.rtf < 0:
+        p.error('--rtf must be >= 0')
+    if args.launch_rtf < 0:
+        p.error('--launch-rtf must be >= 0')
+    if args.step_chunk is not None and not args.step_chunk > 0:
+        p.error('--step-chunk must be > 0')
+    if args.rtf is None:
+        args.rtf = float(load_config('simulation')['real_time_factor'])
+    if args.launch_rtf == 0 or (args.rtf != 0 and args.rtf <= args.launch_rtf):
+        args.launch_rtf = args.rtf  # no hold
+    if args.step_chunk is None and args.launch_rtf != args.rtf and (
+            args.rtf == 0 or args.rtf > 4):
+        args.step_chunk = FAST_CHUNK
+    return args
+
+
+def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
+    """Return the graph for ``args``, in launch order."""
+    common = {} if args.profile is None else {'profile': args.profile}
+    bridge = dict(common, real_time_factor=repr(float(args.launch_rtf)))
+    if args.step_chunk is not None:
+        bridge['step_chunk'] = repr(float(args.step_chunk))
+    if args.gui:
+        bridge['gui'] = 'true'
+    if args.seed is not None:
+        bridge['item_seed'] = str(args.seed)
+    if args.mode == 'mirrored':  # items must arrive in mirror pairs
+        bridge['feed_pattern'] = 'mirror_pairs'
+    if args.mode == 'idle':  # no job: no items to go missed
+        bridge['feed_interval'] = '0.0'
+    out = [
+        Stage('pybullet_bridge', 'scara_collab.nodes.pybullet_bridge:main',
+              ('simulation', 'controllers'), '/clock messages', bridge),
+        Stage('left_planner', 'scara_collab.nodes.planner:main_left', ('controllers',),
+              'node left_planner subscribed to /scara_left/target', dict(common)),
+        Stage('right_planner', 'scara_collab.nodes.planner:main_right', ('controllers',),
+              'node right_planner subscribed to /scara_right/target', dict(common)),
+        Stage('replication_manager', 'scara_collab.nodes.replication_manager:main', (),
+              'service /replication_manager/enable', dict(common)),
+        Stage('collision_monitor', 'scara_collab.nodes.collision_monitor:main', (),
+              'service /collision_monitor/clear', dict(common)),
+    ]
+    if with_automation:
+        auto = dict(common, auto_start='false')
+        if args.mode != 'idle':
+            auto['mode'] = args.mode
+        out.append(Stage('automation_manager', f'{AUTOMATION_MODULE}:main', ('automation',),
+                         'service /automation_manager/start', auto))
+    return out
+
+
+def command(stage: Stage, config_dir: Path) -> List[str]:
+    """Return the command line of one stage."""
+    cmd = [sys.executable, '-m', 'scara_collab.run.child', stage.entry,
+           '--ros-args', '-p', 'use_sim_time:=true']
+    for name in stage.configs:
+        cmd += ['--params-file', str(config_dir / f'{name}.yaml')]
+    for key, value in stage.params.items():
+        cmd += ['-p', f'{key}:={value}']
+    return cmd
+
+
+class Console:
+    """Stage lines and progress on stdout (and in ``launch.log``); errors always shown."""
+
+    def __init__(self, log_path: Path, quiet: bool):
+        self.quiet = quiet
+        self.tty = sys.stdout.isatty()
+        self.log = open(log_path, 'a', encoding='utf-8')
+        self._live = False
+        self._t0 = time.monotonic()
+
+    def _clear_live(self) -> None:
+        if self._live:
+            sys.stdout.write('\r\x1b[K')
+            self._live = False
+
+    def say(self, text: str, error: bool = False) -> None:
+        self.log.write(f'{time.monotonic() - self._t0:7.2f} {text}\n')
+        self.log.flush()
+        if self.quiet and not error:
+            return
+        self._clear_live()
+        print(text, flush=True)
+
+    def progress(self, text: str) -> None:
+        if self.quiet:
+            return
+        if self.tty:
+            sys.stdout.write('\r' + text + '\x1b[K')
+            sys.stdout.flush()
+            self._live = True
+        else:
+            self.say(text)
+
+    def close(self) -> None:
+        self._clear_live()
+        self.log.close()
+
+
+class Launcher:
+    """Start the stages, supervise the run, stop everything; see the module docstring."""
+
+    def __init__(self, args: argparse.Namespace, output: Path, console: Console):
+        self.args = args
+        self.output = output
+        self.console = console
+        self.config_dir = config_dir()
+        self.with_automation = importlib.util.find_spec(AUTOMATION_MODULE) is not None
+        self.stages = stages(args, self.with_automation)
+        self.children: List[Child] = []
+        self.signals: List[str] = []
+        self.job_started = False
+        self.rtf_released = False
+        self.t_launch = time.monotonic()
+        self.context = rclpy.Context()
+        rclpy.init(args=[], context=self.context,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        self.recorder = RunRecorder(output, args.mode, profile=args.profile,
+                                    context=self.context)
+        self.node = self.recorder
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.recorder)
+        self._clients: Dict[str, object] = {}
+        self._bridge_params: Optional[AsyncParameterClient] = None
+        self._next_poll = 0.0
+        self._next_checkpoint = 0.0
+        self.rtf = args.rtf
+        self.launch_rtf = args.launch_rtf
+
+    # --- signals ---------------------------------------------------------------------------
+    def on_signal(self, signum, _frame) -> None:
+        self.signals.append(signal.Signals(signum).name)
+        if len(self.signals) == 2:
+            self.console.say(f'[launch] {self.signals[-1]} again: killing the nodes now',
+                             error=True)
+
+    # --- low-level waits -------------------------------------------------------------------
+    def check(self) -> None:
+        """Raise :class:`RunEnd` on a signal or a dead node process."""
+        if self.signals:
+            sig = self.signals[0]
+            raise RunEnd(sig, 130 if sig == 'SIGINT' else 143)
+        now = time.monotonic()
+        if now < self._next_poll:
+            return
+        self._next_poll = now + 0.1
+        if now >= self._next_checkpoint:  # a summary on disk even if we are SIGKILLed
+            self._next_checkpoint = now + 10.0
+            self.recorder.checkpoint()
+        for child in self.children:
+            code = child.proc.poll()
+            if code is not None:
+                name = child.stage.name
+                raise RunEnd(f'node {name} exited with {describe_exit(code)}', EXIT_FAILED,
+                             f'[launch] last lines of {child.log_path}:\n'
+                             + '\n'.join('    ' + ln for ln in tail(child.log_path).splitlines()))
+
+    def wait_until(self, predicate: Callable[[], bool], timeout: float,
+                   on_timeout: Callable[[], str], supervise: bool = True) -> None:
+        """Spin the recorder until ``predicate()``; :class:`RunEnd` on timeout or trouble.
+
+        :param supervise: also end on a signal or a dead node (:meth:`check`); without it (the
+            shutdown) only a second signal cuts the wait short.
+        """
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if supervise:
+                self.check()
+            elif len(self.signals) > 1:
+                raise RunEnd(self.signals[-1], 130)
+            if time.monotonic() >= deadline:
+                raise RunEnd(on_timeout())
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def client(self, srv_type, name: str):
+        if name not in self._clients:
+            self._clients[name] = self.node.create_client(srv_type, name)
+        return self._clients[name]
+
+    def call(self, srv_type, name: str, request, timeout: float, what: str,
+             supervise: bool = True):
+        """Call a service and return the response (waits for the service first)."""
+        cli = self.client(srv_type, name)
+        self.wait_until(cli.service_is_ready, timeout,
+                        lambda: f'{what}: service {name} not available after {timeout:g} s',
+                        supervise)
+        future = cli.call_async(request)
+        self.wait_until(future.done, timeout,
+                        lambda: f'{what}: {name} did not answer within {timeout:g} s', supervise)
+        return future.result()
+
+    # --- readiness -------------------------------------------------------------------------
+    def _subscribed(self, node_name: str, topic: str) -> bool:
+        try:
+            subs = self.node.get_subscriber_names_and_types_by_node(node_name, '/')
+        except NodeNameNonExistentError:
+            return False
+        return any(name == topic for name, _ in subs)
+
+    def _service_ready(self, srv_type, name: str) -> Callable[[], bool]:
+        cli = self.client(srv_type, name)
+        return cli.service_is_ready
+
+    def ready_check(self, stage: Stage) -> Callable[[], bool]:
+        """Return the readiness predicate of a stage (see the module docstring)."""
+        name = stage.name
+        if name == 'pybullet_bridge':
+            return lambda: self.node.get_clock().now().nanoseconds > 0
+        if name.endswith('_planner'):
+            robot = f'scara_{name.split("_")[0]}'
+            return lambda: self._subscribed(name, f'/{robot}/target')
+        if name == 'replication_manager':
+            return self._service_ready(SetBool, '/replication_manager/enable')
+        if name == 'collision_monitor':
+            return self._service_ready(Trigger, '/collision_monitor/clear')
+        if name == 'automation_manager':
+            return self._service_ready(Trigger, '/automation_manager/start')
+        raise ValueError(f'no readiness check for {name}')
+
+    # --- processes -------------------------------------------------------------------------
+    def env(self) -> Dict[str, str]:
+        env = dict(os.environ)
+        env.update(PYTHONUNBUFFERED='1', RCUTILS_COLORIZED_OUTPUT='0',
+                   SCARA_LAUNCHER_PID=str(os.getpid()))
+        return env
+
+    def start(self, stage: Stage) -> Child:
+        logs = self.output / 'logs'
+        logs.mkdir(parents=True, exist_ok=True)
+        log_path = logs / f'{stage.name}.log'
+        log_file = open(log_path, 'wb')
+        cmd = command(stage, self.config_dir)
+        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log_file,
+                                stderr=subprocess.STDOUT, env=self.env(),
+                                start_new_session=True)  # Ctrl-C reaches the launcher only
+        child = Child(stage, proc, log_path, log_file, time.monotonic())
+        self.children.append(child)
+        self.write_pids()
+        self._write_launch_file()
+        return child
+
+    def write_pids(self) -> None:
+        pids = {c.stage.name: c.proc.pid for c in self.children}
+        tmp = self.output / 'pids.json.tmp'
+        tmp.write_text(json.dumps(pids, indent=2) + '\n', encoding='utf-8')
+        os.replace(tmp, self.output / 'pids.json')
+
+    def _write_launch_file(self) -> None:
+        info = {
+            'argv': sys.argv,
+            'python': sys.executable,
+            'config_dir': str(self.config_dir),
+            'ROS_DOMAIN_ID': os.environ.get('ROS_DOMAIN_ID'),
+            'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'),
+            'commands': {c.stage.name: command(c.stage, self.config_dir)
+                         for c in self.children},
+        }
+        (self.output / 'launch.json').write_text(json.dumps(info, indent=2) + '\n',
+                                                 encoding='utf-8')
+
+    def set_bridge_rtf(self, value: float, timeout: Optional[float] = None,
+                       supervise: bool = True) -> None:
+        """Set the bridge's ``real_time_factor`` (its parameter services; waits for them)."""
+        timeout = timeout or self.args.ready_timeout
+        if self._bridge_params is None:
+            self._bridge_params = AsyncParameterClient(self.node, 'pybullet_bridge')
+        client = self._bridge_params
+        self.wait_until(client.services_are_ready, timeout,
+                        lambda: f'pybullet_bridge parameter services not available after '
+                        f'{timeout:g} s', supervise)
+        future = client.set_parameters(
+            [Parameter('real_time_factor', Parameter.Type.DOUBLE, float(value))])
+        self.wait_until(future.done, timeout, lambda: 'pybullet_bridge did not answer '
+                        f'set_parameters within {timeout:g} s', supervise)
+        results = future.result().results if future.result() is not None else []
+        if not results or not results[0].successful:
+            reason = results[0].reason if results else 'no result'
+            raise RunEnd(f'pybullet_bridge refused real_time_factor {value}: {reason}')
+
+    def _duplicates(self, name: str) -> int:
+        return sum(1 for n, ns in self.node.get_node_names_and_namespaces()
+                   if n == name and ns == '/')
+
+    def start_graph(self) -> None:
+        """Start every stage in order, each once the previous one is ready."""
+        domain = os.environ.get('ROS_DOMAIN_ID', '0 (default)')
+        self.console.say(f'[launch] mode {self.args.mode}, {self.args.duration:g} sim s, '
+                         f'rtf {format_factor(self.rtf)}, output {self.output}')
+        self.console.say(f'[launch] ROS_DOMAIN_ID {domain}, discovery '
+                         f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}')
+        if not self.with_automation:
+            self.console.say(f'[launch] {AUTOMATION_MODULE} is not installed: idle graph '
+                             'without the automation manager')
+        for stage in self.stages:
+            if self._duplicates(stage.name):
+                raise RunEnd(f'a node named {stage.name} is already running on ROS_DOMAIN_ID '
+                             f'{domain}; stop it or use another ROS_DOMAIN_ID')
+            child = self.start(stage)
+            timeout = self.args.ready_timeout
+            self.wait_until(self.ready_check(stage), timeout,
+                            lambda: f'stage {stage.name} not ready after {timeout:g} s '
+                            f'(waiting for {stage.ready}); see {child.log_path}')
+            child.ready_after = time.monotonic() - child.started
+            extra = ''
+            if stage.name == 'pybullet_bridge':
+                extra = f', sim t={self.recorder.sim_time:.2f} s'
+                if self.launch_rtf != self.rtf:
+                    extra += f', held at rtf {self.launch_rtf:g} until the job starts'
+            self.console.say(f'[launch] {stage.name:<20} ready in {child.ready_after:4.1f} s '
+                             f'(pid {child.proc.pid}): {stage.ready}{extra}')
+
+    def start_job(self) -> None:
+        """Call ``/automation_manager/start`` (not in idle mode) and release the clock."""
+        if self.args.mode != 'idle':
+            res = self.call(Trigger, '/automation_manager/start', Trigger.Request(),
+                            self.args.ready_timeout, 'automation_manager')
+            if not res.success:
+                raise RunEnd(f'automation_manager refused to start: {res.message}')
+            self.job_started = True
+        t0 = self.recorder.start_job()
+        if self.launch_rtf != self.rtf:
+            self.set_bridge_rtf(self.rtf)
+            self.rtf_released = True
+        self.recorder.extra['launch_wall_seconds'] = time.monotonic() - self.t_launch
+        job = f'{self.args.mode} job started' if self.job_started else 'graph idle'
+        self.console.say(f'[launch] {job} at sim t={t0:.2f} s after '
+                         f'{time.monotonic() - self.t_launch:.1f} s; running '
+                         f'{self.args.duration:g} sim s at rtf {format_factor(self.rtf)}')
+
+    def supervise(self) -> None:
+        """Spin until the duration is reached; progress; :class:`RunEnd` on trouble."""
+        end = self.recorder.job_start + self.args.duration
+        period = 0.25 if self.console.tty else 5.0
+        next_progress = time.monotonic() + period
+        last_sim, last_change = self.recorder.sim_time, time.monotonic()
+        while True:
+            self.executor.spin_once(timeout_sec=0.02)
+            self.check()
+            now = time.monotonic()
+            sim = self.recorder.sim_time
+            if (self.recorder.log.t_last or 0.0) >= end:  # recorded up to the end
+                self.recorder.freeze(end)
+                return
+            if sim > last_sim:
+                last_sim, last_change = sim, now
+            elif now - last_change > self.args.stall_timeout:
+                raise RunEnd(f'sim time stood still at t={sim:.2f} s for '
+                             f'{self.args.stall_timeout:g} s (is pybullet_bridge stuck?)')
+            if now >= next_progress:
+                next_progress = now + period
+                self.console.progress(format_progress(self.recorder.progress(),
+                                                      self.args.duration))
+
+    # --- shutdown --------------------------------------------------------------------------
+    def hold_clock(self) -> None:
+        """Slow the bridge back to the launch pace, so the shutdown does not race sim time."""
+        if self.rtf_released and len(self.signals) < 2:
+            self.rtf_released = False
+            bridge = self.children[0] if self.children else None
+            if bridge is not None and bridge.proc.poll() is None:
+                try:
+                    self.set_bridge_rtf(self.launch_rtf, timeout=2.0, supervise=False)
+                except RunEnd:
+                    pass
+
+    def stop_job(self) -> None:
+        """Ask the automation manager to stop the job (best effort, short timeout)."""
+        if not self.job_started:
+            return
+        self.job_started = False
+        auto = next((c for c in self.children if c.stage.name == 'automation_manager'), None)
+        if auto is None or auto.proc.poll() is not None or len(self.signals) > 1:
+            return
+        try:
+            res = self.call(Trigger, '/automation_manager/stop', Trigger.Request(), 5.0,
+                            'automation_manager', supervise=False)
+        except RunEnd as exc:
+            self.recorder.extra['job_stop'] = f'not stopped: {exc.reason}'
+            return
+        self.recorder.extra['job_stop'] = res.message
+
+    def stop_children(self, grace: float = 5.0) -> None:
+        """SIGINT the children in reverse order, wait for them, then kill what remains.
+
+        :param grace: wall seconds the children have to exit before SIGKILL.
+        """
+        t0 = time.monotonic()
+        for child in reversed(self.children):
+            if child.proc.poll() is None:
+                # a node still starting may not handle SIGINT yet (a library can swallow the
+                # KeyboardInterrupt while importing); SIGTERM ends it either way
+                sig = signal.SIGINT if child.ready_after is not None else signal.SIGTERM
+                try:
+                    child.proc.send_signal(sig)
+                except ProcessLookupError:
+                    pass
+        deadline = time.monotonic() + grace
+        for child in reversed(self.children):
+            while child.proc.poll() is None and time.monotonic() < deadline \
+                    and len(self.signals) < 2:
+                try:
+                    child.proc.wait(timeout=0.05)
+                except subprocess.TimeoutExpired:
+                    pass
+        for child in reversed(self.children):
+            if child.proc.poll() is None:
+                self.console.say(f'[launch] {child.stage.name} did not stop on SIGINT; killing',
+                                 error=True)
+                child.proc.kill()
+                try:
+                    child.proc.wait(timeout=5.0)
+                except subprocess.TimeoutExpired:
+                    pass
+            child.log_file.close()
+        if self.children:
+            self.console.say(f'[launch] nodes stopped in {time.monotonic() - t0:.1f} s')
+        self.recorder.extra['nodes'] = {
+            c.stage.name: {'pid': c.proc.pid, 'exit_code': c.proc.returncode,
+                           'ready_after_s': c.ready_after,
+                           'log': str(c.log_path.relative_to(self.output))}
+            for c in self.children}
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.recorder.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+def format_factor(rtf: float) -> str:
+    """``0`` -> ``'unthrottled'``, else ``'2x'``."""
+    return 'unthrottled' if rtf == 0 else f'{rtf:g}x'
+
+
+def default_output(mode: str) -> Path:
+    """``runs/<YYYYmmdd-HHMMSS>_<mode>`` (made unique)."""
+    stamp = datetime.datetime.now().strftime('%Y%m%d-%H%M%S')
+    path = Path('runs') / f'{stamp}_{mode}'
+    k = 1
+    while path.exists():
+        k += 1
+        path = Path('runs') / f'{stamp}_{mode}_{k}'
+    return path
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the cell; returns the exit status (see the module docstring)."""
+    args = parse_args(argv)
+    if args.mode != 'idle' and importlib.util.find_spec(AUTOMATION_MODULE) is None:
+        print(f'launch_cell: --mode {args.mode} needs the automation manager '
+              f'({AUTOMATION_MODULE}), which is not installed; --mode idle runs the graph '
+              'without it', file=sys.stderr)
+        return EXIT_USAGE
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # before rclpy.init
+    output = (args.output or default_output(args.mode)).resolve()
+    output.mkdir(parents=True, exist_ok=True)
+    console = Console(output / 'launch.log', args.quiet)
+    try:
+        launcher = Launcher(args, output, console)
+    except KeyboardInterrupt:  # Ctrl-C before anything was started
+        console.close()
+        return 130
+    previous = {s: signal.signal(s, launcher.on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    code, reason, interrupted = 0, 'duration reached', False
+    try:
+        launcher.start_graph()
+        launcher.start_job()
+        launcher.supervise()
+    except RunEnd as end:
+        code, reason, interrupted = end.code, end.reason, True
+        console.say(f'[launch] {"stopping" if end.code in (130, 143) else "ERROR"}: '
+                    f'{end.reason}', error=True)
+        if end.details:
+            console.say(end.details, error=True)
+    except Exception as exc:  # a bug of ours: still stop the nodes and keep the files
+        code, reason, interrupted = EXIT_FAILED, f'launcher error: {exc!r}', True
+        console.say('[launch] ERROR: ' + traceback.format_exc().rstrip(), error=True)
+    finally:
+        try:
+            launcher.recorder.freeze()
+            launcher.hold_clock()
+            launcher.stop_job()
+            launcher.stop_children(grace=0.5 if len(launcher.signals) > 1 else 5.0)
+            launcher.recorder.extra['exit_code'] = code
+            summary = launcher.recorder.finish(reason, interrupted, plots=not args.no_plots)
+            text = format_report(summary)
+            (output / 'report.txt').write_text(text + '\n', encoding='utf-8')
+            console.say(text, error=True)
+        finally:
+            launcher.close()
+            console.close()
+            for s, handler in previous.items():
+                signal.signal(s, handler)
+    return code

@@ -1,0 +1,266 @@
+"""``run_recorder``: the node inside the launcher that records a run (sim time).
+
+Subscribes ``/joint_states`` (every message becomes a row of ``timeseries.csv``),
+``/conveyor/events`` (``events.csv``), ``/automation_manager/stats`` (the last key-values go
+into the summary) and the latched ``/emergency_stop``. The numbers are computed by
+:mod:`scara_collab.run.telemetry`; the summary and the plots are written by
+:mod:`scara_collab.run.report` when the run ends (:meth:`RunRecorder.finish`), or with
+``interrupted: true`` when the recorder is closed before that (:meth:`RunRecorder.close`).
+
+The launcher tells the recorder when the job window starts (:meth:`RunRecorder.start_job`)
+and ends (:meth:`RunRecorder.freeze`); ``sim_seconds``, ``wall_seconds``, the real-time factor
+and the item counts of the summary refer to that window. The handlers ``on_*`` are public so a
+test can feed them messages directly.
+"""
+import math
+from pathlib import Path
+import time
+from typing import Dict, List, Optional, Union
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
+
+from scara_collab.core.config import load_config
+from scara_collab.core.model import CellModel, load_cell
+from scara_collab.nodes import conversions as conv
+from scara_collab.run import report
+from scara_collab.run.telemetry import parse_value, RunLog
+
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+STATE_QOS = QoSProfile(depth=200)   # a burst of joint states while the launcher is busy
+EVENTS_QOS = QoSProfile(depth=100)
+MODES = ('idle', 'single', 'collaborative', 'mirrored')
+
+
+class RunRecorder(Node):
+    """Record one run into ``directory``.
+
+    :param directory: the run folder (created if needed).
+    :param mode: ``idle``, ``single``, ``collaborative`` or ``mirrored``.
+    :param cell: the cell model; default ``load_cell(profile)``.
+    :param profile: link profile for the default cell model (and the summary).
+    :param batch: joint states per CSV write (see :class:`RunLog`).
+    :param kwargs: passed to :class:`rclpy.node.Node` (e.g. ``context``).
+    """
+
+    def __init__(self, directory: Union[str, Path], mode: str = 'idle',
+                 cell: Optional[CellModel] = None, profile: Optional[str] = None,
+                 batch: int = 200, **kwargs):
+        overrides = list(kwargs.pop('parameter_overrides', []))
+        overrides.append(Parameter('use_sim_time', Parameter.Type.BOOL, True))
+        super().__init__('run_recorder', parameter_overrides=overrides, **kwargs)
+        if mode not in MODES:
+            raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
+        self.mode = mode
+        self.profile = profile
+        self.cell = cell if cell is not None else load_cell(profile)
+        period = 1.0 / float(load_config('simulation')['state_rate'])
+        self.log = RunLog(directory, self.cell, batch=batch, state_period=period)
+        self.directory = self.log.directory
+        self.stats: Dict[str, object] = {}
+        self.stats_time: Optional[float] = None
+        self.estops: List[float] = []
+        self.estop_active = False
+        self.extra: Dict[str, object] = {}
+        self.job_start: Optional[float] = None      # sim s
+        self.job_start_wall: Optional[float] = None
+        self.end: Optional[float] = None            # sim s, set by freeze()
+        self.end_wall: Optional[float] = None
+        self.first_state_wall: Optional[float] = None
+        self.summary: Optional[Dict] = None
+        self.plots: List[Path] = []
+        self._index: Dict[tuple, np.ndarray] = {}
+        self._names = list(self.cell.leader.joint_names) + list(self.cell.follower.joint_names)
+        self.create_subscription(JointState, '/joint_states', self.on_joint_state, STATE_QOS)
+        self.create_subscription(DiagnosticStatus, '/conveyor/events', self.on_event, EVENTS_QOS)
+        self.create_subscription(DiagnosticStatus, '/automation_manager/stats', self.on_stats, 10)
+        self.create_subscription(Bool, '/emergency_stop', self.on_estop, LATCHED)
+
+    # --- time ------------------------------------------------------------------------------
+    @property
+    def sim_time(self) -> float:
+        """Latest sim time heard (``/clock`` or a joint state stamp), s; 0 before any."""
+        now = self.get_clock().now().nanoseconds * 1e-9
+        return max(now, self.log.t_last or 0.0)
+
+    @property
+    def recording(self) -> bool:
+        """True until :meth:`freeze` (or the end of the run)."""
+        return self.end is None and not self.log.closed
+
+    # --- handlers --------------------------------------------------------------------------
+    def on_joint_state(self, msg: JointState) -> None:
+        """Queue a row for ``timeseries.csv``: the six joints of both arms at the stamp."""
+        if not self.recording:
+            return
+        key = tuple(msg.name)
+        idx = self._index.get(key)
+        if idx is None:
+            where = {n: i for i, n in enumerate(key)}
+            missing = [n for n in self._names if n not in where]
+            if missing:
+                self.get_logger().warning(f'joint_states lacks {missing}; not recorded',
+                                          throttle_duration_sec=10.0)
+                return
+            idx = self._index[key] = np.array([where[n] for n in self._names])
+        if len(msg.position) != len(key):
+            return
+        q = np.asarray(msg.position, dtype=float)[idx]
+        if self.first_state_wall is None:
+            self.first_state_wall = time.monotonic()
+        self.log.add_state(conv.to_sec(msg.header.stamp), q[:3], q[3:])
+
+    def on_event(self, msg: DiagnosticStatus) -> None:
+        """Record a conveyor event (``name`` = kind; values item, class, robot, time)."""
+        if not self.recording:
+            return
+        v = conv.status_values(msg)
+        try:
+            t = float(v.get('time', 'nan'))
+        except ValueError:
+            t = math.nan
+        if not math.isfinite(t):
+            t = self.sim_time
+        self.log.add_event(t, msg.name, v.get('item', ''), v.get('class', ''),
+                           v.get('robot', ''))
+
+    def on_stats(self, msg: DiagnosticStatus) -> None:
+        """Keep the last ``/automation_manager/stats`` key-values (typed)."""
+        if not self.recording:
+            return
+        self.stats = {k: parse_value(v) for k, v in conv.status_values(msg).items()}
+        self.stats_time = self.sim_time
+
+    def on_estop(self, msg: Bool) -> None:
+        """Count emergency stops (rising edges of ``/emergency_stop``)."""
+        on = bool(msg.data)
+        if on and not self.estop_active:
+            self.estops.append(self.sim_time)
+        self.estop_active = on
+
+    # --- the run window --------------------------------------------------------------------
+    def start_job(self, t: Optional[float] = None) -> float:
+        """Mark the start of the job window (default: now, sim time); returns it."""
+        self.job_start = self.sim_time if t is None else float(t)
+        self.job_start_wall = time.monotonic()
+        return self.job_start
+
+    def freeze(self, t: Optional[float] = None) -> None:
+        """End the window (default: the last recorded state); later messages are ignored."""
+        if self.end is not None:
+            return
+        self.log.flush()
+        if t is not None:
+            self.end = float(t)
+        else:
+            self.end = self.log.t_last if self.log.t_last is not None else self.sim_time
+        self.end_wall = time.monotonic()
+
+    def window(self):
+        """``(t_start, t_end, wall_start, wall_end)`` of the run window so far."""
+        t_start = self.job_start if self.job_start is not None else (self.log.t_first or 0.0)
+        t_end = self.end if self.end is not None else (self.log.t_last or t_start)
+        wall_start = self.job_start_wall if self.job_start_wall is not None else (
+            self.first_state_wall)
+        wall_end = self.end_wall if self.end_wall is not None else time.monotonic()
+        return t_start, max(t_end, t_start), wall_start, wall_end
+
+    # --- output ----------------------------------------------------------------------------
+    def progress(self) -> Dict[str, object]:
+        """Numbers for the live progress line (job sim s, counts, separation, RTF)."""
+        self.log.flush()
+        t_start, t_end, wall_start, wall_end = self.window()
+        counts, _ = self.log.counts(t_start, t_end, self.stats)
+        wall = (wall_end - wall_start) if wall_start is not None else 0.0
+        return {'sim': t_end - t_start, 'sorted': counts['sorted'], 'missed': counts['missed'],
+                'items_per_minute': counts['items_per_minute'],
+                'min_separation_m': self.log.min_distance if self.log.rows else None,
+                'rtf': (t_end - t_start) / wall if wall > 0.5 else None}
+
+    def build_summary(self, exit_reason: str, interrupted: bool) -> Dict[str, object]:
+        """Return the summary of the run so far (the fields of ``summary.json``)."""
+        self.log.flush()
+        t_start, t_end, wall_start, wall_end = self.window()
+        counts, source = self.log.counts(t_start, t_end, self.stats)
+        sim_seconds = t_end - t_start
+        wall = (wall_end - wall_start) if wall_start is not None else 0.0
+        log = self.log
+        summary: Dict[str, object] = {
+            'mode': self.mode,
+            'profile': self.profile or self.cell.profile,
+            'sim_seconds': sim_seconds,
+            'wall_seconds': wall,
+            'real_time_factor': sim_seconds / wall if wall > 0 else None,
+            **counts,
+            'counts_source': source,
+            'min_separation_m': log.min_distance if log.rows else None,
+            'min_separation_time': log.min_distance_time,
+            'safety_margin_m': self.cell.safety_margin,
+            'margin_ok': bool(log.min_distance >= self.cell.safety_margin) if log.rows else None,
+            'mirror_error_max_m': log.max_mirror_error if (
+                self.mode == 'mirrored' and log.rows) else None,
+            'mirror_error_max_time': log.max_mirror_error_time if self.mode == 'mirrored'
+            else None,
+            'emergency_stops': len(self.estops),
+            'emergency_stop_times': list(self.estops),
+            'interrupted': bool(interrupted),
+            'exit_reason': exit_reason,
+            'job_start_sim_time': self.job_start,
+            'sim_time_end': t_end,
+            'joint_state_rows': log.rows,
+            'joint_states_missing': log.missing,
+            'largest_gap_s': log.largest_gap,
+            'events': log.event_counts(t_start, t_end),
+            'stats': dict(self.stats),
+            'stats_time': self.stats_time,
+            'output': str(self.directory),
+        }
+        summary.update(self.extra)
+        return summary
+
+    def checkpoint(self) -> None:
+        """Flush the CSV files and write a provisional summary (``exit_reason: running``)."""
+        if self.summary is None and not self.log.closed:
+            report.write_summary(self.directory, self.build_summary('running', True))
+
+    def finish(self, exit_reason: str, interrupted: bool, plots: bool = True) -> Dict:
+        """End the recording: close the CSV files, write ``summary.json`` and the plots.
+
+        Idempotent: a second call returns the first summary.
+
+        :param exit_reason: why the run ended, e.g. ``'duration reached'``, ``'SIGINT'``.
+        :param interrupted: False only for a run that reached its end normally.
+        :param plots: draw the PNG plots too.
+        :return: the summary written.
+        """
+        if self.summary is not None:
+            return self.summary
+        self.freeze()
+        summary = self.build_summary(exit_reason, interrupted)
+        self.log.close()
+        report.write_summary(self.directory, summary)  # first, so it exists whatever happens
+        if plots:
+            try:
+                self.plots = report.plot_run(self.directory, self.cell, summary)
+                summary['plots'] = [p.name for p in self.plots]
+            except Exception as exc:  # noqa: BLE001 - the numbers matter more than a figure
+                summary['plot_error'] = f'{type(exc).__name__}: {exc}'
+                self.get_logger().error(f'plots not written: {summary["plot_error"]}')
+            report.write_summary(self.directory, summary)
+        self.summary = summary
+        return summary
+
+    def close(self) -> Dict:
+        """Finish as interrupted unless :meth:`finish` ran; the files are complete either way."""
+        return self.finish('recorder closed before the end of the run', True)
+
+    def destroy_node(self) -> bool:
+        """Close the recording with the node."""
+        self.close()
+        return super().destroy_node()

@@ -1,0 +1,314 @@
+"""What a run leaves for people: ``summary.json``, the plots and the printed report.
+
+Plots are drawn from the run folder's CSV files (so they can be redrawn later with
+``python -m scara_collab.run.report RUN_DIR``) with matplotlib's Agg canvas (no display, no
+pyplot state):
+
+- ``tool_paths.png``: top view of the cell (belt band, bases with their reach, bins per class)
+  with both tool paths;
+- ``arm_distance.png``: arm-to-arm capsule surface distance over time against the margin;
+- ``item_counts.png``: cumulative sorted / missed / wrong bin / dropped / spawned items;
+- ``mirror_error.png`` (mirrored mode): follower tool vs the mirror of the leader tool.
+"""
+import argparse
+import csv
+import json
+import math
+import os
+from pathlib import Path
+import sys
+from typing import Dict, List, Optional, Union
+
+import numpy as np
+
+from scara_collab.core.model import CellModel
+from scara_collab.run.telemetry import ARM_DISTANCE, EVENTS, MIRROR_ERROR, TIMESERIES
+
+SUMMARY = 'summary.json'
+PLOTS = ('tool_paths.png', 'arm_distance.png', 'item_counts.png', 'mirror_error.png')
+_ARM_COLOURS = ('tab:orange', 'tab:purple')
+_COUNT_COLOURS = {'sorted': 'tab:green', 'missed': 'tab:red', 'wrong_bin': 'tab:orange',
+                  'dropped': 'tab:brown', 'spawned': 'tab:gray'}
+
+
+# --- summary.json ------------------------------------------------------------------------------
+def _json_safe(value):
+    """Non-finite floats -> None (strict JSON); numpy scalars -> Python; recurse containers."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def write_summary(directory: Union[str, Path], summary: Dict) -> Path:
+    """Write ``summary.json`` atomically (a reader never sees half a file).
+
+    :param directory: the run folder.
+    :param summary: the summary; non-finite numbers are written as null.
+    :return: the path written.
+    """
+    path = Path(directory) / SUMMARY
+    tmp = path.with_name(SUMMARY + '.tmp')
+    with open(tmp, 'w', encoding='utf-8') as f:
+        json.dump(_json_safe(summary), f, indent=2, allow_nan=False)
+        f.write('\n')
+    os.replace(tmp, path)
+    return path
+
+
+def read_summary(directory: Union[str, Path]) -> Dict:
+    """Read a run folder's ``summary.json``."""
+    with open(Path(directory) / SUMMARY, encoding='utf-8') as f:
+        return json.load(f)
+
+
+# --- reading the CSV files ---------------------------------------------------------------------
+def load_timeseries(directory: Union[str, Path]) -> Dict[str, np.ndarray]:
+    """``timeseries.csv`` as ``{column: (N,) array}``; malformed lines are skipped."""
+    path = Path(directory) / TIMESERIES
+    with open(path, encoding='utf-8') as f:
+        header = f.readline().strip().split(',')
+        rows = []
+        for line in f:
+            parts = line.rstrip('\n').split(',')
+            if len(parts) != len(header):
+                continue
+            try:
+                rows.append([float(p) for p in parts])
+            except ValueError:
+                continue
+    data = np.asarray(rows, dtype=float).reshape(-1, len(header))
+    return {name: data[:, k] for k, name in enumerate(header)}
+
+
+def load_events(directory: Union[str, Path]) -> List[Dict[str, str]]:
+    """``events.csv`` as a list of dicts (``time`` stays a string)."""
+    with open(Path(directory) / EVENTS, encoding='utf-8', newline='') as f:
+        return [row for row in csv.DictReader(f) if row.get('time')]
+
+
+# --- plots -------------------------------------------------------------------------------------
+def _figure(width: float = 8.0, height: float = 4.5):
+    from matplotlib.figure import Figure  # Agg canvas by default for savefig; no pyplot
+    return Figure(figsize=(width, height), layout='constrained')
+
+
+def _class_colour(name: str, k: int) -> str:
+    from matplotlib.colors import is_color_like
+    return name if is_color_like(name) else f'C{k}'
+
+
+def _job_line(ax, t0: Optional[float]) -> None:
+    if t0 is not None:
+        ax.axvline(t0, color='0.5', lw=0.8, ls=':', label=f'job start (t={t0:.1f} s)')
+
+
+def plot_tool_paths(cell: CellModel, ts: Dict[str, np.ndarray], path: Path) -> Path:
+    """Top view: belt, bases and reach, bins, both tool paths; saved to ``path``."""
+    from matplotlib.patches import Circle, Rectangle
+    belt = cell.belt
+    lo = [belt.x_start, belt.centre_y - belt.width / 2]
+    hi = [belt.x_end, belt.centre_y + belt.width / 2]
+    for arm in cell.arms:
+        for k in (0, 1):
+            lo[k] = min(lo[k], arm.base[k, 3] - arm.reach_max)
+            hi[k] = max(hi[k], arm.base[k, 3] + arm.reach_max)
+    aspect = (hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-6)
+    fig = _figure(7.0, min(max(7.0 * aspect * 0.85, 4.0), 11.0))
+    ax = fig.add_subplot()
+    ax.add_patch(Rectangle((belt.x_start, belt.centre_y - belt.width / 2),
+                           belt.x_end - belt.x_start, belt.width, color='0.85', zorder=0,
+                           label=f'belt ({belt.speed:g} m/s along +x)'))
+    bin_size = cell.config['bins']['size']
+    for k, cls in enumerate(cell.item_classes):
+        colour = _class_colour(cls, k)
+        for j, arm in enumerate(cell.arms):
+            c = cell.bins[(arm.name, cls)]
+            ax.add_patch(Rectangle((c[0] - bin_size[0] / 2, c[1] - bin_size[1] / 2),
+                                   bin_size[0], bin_size[1], fill=False, ec=colour, lw=2,
+                                   label=f'{cls} bins' if j == 0 else None))
+    base_r = float(cell.config['arm'].get('base_radius', 0.12))
+    for arm, colour in zip(cell.arms, _ARM_COLOURS):
+        b = arm.base[:3, 3]
+        ax.add_patch(Circle(b[:2], base_r, color=colour, alpha=0.6))
+        ax.add_patch(Circle(b[:2], arm.reach_max, fill=False, ec=colour, ls='--', lw=0.6,
+                            alpha=0.6))
+        ax.annotate(arm.name, b[:2], xytext=(6, 6), textcoords='offset points', fontsize=8)
+        x, y = ts.get(f'{arm.name}_tool_x'), ts.get(f'{arm.name}_tool_y')
+        if x is not None and x.size:
+            ax.plot(x, y, color=colour, lw=0.8, label=f'{arm.name} tool')
+            ax.plot(x[-1], y[-1], 'o', color=colour, ms=4)
+    ax.set_xlim(lo[0] - 0.2, hi[0] + 0.2)
+    ax.set_ylim(lo[1] - 0.2, hi[1] + 0.2)
+    ax.set_aspect('equal')
+    ax.set_xlabel('x (m)')
+    ax.set_ylabel('y (m)')
+    ax.set_title('Tool paths, top view (dashed: reach)')
+    ax.grid(True, lw=0.3)
+    ax.legend(loc='upper right', fontsize=7)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def plot_arm_distance(ts: Dict[str, np.ndarray], margin: float, path: Path,
+                      t0: Optional[float] = None) -> Path:
+    """Arm-to-arm surface distance over time with the safety margin; saved to ``path``."""
+    fig = _figure()
+    ax = fig.add_subplot()
+    t, d = ts.get('t', np.empty(0)), ts.get(ARM_DISTANCE, np.empty(0))
+    ax.plot(t, d, lw=0.8, label='arm distance (capsule surfaces)')
+    ax.axhline(margin, color='tab:red', ls='--', lw=1, label=f'safety margin {margin:g} m')
+    if d.size:
+        k = int(np.argmin(d))
+        ax.plot(t[k], d[k], 'v', color='tab:red')
+        ax.annotate(f'min {d[k]:.3f} m at {t[k]:.1f} s', (t[k], d[k]), xytext=(5, -12),
+                    textcoords='offset points', fontsize=8)
+    _job_line(ax, t0)
+    ax.set_ylim(bottom=min(0.0, float(d.min()) if d.size else 0.0))
+    ax.set_xlabel('sim time (s)')
+    ax.set_ylabel('distance (m)')
+    ax.set_title('Arm separation')
+    ax.grid(True, lw=0.3)
+    ax.legend(fontsize=8)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def plot_item_counts(events: List[Dict[str, str]], path: Path, t_end: Optional[float] = None,
+                     t0: Optional[float] = None) -> Path:
+    """Cumulative item counts per kind over time; saved to ``path``."""
+    fig = _figure()
+    ax = fig.add_subplot()
+    for kind, colour in _COUNT_COLOURS.items():
+        times = sorted(float(e['time']) for e in events if e.get('kind') == kind)
+        if not times and kind not in ('sorted', 'missed'):
+            continue
+        x = [0.0] + times + ([t_end] if t_end is not None else [])
+        y = [0] + list(range(1, len(times) + 1)) + ([len(times)] if t_end is not None else [])
+        ax.step(x, y, where='post', color=colour, label=f'{kind} ({len(times)})')
+    _job_line(ax, t0)
+    ax.set_xlabel('sim time (s)')
+    ax.set_ylabel('items')
+    ax.set_title('Items over time (conveyor events)')
+    ax.grid(True, lw=0.3)
+    ax.legend(fontsize=8, loc='upper left')
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def plot_mirror_error(ts: Dict[str, np.ndarray], path: Path, t0: Optional[float] = None,
+                      target: float = 1e-3) -> Path:
+    """Mirror error (mm) over time against the 1 mm target; saved to ``path``."""
+    fig = _figure()
+    ax = fig.add_subplot()
+    t, e = ts.get('t', np.empty(0)), ts.get(MIRROR_ERROR, np.empty(0)) * 1e3
+    ax.plot(t, e, lw=0.8, label='|follower tool - mirror(leader tool)|')
+    ax.axhline(target * 1e3, color='tab:red', ls='--', lw=1, label=f'target {target * 1e3:g} mm')
+    _job_line(ax, t0)
+    ax.set_yscale('symlog', linthresh=0.1)  # sub-mm detail and the large excursions together
+    ax.set_ylim(bottom=0.0)
+    ax.set_xlabel('sim time (s)')
+    ax.set_ylabel('mirror error (mm, linear below 0.1)')
+    ax.set_title('Mirroring')
+    ax.grid(True, lw=0.3)
+    ax.legend(fontsize=8)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def plot_run(directory: Union[str, Path], cell: CellModel, summary: Dict) -> List[Path]:
+    """Draw every plot of a run folder from its CSV files.
+
+    :param directory: the run folder (``timeseries.csv``, ``events.csv``).
+    :param cell: the cell model the run used.
+    :param summary: the run summary (``mode``, ``job_start_sim_time``, ``sim_time_end``).
+    :return: the PNG files written.
+    """
+    directory = Path(directory)
+    ts = load_timeseries(directory)
+    events = load_events(directory)
+    t0 = summary.get('job_start_sim_time')
+    t_end = summary.get('sim_time_end')
+    out = [plot_tool_paths(cell, ts, directory / PLOTS[0]),
+           plot_arm_distance(ts, cell.safety_margin, directory / PLOTS[1], t0),
+           plot_item_counts(events, directory / PLOTS[2], t_end, t0)]
+    if summary.get('mode') == 'mirrored':
+        out.append(plot_mirror_error(ts, directory / PLOTS[3], t0))
+    return out
+
+
+# --- text --------------------------------------------------------------------------------------
+def _num(value, fmt: str, none: str = 'n/a') -> str:
+    return none if value is None else format(value, fmt)
+
+
+def format_rtf(value: Optional[float]) -> str:
+    """Real-time factor as ``'7.3x'``."""
+    return 'n/a' if value is None else f'{value:.1f}x'
+
+
+def format_progress(p: Dict, duration: float) -> str:
+    """One progress line.
+
+    :param p: ``sim`` (job sim s), ``sorted``, ``missed``, ``items_per_minute``,
+        ``min_separation_m``, ``rtf``.
+    :param duration: the run's sim duration, s.
+    """
+    sep = p.get('min_separation_m')
+    return (f'sim {p["sim"]:6.1f}/{duration:g} s | sorted {p["sorted"]} | missed {p["missed"]}'
+            f' | {p["items_per_minute"]:.1f} items/min | min sep '
+            f'{_num(sep, ".3f", "-")} m | RTF {format_rtf(p.get("rtf"))}')
+
+
+def format_report(s: Dict) -> str:
+    """Return the final report of a run (several lines) from its summary."""
+    margin = s.get('safety_margin_m') or 0.0
+    sep = s.get('min_separation_m')
+    verdict = ('' if sep is None else
+               f'  ({"OK" if sep >= margin else "BROKEN"}: margin {margin:g} m)')
+    mirror = s.get('mirror_error_max_m')
+    lines = [
+        f'scara_collab run: mode {s.get("mode")}, '
+        f'{"interrupted" if s.get("interrupted") else "finished"} ({s.get("exit_reason")})',
+        f'  sim time       {_num(s.get("sim_seconds"), ".1f")} s    wall '
+        f'{_num(s.get("wall_seconds"), ".1f")} s    real-time factor '
+        f'{format_rtf(s.get("real_time_factor"))}',
+        f'  items          sorted {s.get("sorted")}   missed {s.get("missed")}   wrong bin '
+        f'{s.get("wrong_bin")}   dropped {s.get("dropped")}   (spawned {s.get("spawned")}; '
+        f'counts from {s.get("counts_source")})',
+        f'  throughput     {_num(s.get("items_per_minute"), ".1f")} items/min',
+        f'  min arm sep.   {_num(sep, ".3f", "n/a (no joint states)")}'
+        + ('' if sep is None else ' m') + verdict,
+        '  mirror error   ' + ('n/a (mirrored mode only)' if mirror is None
+                               else f'max {mirror * 1e3:.2f} mm'),
+    ]
+    missing = s.get('joint_states_missing') or 0
+    if missing:
+        rows = s.get('joint_state_rows') or 0
+        lines.append(f'  telemetry      {missing} of {rows + missing} joint states not heard '
+                     f'(largest gap {s.get("largest_gap_s") or 0.0:.2f} s): short of CPU?')
+    if s.get('emergency_stops'):
+        lines.append(f'  emergency stop {s["emergency_stops"]} time(s)')
+    lines.append(f'  run folder     {s.get("output")}')
+    return '\n'.join(lines)
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Redraw the plots of a run folder and print its report."""
+    from scara_collab.core.model import load_cell
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument('run_dir', help='a run folder written by scripts/launch_cell.py')
+    args = parser.parse_args(argv)
+    summary = read_summary(args.run_dir)
+    plot_run(args.run_dir, load_cell(summary.get('profile') or None), summary)
+    print(format_report(summary))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,251 @@
+"""The files of one run and the numbers behind its summary (numpy and the core, no rclpy).
+
+:class:`RunLog` writes, in a run folder:
+
+- ``timeseries.csv``: one row per joint state: ``t`` (sim s), the six joint positions (leader
+  then follower, each ``joint_1, joint_2, gripper_joint``), both tool tips in ``world``
+  (:func:`scara_collab.core.kinematics.fk`), the mirror error ``|p_follower - mirror(p_leader)|``
+  (:func:`scara_collab.core.mirror.mirror_point`) and the arm-to-arm capsule surface distance
+  (:func:`scara_collab.core.collision.arm_distance`), in metres;
+- ``events.csv``: the conveyor events ``time, kind, item, class, robot``.
+
+States are buffered and computed in vectorised batches (at most ``batch`` rows, or whenever
+:meth:`RunLog.flush` is called); every batch is written and flushed to disk at once, so a run
+that is interrupted keeps every complete row it recorded. Events are flushed one by one.
+
+Example::
+
+    >>> log = RunLog('runs/x', load_cell())
+    >>> log.add_state(0.01, [0.0, 1.57, 0.0], [0.0, -1.57, 0.0])
+    >>> log.flush(); log.min_distance, log.max_mirror_error
+"""
+import csv
+import math
+from pathlib import Path
+from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from scara_collab.core.collision import arm_distance
+from scara_collab.core.kinematics import fk
+from scara_collab.core.mirror import mirror_point
+from scara_collab.core.model import CellModel
+
+TIMESERIES = 'timeseries.csv'
+EVENTS = 'events.csv'
+EVENT_COLUMNS = ('time', 'kind', 'item', 'class', 'robot')
+COUNTED = ('spawned', 'sorted', 'missed', 'wrong_bin', 'dropped')
+MIRROR_ERROR = 'mirror_error_m'
+ARM_DISTANCE = 'arm_distance_m'
+
+
+class Event(NamedTuple):
+    """One conveyor event: sim time (s), kind, item id, item class, robot ('' if none)."""
+
+    time: float
+    kind: str
+    item: str
+    cls: str
+    robot: str
+
+
+def state_columns(cell: CellModel) -> List[str]:
+    """Column names of ``timeseries.csv`` for ``cell`` (leader first).
+
+    :param cell: the cell model.
+    :return: ``t``, the six joint names, ``<robot>_tool_{x,y,z}`` for both arms,
+        ``mirror_error_m``, ``arm_distance_m``.
+    """
+    cols = ['t']
+    for arm in cell.arms:
+        cols += list(arm.joint_names)
+    for arm in cell.arms:
+        cols += [f'{arm.name}_tool_{axis}' for axis in 'xyz']
+    return cols + [MIRROR_ERROR, ARM_DISTANCE]
+
+
+def state_metrics(cell: CellModel, q_leader, q_follower
+                  ) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Tool tips, mirror error and arm distance of joint states (one or N at once).
+
+    :param cell: the cell model (``cell.leader`` and ``cell.follower``).
+    :param q_leader: (..., 3) leader joint states ``(theta1 rad, theta2 rad, d3 m)``.
+    :param q_follower: (..., 3) follower joint states, same leading shape.
+    :return: ``(p_leader (..., 3), p_follower (..., 3), mirror_error (...), distance (...))``,
+        positions in ``world`` and lengths in m; the mirror error is the follower tool's
+        distance from the mirror image of the leader tool, the distance is the smallest
+        capsule surface distance between the arms (negative = overlap).
+    """
+    lead, foll = cell.leader, cell.follower
+    q_leader = np.asarray(q_leader, dtype=float)
+    q_follower = np.asarray(q_follower, dtype=float)
+    p_lead = fk(lead, q_leader)
+    p_foll = fk(foll, q_follower)
+    error = np.linalg.norm(p_foll - mirror_point(lead, foll, p_lead), axis=-1)
+    distance = arm_distance(lead, q_leader, foll, q_follower)
+    return p_lead, p_foll, error, distance
+
+
+def parse_value(text: str) -> Union[None, bool, int, float, str]:
+    """Typed value of a DiagnosticStatus key-value string.
+
+    ``'true'``/``'false'`` -> bool, integers -> int, other numbers -> float (non-finite ->
+    None, so it stays valid JSON), ``''``/``'none'``/``'null'`` -> None, anything else as is.
+    """
+    s = str(text).strip()
+    low = s.lower()
+    if low in ('true', 'false'):
+        return low == 'true'
+    if low in ('', 'none', 'null', 'n/a'):
+        return None
+    try:
+        return int(s)
+    except ValueError:
+        pass
+    try:
+        v = float(s)
+    except ValueError:
+        return s
+    return v if math.isfinite(v) else None
+
+
+# t, joints, tool positions, mirror error, distance
+_FORMAT = ['%.4f'] + ['%.6f'] * 6 + ['%.6f'] * 6 + ['%.9f', '%.6f']
+
+
+class RunLog:
+    """The CSV files of one run and the running aggregates of what they hold.
+
+    :param directory: the run folder (created if needed).
+    :param cell: the cell model (leader first).
+    :param batch: pending joint states that trigger a write (rows are also written by
+        :meth:`flush`).
+    :param state_period: the publisher's joint state period, s; a step between consecutive
+        stamps longer than 1.5 periods counts the states in between as missing.
+    """
+
+    def __init__(self, directory: Union[str, Path], cell: CellModel, batch: int = 200,
+                 state_period: float = 0.01):
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.cell = cell
+        self.batch = max(1, int(batch))
+        self.state_period = float(state_period)
+        self.missing = 0            # joint states never heard (gaps in the stamps)
+        self.largest_gap = 0.0      # s between consecutive recorded stamps, beyond one period
+        self._t_written: Optional[float] = None
+        self.columns = state_columns(cell)
+        self.rows = 0
+        self.t_first: Optional[float] = None
+        self.t_last: Optional[float] = None
+        self.min_distance = math.inf
+        self.min_distance_time: Optional[float] = None
+        self.max_mirror_error = 0.0
+        self.max_mirror_error_time: Optional[float] = None
+        self.events: List[Event] = []
+        self.closed = False
+        self._t: List[float] = []
+        self._q: List[np.ndarray] = []
+        self._ts = open(self.directory / TIMESERIES, 'w', newline='', encoding='utf-8')
+        self._ts.write(','.join(self.columns) + '\n')
+        self._ts.flush()
+        self._ev = open(self.directory / EVENTS, 'w', newline='', encoding='utf-8')
+        self._ev_csv = csv.writer(self._ev, lineterminator='\n')
+        self._ev_csv.writerow(EVENT_COLUMNS)
+        self._ev.flush()
+
+    # --- input -----------------------------------------------------------------------------
+    def add_state(self, t: float, q_leader: Sequence[float], q_follower: Sequence[float]) -> None:
+        """Queue one joint state (sim time ``t`` s); written at the next batch or flush."""
+        if self.closed:
+            return
+        self._t.append(float(t))
+        self._q.append(np.concatenate((np.asarray(q_leader, dtype=float).reshape(3),
+                                       np.asarray(q_follower, dtype=float).reshape(3))))
+        if self.t_first is None:
+            self.t_first = float(t)
+        self.t_last = float(t)
+        if len(self._t) >= self.batch:
+            self.flush()
+
+    def add_event(self, t: float, kind: str, item='', cls: str = '', robot: str = '') -> None:
+        """Record one conveyor event and flush it to ``events.csv``."""
+        if self.closed:
+            return
+        ev = Event(float(t), str(kind), str(item), str(cls), str(robot))
+        self.events.append(ev)
+        self._ev_csv.writerow([f'{ev.time:.3f}', ev.kind, ev.item, ev.cls, ev.robot])
+        self._ev.flush()
+
+    def flush(self) -> None:
+        """Compute the queued rows, append them to ``timeseries.csv`` and flush the files."""
+        if self.closed:
+            return
+        if self._t:
+            t = np.asarray(self._t)
+            q = np.vstack(self._q)
+            self._t, self._q = [], []
+            p_lead, p_foll, error, dist = state_metrics(self.cell, q[:, :3], q[:, 3:])
+            np.savetxt(self._ts, np.column_stack((t, q, p_lead, p_foll, error, dist)),
+                       fmt=_FORMAT, delimiter=',')
+            self.rows += t.size
+            steps = np.diff(t if self._t_written is None else np.concatenate(
+                ([self._t_written], t)))
+            late = steps > 1.5 * self.state_period
+            if np.any(late):
+                self.missing += int(np.sum(np.round(steps[late] / self.state_period) - 1))
+                self.largest_gap = max(self.largest_gap, float(steps[late].max()))
+            self._t_written = float(t[-1])
+            k = int(np.argmin(dist))
+            if dist[k] < self.min_distance:
+                self.min_distance, self.min_distance_time = float(dist[k]), float(t[k])
+            k = int(np.argmax(error))
+            if error[k] > self.max_mirror_error or self.max_mirror_error_time is None:
+                self.max_mirror_error, self.max_mirror_error_time = float(error[k]), float(t[k])
+        self._ts.flush()
+        self._ev.flush()
+
+    def close(self) -> None:
+        """Write what is queued and close the files (idempotent)."""
+        if self.closed:
+            return
+        self.flush()
+        self._ts.close()
+        self._ev.close()
+        self.closed = True
+
+    # --- numbers ---------------------------------------------------------------------------
+    def event_counts(self, t_start: float = -math.inf, t_end: float = math.inf) -> Dict[str, int]:
+        """Events per kind with ``t_start <= time <= t_end``; every kind of :data:`COUNTED`."""
+        counts = {k: 0 for k in COUNTED}
+        for ev in self.events:
+            if t_start <= ev.time <= t_end:
+                counts[ev.kind] = counts.get(ev.kind, 0) + 1
+        return counts
+
+    def counts(self, t_start: float, t_end: float, stats: Optional[Dict[str, object]] = None
+               ) -> Tuple[Dict[str, object], str]:
+        """Item counts and throughput of the window, the automation manager's when it has them.
+
+        :param t_start: window start, sim s.
+        :param t_end: window end, sim s.
+        :param stats: the last ``/automation_manager/stats`` values, parsed (or None).
+        :return: ``({spawned, sorted, missed, wrong_bin, dropped, items_per_minute}, source)``
+            where ``source`` is ``'automation_manager'`` if the stats gave the sorted count,
+            else ``'conveyor events'`` (counted from ``events.csv`` inside the window).
+        """
+        stats = stats or {}
+        from_events = self.event_counts(t_start, t_end)
+        out: Dict[str, object] = {}
+        for key in COUNTED:
+            value = stats.get(key)
+            out[key] = value if isinstance(value, (int, float)) and not isinstance(
+                value, bool) else from_events[key]
+        source = 'automation_manager' if isinstance(stats.get('sorted'), (int, float)) \
+            else 'conveyor events'
+        ipm = stats.get('items_per_minute')
+        if not isinstance(ipm, (int, float)) or isinstance(ipm, bool):
+            span = t_end - t_start
+            ipm = 60.0 * float(out['sorted']) / span if span > 0 else 0.0
+        out['items_per_minute'] = float(ipm)
+        return out, source

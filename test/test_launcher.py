@@ -1,0 +1,176 @@
+"""scripts/launch_cell.py end to end: a clean run, Ctrl-C, a node that dies (real processes).
+
+The launcher is run as a subprocess with the session's ROS_DOMAIN_ID (conftest.py). The
+collaborative job itself (items sorted, throughput) is tested with the automation manager.
+"""
+import csv
+import importlib.util
+import json
+import os
+from pathlib import Path
+import queue
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+LAUNCHER = ROOT / 'scripts' / 'launch_cell.py'
+NODES = ('pybullet_bridge', 'left_planner', 'right_planner', 'replication_manager',
+         'collision_monitor')
+HAVE_AUTOMATION = importlib.util.find_spec('scara_collab.nodes.automation_manager') is not None
+TIMEOUT = 180.0  # wall s for one launch; the graph starts in 10-25 s on a busy 2-core machine
+
+
+class Launch:
+    """``launch_cell.py`` as a subprocess; its stdout lines are collected by a thread."""
+
+    def __init__(self, *args: str):
+        env = dict(os.environ)  # the session's ROS_DOMAIN_ID (conftest.py)
+        env['PYTHONUNBUFFERED'] = '1'
+        self.proc = subprocess.Popen([sys.executable, str(LAUNCHER), *args], cwd=ROOT, env=env,
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     text=True)
+        self.lines: list = []
+        self._queue: queue.Queue = queue.Queue()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip('\n'))
+            self._queue.put(line)
+
+    def wait_for_line(self, pattern: str, timeout: float = TIMEOUT) -> str:
+        """Return the first new line matching ``pattern`` (fails on timeout or exit)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            try:
+                line = self._queue.get(timeout=0.2)
+            except queue.Empty:
+                if self.proc.poll() is not None and self._queue.empty():
+                    break
+                continue
+            if re.search(pattern, line):
+                return line
+        pytest.fail(f'no line matching {pattern!r}; output:\n{self.output}')
+
+    def wait(self, timeout: float = TIMEOUT) -> int:
+        code = self.proc.wait(timeout=timeout)
+        self._reader.join(timeout=10)
+        return code
+
+    @property
+    def output(self) -> str:
+        return '\n'.join(self.lines)
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:  # the children follow (PR_SET_PDEATHSIG)
+            self.proc.kill()
+            self.proc.wait(timeout=30)
+
+
+@pytest.fixture
+def launch():
+    made = []
+
+    def start(*args):
+        made.append(Launch(*args))
+        return made[-1]
+
+    yield start
+    for la in made:
+        la.kill()
+
+
+def assert_complete_csv(path: Path, min_rows: int = 1) -> list:
+    text = path.read_text()
+    assert text.endswith('\n'), f'{path} ends in the middle of a line'
+    rows = list(csv.reader(text.splitlines()))
+    assert len(rows) - 1 >= min_rows, f'{path}: {len(rows) - 1} rows'
+    assert all(len(r) == len(rows[0]) for r in rows), f'{path} has a ragged row'
+    return rows
+
+
+def assert_children_gone(out: Path) -> dict:
+    pids = json.loads((out / 'pids.json').read_text())
+    assert set(NODES) <= set(pids)
+    for name, pid in pids.items():
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)  # reaped by the launcher: no process, not even a zombie
+    return pids
+
+
+def test_idle_run_writes_report_and_files(launch, tmp_path):
+    out = tmp_path / 'idle'
+    la = launch('--mode', 'idle', '--duration', '3', '--rtf', '0', '--output', str(out))
+    assert la.wait() == 0, la.output
+    text = la.output
+    for stage in NODES:
+        assert re.search(rf'\[launch\] {stage} +ready in', text), stage
+    assert 'scara_collab run: mode idle, finished (duration reached)' in text
+    assert re.search(r'real-time factor \d+\.\dx', text)
+    assert re.search(r'min arm sep\. +\d\.\d{3} m +\(OK: margin 0\.1 m\)', text)
+    assert f'run folder     {out}' in text
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['mode'] == 'idle' and summary['interrupted'] is False
+    assert summary['exit_reason'] == 'duration reached' and summary['exit_code'] == 0
+    assert 3.0 <= summary['sim_seconds'] < 3.5
+    assert summary['wall_seconds'] > 0 and summary['real_time_factor'] > 0
+    assert summary['mirror_error_max_m'] is None and summary['margin_ok'] is True
+    rows = assert_complete_csv(out / 'timeseries.csv', min_rows=300)
+    assert rows[0][0] == 't' and rows[0][-2:] == ['mirror_error_m', 'arm_distance_m']
+    assert_complete_csv(out / 'events.csv', min_rows=0)[0] == ['time', 'kind', 'item', 'class',
+                                                               'robot']
+    for png in ('tool_paths.png', 'arm_distance.png', 'item_counts.png'):
+        assert (out / png).read_bytes().startswith(b'\x89PNG'), png
+    for node in NODES:
+        assert (out / 'logs' / f'{node}.log').is_file(), node
+    assert all(n['exit_code'] is not None for n in summary['nodes'].values())
+    assert_children_gone(out)
+
+
+def test_sigint_mid_run_shuts_down_cleanly(launch, tmp_path):
+    """Ctrl-C during the job (collaborative if the automation manager exists, else idle)."""
+    mode = 'collaborative' if HAVE_AUTOMATION else 'idle'
+    out = tmp_path / 'sigint'
+    la = launch('--mode', mode, '--duration', '600', '--rtf', '1', '--output', str(out),
+                '--no-plots')
+    la.wait_for_line(r'\[launch\] (collaborative job started|graph idle) at sim t=')
+    la.proc.send_signal(signal.SIGINT)
+    assert la.wait(timeout=60) == 130, la.output
+    assert 'interrupted (SIGINT)' in la.output
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['interrupted'] is True and summary['exit_reason'] == 'SIGINT'
+    assert summary['mode'] == mode and summary['exit_code'] == 130
+    if HAVE_AUTOMATION:  # the job was started, then stopped before the nodes
+        assert re.search(r'\[launch\] automation_manager +ready in', la.output)
+        assert 'job_stop' in summary, summary
+    assert summary['joint_state_rows'] > 0
+    rows = assert_complete_csv(out / 'timeseries.csv', min_rows=summary['joint_state_rows'])
+    assert len(rows) - 1 == summary['joint_state_rows']
+    assert_complete_csv(out / 'events.csv', min_rows=0)
+    assert 'did not stop on SIGINT' not in la.output
+    assert_children_gone(out)
+
+
+def test_a_dead_node_ends_the_run_with_its_name(launch, tmp_path):
+    out = tmp_path / 'dead'
+    la = launch('--mode', 'idle', '--duration', '600', '--rtf', '1', '--output', str(out),
+                '--no-plots')
+    la.wait_for_line(r'\[launch\] collision_monitor +ready in')
+    pid = json.loads((out / 'pids.json').read_text())['collision_monitor']
+    os.kill(pid, signal.SIGKILL)
+    assert la.wait(timeout=60) == 1, la.output
+    assert re.search(r'ERROR: node collision_monitor exited with code -9 \(SIGKILL\)', la.output)
+    assert 'last lines of' in la.output and 'collision_monitor.log' in la.output
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['interrupted'] is True and summary['exit_code'] == 1
+    assert 'collision_monitor' in summary['exit_reason']
+    assert summary['nodes']['collision_monitor']['exit_code'] == -9
+    assert_complete_csv(out / 'timeseries.csv', min_rows=1)
+    assert_children_gone(out)

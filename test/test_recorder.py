@@ -1,0 +1,270 @@
+"""The run recorder and report: CSV rows and values, summary, plots, interrupted runs."""
+import csv
+import json
+import math
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from scara_collab.core.collision import arm_distance
+from scara_collab.core.kinematics import fk
+from scara_collab.core.mirror import mirror_joints, mirror_point
+from scara_collab.nodes import conversions as conv
+from scara_collab.run import report
+from scara_collab.run.recorder import RunRecorder
+from scara_collab.run.telemetry import parse_value, RunLog, state_columns
+
+PNG = b'\x89PNG\r\n\x1a\n'
+SUMMARY_KEYS = ('mode', 'sim_seconds', 'wall_seconds', 'sorted', 'missed', 'wrong_bin',
+                'items_per_minute', 'min_separation_m', 'mirror_error_max_m',
+                'real_time_factor', 'interrupted', 'exit_reason', 'stats')
+
+
+@pytest.fixture
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture
+def make_recorder(context, tmp_path, cell):
+    made = []
+
+    def make(mode='collaborative', sub='run', **kwargs):
+        rec = RunRecorder(tmp_path / sub, mode, cell=cell, context=context, **kwargs)
+        made.append(rec)
+        return rec
+
+    yield make
+    for rec in made:
+        rec.destroy_node()
+
+
+def random_joints(cell, n, seed=1):
+    rng = np.random.default_rng(seed)
+    arm = cell.leader
+    return rng.uniform(arm.lower * 0.9, arm.upper * 0.9, size=(n, 3))
+
+
+def state_msg(cell, t, q_lead, q_foll, reverse=False):
+    names = list(cell.leader.joint_names) + list(cell.follower.joint_names)
+    pos = list(q_lead) + list(q_foll)
+    if reverse:  # any joint order must work
+        names, pos = names[::-1], pos[::-1]
+    return conv.joint_state(t, names, pos, [0.0] * 6, [0.0] * 6)
+
+
+def event_msg(kind, t, item, cls='red', robot=''):
+    return conv.status(kind, 'OK', f'item {item} {kind}',
+                       {'item': item, 'class': cls, 'robot': robot, 'time': f'{t:.3f}'})
+
+
+def read_csv(path):
+    with open(path, newline='') as f:
+        rows = list(csv.reader(f))
+    return rows[0], rows[1:]
+
+
+def assert_png(path):
+    data = path.read_bytes()
+    assert data.startswith(PNG), path
+    assert len(data) > 5000, f'{path} is suspiciously small'
+
+
+def test_state_rows_match_the_core(make_recorder, cell):
+    rec = make_recorder('collaborative', batch=7)
+    ql = random_joints(cell, 25, seed=2)
+    qf = random_joints(cell, 25, seed=3)
+    for k in range(25):
+        rec.on_joint_state(state_msg(cell, 0.01 * k, ql[k], qf[k], reverse=k % 2 == 1))
+    rec.log.flush()
+    header, rows = read_csv(rec.directory / 'timeseries.csv')
+    assert header == state_columns(cell)
+    assert len(rows) == 25 and all(len(r) == len(header) for r in rows)
+    data = np.array(rows, dtype=float)
+    col = {name: k for k, name in enumerate(header)}
+    np.testing.assert_allclose(data[:, col['t']], 0.01 * np.arange(25), atol=1e-4)
+    joints = [col[n] for n in cell.leader.joint_names + cell.follower.joint_names]
+    np.testing.assert_allclose(data[:, joints], np.hstack([ql, qf]), atol=1e-6)
+    lead, foll = cell.leader, cell.follower
+    p_l, p_f = fk(lead, ql), fk(foll, qf)
+    tool = [col[f'{lead.name}_tool_{a}'] for a in 'xyz']
+    np.testing.assert_allclose(data[:, tool], p_l, atol=1e-6)
+    tool = [col[f'{foll.name}_tool_{a}'] for a in 'xyz']
+    np.testing.assert_allclose(data[:, tool], p_f, atol=1e-6)
+    err = np.linalg.norm(p_f - mirror_point(lead, foll, p_l), axis=1)
+    np.testing.assert_allclose(data[:, col['mirror_error_m']], err, atol=1e-8)
+    dist = np.array([arm_distance(lead, a, foll, b) for a, b in zip(ql, qf)])
+    np.testing.assert_allclose(data[:, col['arm_distance_m']], dist, atol=1e-6)
+    assert rec.log.min_distance == pytest.approx(dist.min(), abs=1e-12)
+
+
+def test_mirrored_states_have_zero_mirror_error(make_recorder, cell):
+    rec = make_recorder('mirrored')
+    q = random_joints(cell, 50, seed=4)
+    for k in range(50):
+        rec.on_joint_state(state_msg(cell, 0.01 * k, q[k], mirror_joints(q[k])))
+    rec.log.flush()
+    header, rows = read_csv(rec.directory / 'timeseries.csv')
+    err = np.array([float(r[header.index('mirror_error_m')]) for r in rows])
+    assert len(err) == 50 and np.all(err < 1e-9)
+    summary = rec.finish('duration reached', False)
+    assert summary['mirror_error_max_m'] < 1e-9
+    assert [p.name for p in rec.plots] == list(report.PLOTS)
+    for p in rec.plots:
+        assert_png(p)
+
+
+def test_summary_plots_and_counts(make_recorder, cell):
+    rec = make_recorder('collaborative')
+    q = np.array([0.0, 1.5708, 0.0])
+    for k in range(301):
+        rec.on_joint_state(state_msg(cell, 10.0 + 0.01 * k, q, mirror_joints(q)))
+        if k == 100:
+            rec.start_job(11.0)
+    for t, kind, item in ((10.5, 'spawned', 1), (11.5, 'spawned', 2), (12.0, 'sorted', 2),
+                          (12.5, 'missed', 1), (12.6, 'grasped', 3)):
+        rec.on_event(event_msg(kind, t, item, robot='scara_left' if kind == 'sorted' else ''))
+    summary = rec.finish('duration reached', False)
+    for key in SUMMARY_KEYS:
+        assert key in summary, key
+    assert summary['mode'] == 'collaborative' and summary['interrupted'] is False
+    assert summary['sim_seconds'] == pytest.approx(2.0)
+    assert summary['counts_source'] == 'conveyor events'
+    # the window starts at the job: the item spawned before it is not counted
+    assert (summary['spawned'], summary['sorted'], summary['missed']) == (1, 1, 1)
+    assert summary['items_per_minute'] == pytest.approx(30.0)
+    assert summary['mirror_error_max_m'] is None
+    assert summary['min_separation_m'] == pytest.approx(
+        float(arm_distance(cell.leader, q, cell.follower, mirror_joints(q))))
+    assert summary['margin_ok'] is True and summary['joint_state_rows'] == 301
+    on_disk = json.loads((rec.directory / 'summary.json').read_text())
+    assert on_disk['plots'] == list(report.PLOTS[:3])
+    assert not (rec.directory / 'mirror_error.png').exists()
+    for name in report.PLOTS[:3]:
+        assert_png(rec.directory / name)
+    _, events = read_csv(rec.directory / 'events.csv')
+    assert events[2] == ['12.000', 'sorted', '2', 'red', 'scara_left']
+    text = report.format_report(on_disk)
+    assert 'sorted 1' in text and 'min arm sep.' in text and str(rec.directory) in text
+
+
+def test_automation_stats_are_preferred(make_recorder, cell):
+    rec = make_recorder('single')
+    q = np.array([0.3, 1.0, 0.1])
+    rec.on_joint_state(state_msg(cell, 1.0, q, mirror_joints(q)))
+    rec.on_event(event_msg('sorted', 1.0, 1))
+    rec.on_stats(conv.status('automation_manager', 'OK', 'running', {
+        'mode': 'single', 'sorted': 7, 'missed': 1, 'wrong_bin': 0, 'dropped': 0,
+        'spawned': 9, 'items_per_minute': 12.5, 'min_separation_m': 0.8,
+        'mirror_error_max_m': 'nan', 'first_item_time': 3.0, 'running': 'true'}))
+    rec.on_joint_state(state_msg(cell, 2.0, q, mirror_joints(q)))
+    summary = rec.finish('duration reached', False, plots=False)
+    assert summary['counts_source'] == 'automation_manager'
+    assert (summary['sorted'], summary['missed'], summary['spawned']) == (7, 1, 9)
+    assert summary['items_per_minute'] == 12.5
+    assert summary['stats']['running'] is True and summary['stats']['mode'] == 'single'
+    assert summary['stats']['mirror_error_max_m'] is None  # NaN is not JSON
+    json.loads((rec.directory / 'summary.json').read_text())
+
+
+def test_interrupted_recording_keeps_complete_files(make_recorder, cell):
+    rec = make_recorder('collaborative', batch=10)
+    q = random_joints(cell, 37, seed=5)
+    for k in range(37):  # 3 full batches on disk, 7 rows still queued
+        rec.on_joint_state(state_msg(cell, 0.01 * k, q[k], mirror_joints(q[k])))
+    rec.on_event(event_msg('spawned', 0.2, 1))
+    header, rows = read_csv(rec.directory / 'timeseries.csv')
+    assert len(rows) == 30  # flushed as it goes, before any close
+    rec.checkpoint()
+    partial = json.loads((rec.directory / 'summary.json').read_text())
+    assert partial['interrupted'] is True and partial['exit_reason'] == 'running'
+    rec.close()  # no finish(): the launcher died or the test ended early
+    text = (rec.directory / 'timeseries.csv').read_text()
+    assert text.endswith('\n')
+    header, rows = read_csv(rec.directory / 'timeseries.csv')
+    assert len(rows) == 37 and all(len(r) == len(header) for r in rows)
+    summary = json.loads((rec.directory / 'summary.json').read_text())
+    assert summary['interrupted'] is True
+    assert 'closed before the end' in summary['exit_reason']
+    assert summary['joint_state_rows'] == 37
+    for key in SUMMARY_KEYS:
+        assert key in summary, key
+    rec.on_joint_state(state_msg(cell, 1.0, q[0], q[0]))  # after close: ignored, no error
+    assert len(read_csv(rec.directory / 'timeseries.csv')[1]) == 37
+
+
+def test_recorder_hears_the_graph(make_recorder, context, cell):
+    """Messages published by another node of the same Context reach the CSV files."""
+    rec = make_recorder('collaborative')
+    probe = Node('probe', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(rec)
+    executor.add_node(probe)
+    states = probe.create_publisher(JointState, '/joint_states', 10)
+    events = probe.create_publisher(DiagnosticStatus, '/conveyor/events', 10)
+
+    def spin_until(predicate, timeout=20.0):
+        import time
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and not predicate():
+            executor.spin_once(timeout_sec=0.01)
+        return predicate()
+
+    try:
+        assert spin_until(lambda: states.get_subscription_count() > 0
+                          and events.get_subscription_count() > 0)
+        q = np.array([0.2, 1.2, 0.3])
+        k = 0
+
+        def publish_and_check():
+            nonlocal k
+            states.publish(state_msg(cell, 0.01 * k, q, mirror_joints(q)))
+            k += 1
+            return rec.log.t_last is not None and rec.log.t_last >= 0.05
+
+        assert spin_until(publish_and_check)
+        events.publish(event_msg('missed', 0.3, 4, cls='blue'))
+        assert spin_until(lambda: len(rec.log.events) == 1)
+        assert rec.log.events[0].kind == 'missed' and rec.log.events[0].cls == 'blue'
+        summary = rec.finish('duration reached', False, plots=False)
+        assert summary['joint_state_rows'] >= 6
+    finally:
+        executor.shutdown()
+        probe.destroy_node()
+
+
+def test_parse_value_and_run_log_windows(tmp_path, cell):
+    assert parse_value('true') is True and parse_value('False') is False
+    assert parse_value('12') == 12 and parse_value('0.5') == 0.5
+    assert parse_value('nan') is None and parse_value('') is None
+    assert parse_value('collaborative') == 'collaborative'
+    log = RunLog(tmp_path, cell)
+    for t, kind in ((1.0, 'sorted'), (2.0, 'sorted'), (3.0, 'missed')):
+        log.add_event(t, kind, 1)
+    assert log.event_counts(1.5, 3.0)['sorted'] == 1
+    counts, source = log.counts(0.0, 60.0)
+    assert counts['sorted'] == 2 and counts['items_per_minute'] == pytest.approx(2.0)
+    assert source == 'conveyor events'
+    log.close()
+    assert math.isinf(log.min_distance)  # no states: no separation yet
+
+
+def test_lost_joint_states_are_counted(make_recorder, cell):
+    rec = make_recorder('idle', batch=4)
+    q = np.zeros(3)
+    stamps = [0.0, 0.01, 0.02, 0.06, 0.07, 0.08, 0.09, 0.10, 0.30]  # 3 + 19 missing
+    for t in stamps:
+        rec.on_joint_state(state_msg(cell, t, q, q))
+    summary = rec.finish('duration reached', False, plots=False)
+    assert summary['joint_state_rows'] == len(stamps)
+    assert summary['joint_states_missing'] == 22
+    assert summary['largest_gap_s'] == pytest.approx(0.2)
+    assert '22 of 31 joint states not heard' in report.format_report(summary)

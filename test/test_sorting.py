@@ -1,0 +1,79 @@
+"""Sorting decisions: intercepts meet the moving item, drops land over the right bin."""
+import numpy as np
+from numpy.testing import assert_allclose
+
+from scara_collab.core.kinematics import fk, ik
+from scara_collab.core.model import load_cell
+from scara_collab.core.planning import plan_path
+from scara_collab.core.sorting import (
+    drop_point, intercept, joint_time, mirror_partner, order_candidates, pick_height, predict,
+    SeenItem)
+
+CELL = load_cell()
+LEFT = CELL.leader
+
+
+def plan(q0, target):
+    return plan_path(LEFT, q0, target, mode='line_or_joint')
+
+
+def home_q():
+    return ik(LEFT, drop_point(CELL, LEFT.name, CELL.item_classes[0], 0.1)).unwrap()
+
+
+def test_intercept_meets_the_item_where_it_will_be():
+    z = pick_height(CELL, 0.04)
+    item = SeenItem(7, 'red', np.array([1.2, -0.2, 0.25]), stamp=10.0)
+    hit = intercept(CELL, LEFT, home_q(), item, t_start=10.5, z=z, plan=plan)
+    assert hit is not None
+    where = predict(CELL, item, hit.arrive)
+    assert_allclose(hit.target[:2], where[:2], atol=0.003)  # within 3 mm of the item
+    assert hit.target[2] == z == CELL.belt.top_z + CELL.item_size + 0.04
+    assert_allclose(fk(LEFT, hit.traj.q[-1]), hit.target, atol=1e-6)
+    assert hit.start >= 10.5 and hit.arrive == hit.start + hit.traj.duration
+
+
+def test_items_out_of_reach_are_not_intercepted_and_upstream_ones_are_met_later():
+    z = pick_height(CELL, 0.04)
+    gone = SeenItem(1, 'red', np.array([4.4, 0.3, 0.25]), stamp=0.0)
+    assert intercept(CELL, LEFT, home_q(), gone, 0.0, z, plan) is None
+    early = SeenItem(2, 'red', np.array([-0.4, 0.0, 0.25]), stamp=0.0)
+    hit = intercept(CELL, LEFT, home_q(), early, 0.0, z, plan)
+    assert hit is not None and hit.target[0] > 0.3  # met once it has come into reach
+    assert hit.start > 0.0, 'the arm waits for the item instead of arriving early'
+    assert_allclose(predict(CELL, early, hit.arrive)[:2], hit.target[:2], atol=1e-9)
+
+
+def test_drop_points_are_over_the_bins_above_the_walls():
+    for (robot, cls), floor in CELL.bins.items():
+        p = drop_point(CELL, robot, cls, 0.1)
+        assert_allclose(p[:2], floor[:2])
+        wall = CELL.config['bins']['size'][2]
+        assert p[2] - CELL.item_size >= floor[2] + wall + 0.1 - 1e-12
+        assert ik(CELL.arm(robot), p).ok
+
+
+def test_urgent_items_first_and_own_half_preferred():
+    z = pick_height(CELL, 0.04)
+    a = SeenItem(1, 'red', np.array([3.0, -0.2, 0.25]), 0.0)   # downstream, left half
+    b = SeenItem(2, 'red', np.array([1.0, -0.2, 0.25]), 0.0)   # upstream, left half
+    c = SeenItem(3, 'blue', np.array([2.5, 0.2, 0.25]), 0.0)   # right half
+    assert [i.id for i in order_candidates(CELL, LEFT, [b, a, c], 0.0, z, True, False)] == [1, 2]
+    with_steal = order_candidates(CELL, LEFT, [b, a, c], 0.0, z, True, True)
+    assert [i.id for i in with_steal] == [1, 2, 3]  # own half first, then the other's
+    assert [i.id for i in order_candidates(CELL, LEFT, [b, c, a], 0.0, z, None, False)][0] == 3
+
+
+def test_joint_time_is_a_lower_bound_of_planned_moves():
+    q0 = home_q()
+    target = np.array([2.5, -0.2, 0.34])
+    traj = plan(q0, target)
+    assert joint_time(LEFT, q0, traj.q[-1]) <= traj.duration + 1e-9
+
+
+def test_mirror_partner():
+    item = SeenItem(1, 'red', np.array([1.0, -0.2, 0.25]), 5.0)
+    twin = SeenItem(2, 'red', np.array([1.0, 0.2, 0.25]), 5.0)
+    other = SeenItem(3, 'blue', np.array([1.0, 0.2, 0.25]), 5.0)
+    assert mirror_partner(CELL, item, [item, other, twin]).id == 2
+    assert mirror_partner(CELL, item, [item, other]) is None
