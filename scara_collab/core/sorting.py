@@ -94,7 +94,17 @@ def intercept(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: 
     if not np.isfinite(x_in):
         return None
     arrive = max(t_start, t_start + (x_in - p0[0]) / speed)
-    for _ in range(iterations):
+    for _ in range(iterations):  # cheap first: the joint-space time bound, no planning
+        p = predict(cell, item, arrive)
+        p[2] = z
+        sol = ik(arm, p, q_current=q_start)
+        if not sol.ok:
+            break
+        bound = t_start + joint_time(arm, q_start, sol.q)
+        if bound <= arrive + tol / speed:
+            break
+        arrive = bound
+    for _ in range(iterations):  # then real plans (usually one or two) until it settles
         p = predict(cell, item, arrive)
         p[2] = z
         try:

@@ -14,6 +14,7 @@ Services ``/automation_manager/start`` and ``/stop`` (std_srvs/Trigger); paramet
 sorted, missed, wrong_bin, dropped, spawned, items_per_minute, min_separation_m,
 mirror_error_max_m, first_item_time, running.
 """
+import time
 from typing import Dict, Optional
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -92,6 +93,7 @@ class AutomationManager(Node):
         self.jobs = [ArmJob(a.name) for a in active[self.mode]]
         self.running = False
         self.q: Dict[str, np.ndarray] = {}
+        self.q_stamp = 0.0  # sim time of the states in self.q
         self.items: Dict[int, sorting.SeenItem] = {}
         self.claimed: Dict[int, str] = {}
         self.counts = {k: 0 for k in COUNTED}
@@ -102,6 +104,8 @@ class AutomationManager(Node):
         self.min_sep = float('inf')
         self.mirror_max: Optional[float] = None
         self.estop = False
+        self._rtf = (None, None, 1.0)  # (wall, sim, factor): sim seconds per wall second
+        self._parked_idle = False
 
         self.target_pub = {a.name: self.create_publisher(PointStamped, f'/{a.name}/target', 10)
                            for a in self.cell.arms}
@@ -114,7 +118,7 @@ class AutomationManager(Node):
                                      lambda m, n=a.name: self._on_planner(n, m), 10)
         self.create_subscription(MarkerArray, '/conveyor/items', self._on_items, 10)
         self.create_subscription(DiagnosticStatus, '/conveyor/events', self._on_event, 100)
-        self.create_subscription(JointState, '/joint_states', self._on_state, 10)
+        self.create_subscription(JointState, '/joint_states', self._on_state, QoSProfile(depth=1))
         self.create_subscription(Float64, '/collision_monitor/min_distance', self._on_distance,
                                  10)
         self.create_subscription(Float64, '/replication_manager/mirror_error', self._on_mirror,
@@ -162,6 +166,7 @@ class AutomationManager(Node):
                 self.q[a.name] = conv.joint_state_arrays(msg, a.joint_names)[0]
             except conv.MessageError:
                 return
+        self.q_stamp = conv.to_sec(msg.header.stamp)
 
     def _on_distance(self, msg: Float64) -> None:
         self.min_sep = min(self.min_sep, msg.data)
@@ -210,9 +215,24 @@ class AutomationManager(Node):
 
     # --- the job ----------------------------------------------------------------------------
     def _tick(self) -> None:
+        wall, now = time.monotonic(), self._now()
+        w0, s0, factor = self._rtf
+        if w0 is not None and wall - w0 > 0.5:
+            self._rtf = (wall, now, 0.7 * factor + 0.3 * max((now - s0) / (wall - w0), 0.1))
+        elif w0 is None:
+            self._rtf = (wall, now, factor)
         if not self.running or self.estop or len(self.q) < len(self.cell.arms):
             return
-        now = self._now()
+        if not self._parked_idle:  # arms this job does not use wait above a bin, off the belt
+            self._parked_idle = True
+            used = {j.robot for j in self.jobs} | (
+                {a.name for a in self.cell.arms} if self.mode == 'mirrored' else set())
+            for arm in self.cell.arms:
+                if arm.name not in used:
+                    park = sorting.drop_point(self.cell, arm.name, self.cell.item_classes[0],
+                                              self.drop_clearance)
+                    self.target_pub[arm.name].publish(
+                        conv.make_point_stamped(park, 'world', now + self.lead))
         for job in self.jobs:
             if job.phase == 'idle':
                 self._pick_next(job, now)
@@ -220,7 +240,7 @@ class AutomationManager(Node):
                 if any(e is None for e in job.ends.values()):
                     if now - job.asked > self.move_timeout:
                         self._give_up(job, 'no plan from the planner in time')
-                elif now >= max(job.ends.values()):
+                elif min(now, self.q_stamp) >= max(job.ends.values()):  # seen to have ended
                     self._arrived(job, now)
 
     def _arrived(self, job: ArmJob, now: float) -> None:
@@ -240,10 +260,22 @@ class AutomationManager(Node):
                 self._give_up(job, f'item {seen.id} got away ({np.hypot(*off):.3f} m)')
 
     def _chase(self, job: ArmJob, item: sorting.SeenItem, now: float) -> bool:
-        start = now + self.lead
-        hit = sorting.intercept(self.cell, self.cell.arm(job.robot), self.q[job.robot], item,
-                                start, self.z_pick, self._plan_fn(job.robot))
-        if hit is None:
+        # Sim time runs on in the other processes while this computes: if the intercept was
+        # stale by the time it was ready, compute it again from a later start.
+        # The node's clock stands still while this computes (its callbacks wait), but sim
+        # time runs on in the other processes: estimate it from wall time and the observed
+        # real-time factor, and compute again from a later start if the plan went stale.
+        wall0, now0, extra = time.monotonic(), self._now(), 0.0
+        for _ in range(3):
+            start = now0 + extra + self.lead
+            hit = sorting.intercept(self.cell, self.cell.arm(job.robot), self.q[job.robot],
+                                    item, start, self.z_pick, self._plan_fn(job.robot))
+            if hit is None:
+                return False
+            extra = (time.monotonic() - wall0) * self._rtf[2]
+            if now0 + extra + 0.5 * self.lead <= hit.start:
+                break
+        else:
             return False
         job.item, job.phase, job.asked, job.delayed = item, 'to_item', now, False
         self._send(job, hit.target, hit.start)
@@ -270,7 +302,7 @@ class AutomationManager(Node):
         own = None if self.mode == 'single' else True
         start = now + self.lead
         for item in sorting.order_candidates(self.cell, arm, free, start, self.z_pick, own,
-                                             steal=others_busy)[:4]:
+                                             steal=others_busy)[:2]:
             if not self._chase(job, item, now):
                 continue
             self.claimed[item.id] = job.robot
@@ -315,7 +347,7 @@ class AutomationManager(Node):
             return
         drop = sorting.drop_point(self.cell, job.robot, job.item.cls, self.drop_clearance)
         job.phase, job.asked, job.delayed = 'to_bin', self._now(), False
-        self._send(job, drop, self._now() + self.lead)
+        self._send(job, drop, 0.0)  # the bin does not move: start as soon as planned
 
     def _give_up(self, job: ArmJob, why: str) -> None:
         self.get_logger().warning(f'{job.robot}: {why}')
@@ -334,7 +366,7 @@ class AutomationManager(Node):
         park = sorting.drop_point(self.cell, job.robot, self.cell.item_classes[0],
                                   self.drop_clearance)
         job.phase, job.asked = 'to_park', self._now()
-        self._send(job, park, self._now() + self.lead)
+        self._send(job, park, 0.0)
 
     # --- stats ------------------------------------------------------------------------------
     def stats(self) -> Dict[str, object]:

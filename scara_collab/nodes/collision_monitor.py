@@ -46,7 +46,8 @@ class CollisionMonitor(Node):
         self.estop_pub = self.create_publisher(Bool, '/emergency_stop', LATCHED)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
         self.marker_pub = self.create_publisher(MarkerArray, '~/capsules', 10)
-        self.create_subscription(JointState, '/joint_states', self._on_state, 10)
+        self.create_subscription(JointState, '/joint_states', self._on_state,
+                                 QoSProfile(depth=1))
         self.create_service(Trigger, '~/clear', self._on_clear)
         self.estop_pub.publish(Bool(data=False))
         self.get_logger().info(f'watching {self.cell.leader.name} vs '

@@ -27,6 +27,7 @@ import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
@@ -36,6 +37,9 @@ from scara_collab.core.planning import MODES, Plan, plan_path, schedule, Timelin
 from scara_collab.core.trajectory import path_metrics
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes.params import declare_config
+
+
+LATEST = QoSProfile(depth=1)
 
 
 class Planner(Node):
@@ -69,6 +73,7 @@ class Planner(Node):
         self.max_wait = float(self.get_parameter('max_wait').value)
 
         self.q: Optional[np.ndarray] = None
+        self.q_stamp = 0.0  # sim time of the state in self.q
         self.q_other: Optional[np.ndarray] = None
         self.mine: Optional[Plan] = None            # my committed move
         self.pending_target = None                  # (xyz, frame, asked) of my move
@@ -81,7 +86,8 @@ class Planner(Node):
         self.traj_pub = self.create_publisher(JointTrajectory, f'/{r}/joint_trajectory', 10)
         self.path_pub = self.create_publisher(Path, f'/{r}/planned_path', 10)
         self.status_pub = self.create_publisher(DiagnosticStatus, f'/{r}/planner_status', 10)
-        self.create_subscription(JointState, '/joint_states', self._on_state, 10)
+        # only the latest state matters: a backlog of old ones would make plans start stale
+        self.create_subscription(JointState, '/joint_states', self._on_state, LATEST)
         self.create_subscription(PointStamped, f'/{r}/target', self._on_target, 10)
         self.create_subscription(JointTrajectory, f'/{o}/joint_trajectory', self._on_other, 10)
         self.create_subscription(DiagnosticStatus, f'/{o}/execution_status',
@@ -119,10 +125,11 @@ class Planner(Node):
         try:
             self.q, _ = conv.joint_state_arrays(msg, self.arm.joint_names)
             self.q_other, _ = conv.joint_state_arrays(msg, self.other.joint_names)
+            self.q_stamp = conv.to_sec(msg.header.stamp)
         except conv.MessageError as exc:
             self.get_logger().warning(f'ignoring joint_states: {exc}', throttle_duration_sec=5.0)
             return
-        if self.queued is not None and (self.mine is None or self._now() >= self.mine.end):
+        if self.queued is not None and (self.mine is None or self.q_stamp >= self.mine.end):
             xyz, frame, stamp = self.queued
             self.queued = None
             self._plan(xyz, frame, stamp)

@@ -15,6 +15,7 @@ import numpy as np
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool
@@ -44,7 +45,8 @@ class ReplicationManager(Node):
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
         self.error_pub = self.create_publisher(Float64, '~/mirror_error', 10)
         self.create_subscription(PointStamped, '/collab/target', self._on_target, 10)
-        self.create_subscription(JointState, '/joint_states', self._on_state, 10)
+        self.create_subscription(JointState, '/joint_states', self._on_state,
+                                 QoSProfile(depth=1))
         self.create_service(SetBool, '~/enable', self._on_enable)
         self.get_logger().info(f'replicating {lead.name} -> {foll.name} '
                                f'({"on" if self.enabled else "off"})')
