@@ -58,7 +58,7 @@ def test_collaborative_sorts_with_both_arms_and_keeps_the_margin():
 
 
 def test_mirrored_pairs_are_sorted_in_step():
-    s = run_job('mirrored', 35.0, 3.0)
+    s = run_job('mirrored', 35.0, 1.8)
     assert s['sorted'] >= 6 and s['sorted'] % 2 == 0 or s['sorted'] >= 7
     assert s['sorted_by_scara_left'] > 0 and s['sorted_by_scara_right'] > 0
     assert s['mirror_error_max_m'] is not None and s['mirror_error_max_m'] <= 1e-3

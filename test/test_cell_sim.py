@@ -273,7 +273,7 @@ def test_spawn_refuses_items_off_the_belt(cell):
 
 def test_automatic_feed_mirror_pairs(cell):
     with _make(cell, feed_interval=0.5, feed_pattern='mirror_pairs') as sim:
-        sim.step(1050)
+        sim.step(2050)  # 0.5 s per item: a pair every 1.0 s, as many items/min as 'random'
         items = sim.items()
         assert len(items) == 4
         by_x = sorted(items, key=lambda i: (round(i.position[0], 3), i.position[1]))

@@ -487,7 +487,16 @@ class CellSim:
             if pattern not in FEED_PATTERNS:
                 raise ValueError(f'feed pattern must be one of {FEED_PATTERNS}, got {pattern!r}')
             self.feed_pattern = pattern
-        self._next_feed = self.time + self.feed_interval
+        self._next_feed = self.time + self.feed_period
+
+    @property
+    def feed_period(self) -> float:
+        """Return the seconds between feeds.
+
+        ``feed_interval`` is per item, so mirror pairs (two items) come every two intervals
+        and every pattern delivers the same items per minute.
+        """
+        return self.feed_interval * (2.0 if self.feed_pattern == 'mirror_pairs' else 1.0)
 
     def _colour(self, cls: str):
         if cls in _COLOURS:
@@ -570,7 +579,7 @@ class CellSim:
     def _update_items(self) -> None:
         """Feed, carry items on the belt, detect missed / sorted / wrong_bin / dropped."""
         if self.feed_interval > 0 and self.time >= self._next_feed - 1e-9:
-            self._next_feed += self.feed_interval
+            self._next_feed += self.feed_period
             self._feed()
         belt = self.cell.belt
         rest_z = belt.top_z + self.cell.item_size / 2.0
