@@ -20,8 +20,6 @@ from typing import Dict, Optional
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -35,6 +33,7 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.planning import plan_path
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes.params import declare_config
+from scara_collab.nodes.runner import run_node
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
@@ -391,17 +390,7 @@ class AutomationManager(Node):
 
 def main(args=None) -> None:
     """Run the sorting job: ``ros2 run scara_collab automation_manager``."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = AutomationManager()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(AutomationManager, args)
 
 
 if __name__ == '__main__':

@@ -9,8 +9,6 @@ again. Capsule markers coloured by distance go to ``/collision_monitor/capsules`
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Point
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
@@ -21,6 +19,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from scara_collab.core import collision
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.runner import run_node
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
@@ -114,14 +113,4 @@ class CollisionMonitor(Node):
 
 def main(args=None) -> None:
     """Run the collision monitor: ``ros2 run scara_collab collision_monitor``."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = CollisionMonitor()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(CollisionMonitor, args)

@@ -24,8 +24,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
@@ -37,6 +35,7 @@ from scara_collab.core.planning import MODES, Plan, plan_path, schedule, Timelin
 from scara_collab.core.trajectory import path_metrics
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes.params import declare_config
+from scara_collab.nodes.runner import run_node
 
 
 LATEST = QoSProfile(depth=1)
@@ -232,25 +231,11 @@ class Planner(Node):
             self._publish(self.mine, f're-timed for a new {self.other.name} move')
 
 
-def _main(robot: str, node_name: str, args=None) -> None:
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = Planner(robot=robot, node_name=node_name)
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-
-
 def main_left(args=None) -> None:
     """Run the left (leader) planner: ``ros2 run scara_collab left_planner``."""
-    _main('scara_left', 'left_planner', args)
+    run_node(lambda: Planner(robot='scara_left', node_name='left_planner'), args)
 
 
 def main_right(args=None) -> None:
     """Run the right (follower) planner: ``ros2 run scara_collab right_planner``."""
-    _main('scara_right', 'right_planner', args)
+    run_node(lambda: Planner(robot='scara_right', node_name='right_planner'), args)

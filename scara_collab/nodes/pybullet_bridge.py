@@ -19,9 +19,7 @@ from typing import Dict, Optional
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
-import rclpy
 from rclpy.clock import Clock, ClockType
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -36,6 +34,7 @@ from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes.params import declare_config
+from scara_collab.nodes.runner import run_node
 from scara_collab.sim.cell_sim import CellSim
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
@@ -212,17 +211,7 @@ class PyBulletBridge(Node):
 
 def main(args=None) -> None:
     """Run the bridge (``ros2 run scara_collab pybullet_bridge``)."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = PyBulletBridge()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(PyBulletBridge, args)
 
 
 if __name__ == '__main__':

@@ -12,8 +12,6 @@ leader's tool) and publishes it on ``/replication_manager/mirror_error`` while m
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
@@ -24,6 +22,7 @@ from scara_collab.core.kinematics import base_to_world, fk
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.runner import run_node
 
 
 class ReplicationManager(Node):
@@ -101,14 +100,4 @@ class ReplicationManager(Node):
 
 def main(args=None) -> None:
     """Run the replication manager: ``ros2 run scara_collab replication_manager``."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ReplicationManager()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(ReplicationManager, args)
