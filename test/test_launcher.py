@@ -119,7 +119,7 @@ def test_idle_run_writes_report_and_files(launch, tmp_path):
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['mode'] == 'idle' and summary['interrupted'] is False
     assert summary['exit_reason'] == 'duration reached' and summary['exit_code'] == 0
-    assert 3.0 <= summary['sim_seconds'] < 3.5
+    assert 3.0 - 1e-6 <= summary['sim_seconds'] < 3.5  # float sums of 1 ms steps
     assert summary['wall_seconds'] > 0 and summary['real_time_factor'] > 0
     assert summary['mirror_error_max_m'] is None and summary['margin_ok'] is True
     rows = assert_complete_csv(out / 'timeseries.csv', min_rows=300)
