@@ -70,7 +70,8 @@ def test_ik_round_trip_on_100k_random_targets(arm):
     assert np.all(fresh.elbow[fresh.q[:, 1] > 1e-9] == 1)
 
 
-annulus = st.tuples(st.floats(0.807, 2.45), st.floats(-np.pi, np.pi), st.floats(0.1, 0.7))
+# strictly inside: a target generated at exactly 2.45 m lands a rounding error outside it
+annulus = st.tuples(st.floats(0.807, 2.45 - 1e-9), st.floats(-np.pi, np.pi), st.floats(0.1, 0.7))
 
 
 @settings(max_examples=300, deadline=None)

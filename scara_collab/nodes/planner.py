@@ -41,6 +41,15 @@ from scara_collab.nodes.runner import run_node
 LATEST = QoSProfile(depth=1)
 
 
+def _lateness(msg: DiagnosticStatus) -> float:
+    """Seconds by which the bridge started a trajectory after its stamp (0 if on time)."""
+    values = conv.status_values(msg)
+    if msg.level != DiagnosticStatus.OK or 'start' not in values or 'stamp' not in values:
+        return 0.0
+    stamp = float(values['stamp'])
+    return float(values['start']) - stamp if stamp > 0 else 0.0
+
+
 class Planner(Node):
     """Motion planner of one arm."""
 
@@ -91,6 +100,8 @@ class Planner(Node):
         self.create_subscription(JointTrajectory, f'/{o}/joint_trajectory', self._on_other, 10)
         self.create_subscription(DiagnosticStatus, f'/{o}/execution_status',
                                  self._on_other_execution, 10)
+        self.create_subscription(DiagnosticStatus, f'/{r}/execution_status',
+                                 self._on_own_execution, 10)
         self.get_logger().info(f'{r} planner ready ({self.mode} moves, '
                                f'{"leader" if self.leader else "follower, yields to " + o})')
 
@@ -113,6 +124,10 @@ class Planner(Node):
         self.traj_pub.publish(conv.trajectory_msg(self.arm.joint_names, t.t, t.q, t.qd, t.qdd,
                                                   start=plan.start))
         self.path_pub.publish(conv.path_msg(t.p, plan.start))
+        self._publish_status(plan, note)
+
+    def _publish_status(self, plan: Plan, note: str) -> None:
+        t = plan.traj
         level = 'WARN' if plan.delay > 0 else 'OK'
         msg = note + (f'; delayed by {plan.delay:.2f} s for {self.other.name}'
                       if plan.delay > 0 else '')
@@ -184,9 +199,28 @@ class Planner(Node):
                       f'{traj.duration:.2f} s)')
 
     def _on_other_execution(self, msg: DiagnosticStatus) -> None:
-        """Forget a trajectory of the other arm that the bridge refused (the prior one runs)."""
+        """Track what the bridge really runs for the other arm.
+
+        A refused trajectory is forgotten (the prior one runs on); one the bridge started
+        late is shifted to its actual start.
+        """
         if msg.level == DiagnosticStatus.ERROR and 'refused' in msg.message:
             self.theirs = self.theirs_before
+            return
+        late = _lateness(msg)
+        if late > 0 and self.theirs is not None:
+            self.theirs = self.theirs.shifted(late)
+
+    def _on_own_execution(self, msg: DiagnosticStatus) -> None:
+        """Re-base my move if the bridge started it late, and announce its real end."""
+        late = _lateness(msg)
+        if late <= 0 or self.mine is None:
+            return
+        values = conv.status_values(msg)
+        if abs(float(values['stamp']) - self.mine.start) > 1e-3:
+            return  # not my current move
+        self.mine = Plan(self.mine.traj, float(values['start']), self.mine.delay + late)
+        self._publish_status(self.mine, f'started {late:.3f} s late by the bridge')
 
     def _wait(self, xyz: np.ndarray, frame: str, asked: float) -> None:
         """Wait for the other arm: it blocks the move even after its committed motion."""

@@ -150,11 +150,11 @@ class PyBulletBridge(Node):
         self._publish_due()
 
     # --- callbacks ------------------------------------------------------------------------
-    def _report(self, robot: str, level: str, message: str) -> None:
+    def _report(self, robot: str, level: str, message: str, **values) -> None:
         if level != 'OK':
             self.get_logger().warning(f'{robot}: {message}')
-        self.status_pub[robot].publish(conv.status(f'{robot}/execution', level, message,
-                                                   {'time': f'{self.sim.time:.3f}'}))
+        self.status_pub[robot].publish(conv.status(
+            f'{robot}/execution', level, message, {'time': f'{self.sim.time:.3f}', **values}))
 
     _keeps = 'not executed: the arm keeps its current command'
 
@@ -187,7 +187,8 @@ class PyBulletBridge(Node):
             self._report(robot, 'ERROR', f'trajectory refused: {exc}; {self._keeps}')
             return
         self._report(robot, 'OK', f'executing {len(t)} points from t={start:.3f} s '
-                     f'for {t[-1]:.3f} s')
+                     f'for {t[-1]:.3f} s', start=f'{start:.4f}', end=f'{start + t[-1]:.4f}',
+                     stamp=f'{stamp:.4f}')
 
     def _on_gripper(self, robot: str, req: SetBool.Request, res: SetBool.Response):
         ok, message = self.sim.grasp(robot) if req.data else self.sim.release(robot)
