@@ -25,9 +25,9 @@ from trajectory_msgs.msg import JointTrajectory
 
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.mirror import mirror_point
-from scara_collab.core.paths import config_dir
 from scara_collab.core.trajectory import segment_deviation
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.params import ros_args
 from scara_collab.nodes.planner import Planner
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 from scara_collab.nodes.replication_manager import ReplicationManager
@@ -38,28 +38,19 @@ from scara_collab.nodes.replication_manager import ReplicationManager
 MOVE = (np.array([3.4, -1.15, 0.4]), np.array([2.2, -0.25, 0.4]))
 
 
-def args_for(*files, **params):
-    out = ['--ros-args', '-p', 'use_sim_time:=true']
-    for f in files:
-        out += ['--params-file', str(config_dir() / f'{f}.yaml')]
-    for k, v in params.items():
-        out += ['-p', f'{k}:={v}']
-    return out
-
-
 def measure(mode: str) -> dict:
     """Measure one mirrored move in ``mode`` ('line' or 'joint') through a fresh graph."""
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     ex = SingleThreadedExecutor(context=ctx)
     nodes = [
-        PyBulletBridge(context=ctx, cli_args=args_for(
+        PyBulletBridge(context=ctx, cli_args=ros_args(
             'simulation', 'controllers', real_time_factor=0.0, feed_interval=0.0)),
         Planner('scara_left', 'left_planner', context=ctx,
-                cli_args=args_for('controllers', mode=mode)),
+                cli_args=ros_args('controllers', mode=mode)),
         Planner('scara_right', 'right_planner', context=ctx,
-                cli_args=args_for('controllers', mode=mode)),
-        ReplicationManager(context=ctx, cli_args=args_for()),
+                cli_args=ros_args('controllers', mode=mode)),
+        ReplicationManager(context=ctx, cli_args=ros_args()),
         Node('bench', context=ctx),
     ]
     bridge, left_pl, right_pl, _, probe = nodes

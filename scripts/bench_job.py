@@ -16,21 +16,12 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
 from scara_collab.core.config import load_config
-from scara_collab.core.paths import config_dir
 from scara_collab.nodes.automation_manager import AutomationManager
 from scara_collab.nodes.collision_monitor import CollisionMonitor
+from scara_collab.nodes.params import ros_args
 from scara_collab.nodes.planner import Planner
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 from scara_collab.nodes.replication_manager import ReplicationManager
-
-
-def ros_args(*files, **params):
-    out = ['--ros-args', '-p', 'use_sim_time:=true']
-    for f in files:
-        out += ['--params-file', str(config_dir() / f'{f}.yaml')]
-    for k, v in params.items():
-        out += ['-p', f'{k}:={v}']
-    return out
 
 
 def run(mode: str, duration: float, feed: float) -> dict:
