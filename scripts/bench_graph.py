@@ -31,6 +31,7 @@ from scara_collab.nodes.params import ros_args
 from scara_collab.nodes.planner import Planner
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 from scara_collab.nodes.replication_manager import ReplicationManager
+from scara_collab.nodes.runner import close_graph
 
 # A 1.5 m move towards the belt like the seeds' "rest position to the conveyor centre", but
 # ending 0.25 m short of the centre line: mirrored, the seeds' own move would put both tools on
@@ -115,10 +116,7 @@ def measure(mode: str) -> dict:
             'reachable': bool(ik(left, start).ok and ik(left, goal).ok),
         }
     finally:
-        ex.shutdown()
-        for n in nodes:
-            n.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        close_graph(ex, nodes, ctx)
 
 
 def main(argv=None) -> int:

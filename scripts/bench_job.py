@@ -22,6 +22,7 @@ from scara_collab.nodes.params import ros_args
 from scara_collab.nodes.planner import Planner
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 from scara_collab.nodes.replication_manager import ReplicationManager
+from scara_collab.nodes.runner import close_graph
 
 
 def run(mode: str, duration: float, feed: float) -> dict:
@@ -59,10 +60,7 @@ def run(mode: str, duration: float, feed: float) -> dict:
         out['feed_interval'] = feed
         return out
     finally:
-        ex.shutdown()
-        for n in nodes:
-            n.destroy_node()
-        rclpy.try_shutdown(context=ctx)
+        close_graph(ex, nodes, ctx)
 
 
 def main(argv=None) -> int:

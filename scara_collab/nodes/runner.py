@@ -23,3 +23,16 @@ def run_node(factory: Callable[[], Node], args: Optional[list] = None) -> None:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+
+
+def close_graph(executor, nodes, context) -> None:
+    """Tear down nodes built in-process: stop the executor, destroy the nodes, shut down.
+
+    :param executor: the executor the nodes were added to.
+    :param nodes: the nodes, in any order.
+    :param context: the ``rclpy.Context`` they were created in.
+    """
+    executor.shutdown()
+    for node in nodes:
+        node.destroy_node()
+    rclpy.try_shutdown(context=context)
