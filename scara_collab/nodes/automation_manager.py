@@ -31,7 +31,7 @@ from scara_collab.core import sorting
 from scara_collab.core.kinematics import IKError
 from scara_collab.core.model import load_cell
 from scara_collab.core.planning import plan_path
-from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes.params import declare_config
 from scara_collab.nodes.runner import run_node
 
@@ -129,6 +129,7 @@ class AutomationManager(Node):
         self.create_timer(1.0, self._publish_stats)
         if self.get_parameter('auto_start').value:
             self.running = True
+        self.lockstep = lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'sorting job ready: mode {self.mode}, arms '
                                f'{[j.robot for j in self.jobs]}')
 
@@ -259,11 +260,11 @@ class AutomationManager(Node):
                 self._give_up(job, f'item {seen.id} got away ({np.hypot(*off):.3f} m)')
 
     def _chase(self, job: ArmJob, item: sorting.SeenItem, now: float) -> bool:
-        # Sim time runs on in the other processes while this computes: if the intercept was
-        # stale by the time it was ready, compute it again from a later start.
-        # The node's clock stands still while this computes (its callbacks wait), but sim
-        # time runs on in the other processes: estimate it from wall time and the observed
-        # real-time factor, and compute again from a later start if the plan went stale.
+        # The node's clock stands still while this computes (its callbacks wait). In lockstep
+        # the bridge waits too; otherwise sim time runs on in the other processes: estimate it
+        # from wall time and the observed real-time factor, and compute again from a later
+        # start if the plan went stale.
+        rate = 0.0 if self.lockstep is not None else self._rtf[2]
         wall0, now0, extra = time.monotonic(), self._now(), 0.0
         for _ in range(3):
             start = now0 + extra + self.lead
@@ -271,7 +272,7 @@ class AutomationManager(Node):
                                     item, start, self.z_pick, self._plan_fn(job.robot))
             if hit is None:
                 return False
-            extra = (time.monotonic() - wall0) * self._rtf[2]
+            extra = (time.monotonic() - wall0) * rate
             if now0 + extra + 0.5 * self.lead <= hit.start:
                 break
         else:

@@ -18,7 +18,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from scara_collab.core import collision
 from scara_collab.core.model import load_cell
-from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes.runner import run_node
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
@@ -49,6 +49,7 @@ class CollisionMonitor(Node):
                                  QoSProfile(depth=1))
         self.create_service(Trigger, '~/clear', self._on_clear)
         self.estop_pub.publish(Bool(data=False))
+        lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'watching {self.cell.leader.name} vs '
                                f'{self.cell.follower.name}, margin {self.margin} m')
 

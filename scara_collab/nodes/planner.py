@@ -33,7 +33,7 @@ from scara_collab.core.kinematics import IKError
 from scara_collab.core.model import load_cell
 from scara_collab.core.planning import MODES, Plan, plan_path, schedule, Timeline
 from scara_collab.core.trajectory import path_metrics
-from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes.params import declare_config
 from scara_collab.nodes.runner import run_node
 
@@ -102,6 +102,7 @@ class Planner(Node):
                                  self._on_other_execution, 10)
         self.create_subscription(DiagnosticStatus, f'/{r}/execution_status',
                                  self._on_own_execution, 10)
+        lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'{r} planner ready ({self.mode} moves, '
                                f'{"leader" if self.leader else "follower, yields to " + o})')
 

@@ -12,6 +12,12 @@ zero = start now, else at the stamp; a new trajectory replaces the running one; 
 refused with the reason and the arm keeps its current command) and ``/emergency_stop``
 (transient local; true = both arms hold). Serves ``/<robot>/gripper`` (std_srvs/SetBool:
 true = grasp, false = release).
+
+Lockstep (:mod:`scara_collab.nodes.lockstep`): the nodes on sim time answer each ``/clock``
+on ``/sim/lockstep``, and the bridge never steps more than ``lockstep_window`` sim seconds
+(default 0.02, 0 = off) beyond the oldest answer, so a node that is computing holds sim time
+instead of falling behind it. A node silent for ``lockstep_timeout`` wall seconds is no longer
+waited for.
 """
 import math
 import time
@@ -33,6 +39,7 @@ from scara_collab.core.kinematics import within_limits
 from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.lockstep import LockstepGate
 from scara_collab.nodes.params import declare_config
 from scara_collab.nodes.runner import run_node
 from scara_collab.sim.cell_sim import CellSim
@@ -49,12 +56,15 @@ class PyBulletBridge(Node):
     def __init__(self, **kwargs):
         super().__init__('pybullet_bridge', **kwargs)
         cfg = declare_config(self, ('simulation', 'controllers'),
-                             dynamic=('real_time_factor',), on_change=self._on_config)
+                             dynamic=('real_time_factor', 'feed_interval'),
+                             on_change=self._on_config)
         self.declare_parameter('profile', '')
         self.declare_parameter('clock_rate', 100.0)
         self.declare_parameter('markers_rate', 10.0)
         self.declare_parameter('step_chunk', 0.01)
         self.declare_parameter('home', [0.0, 1.5708, 0.0])  # leader joints; follower mirrored
+        self.declare_parameter('lockstep_window', 0.02)
+        self.declare_parameter('lockstep_timeout', 5.0)
         sim_cfg, ctl_cfg = cfg['simulation'], cfg['controllers']
         profile = self.get_parameter('profile').value or None
         self.cell = load_cell(profile)
@@ -89,19 +99,38 @@ class PyBulletBridge(Node):
             self.create_service(SetBool, f'{name}/gripper',
                                 lambda req, res, n=name: self._on_gripper(n, req, res))
         self.create_subscription(Bool, 'emergency_stop', self._on_estop, LATCHED)
+        window = float(self.get_parameter('lockstep_window').value)
+        if 0 < window < self._periods['clock'] - 1e-9:
+            raise ValueError(f'lockstep_window {window} s is shorter than the clock period '
+                             f'{self._periods["clock"]} s: the clock could never advance')
+        self.gate = LockstepGate(self, window, float(self.get_parameter('lockstep_timeout').value),
+                                 on_answer=self._wake)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(0.0 if self._rtf == 0 else 0.002, self._tick, clock=self._steady)
+        self._timer = self.create_timer(0.0 if self._rtf == 0 else 0.002, self._tick,
+                                        clock=self._steady)
+        self._parked = False  # the stepping timer is off while the bridge waits for answers
+        if self.gate.enabled:  # re-arm now and then, so a silent participant times out
+            self.create_timer(0.25, self._wake, clock=self._steady)
         self._publish_all()
         self.get_logger().info(
             f'cell ready: {len(self.sim.joint_state()[0])} joints, physics '
             f'{sim_cfg["physics_rate"]:.0f} Hz, control {ctl_cfg["control_mode"]}, '
-            f'real-time factor {self._rtf or "unthrottled"}')
+            f'real-time factor {self._rtf or "unthrottled"}, lockstep '
+            f'{f"window {window:.3f} s" if window > 0 else "off"}')
 
     # --- stepping -------------------------------------------------------------------------
     def _on_config(self, name: str, tree: dict) -> None:
         if name == 'simulation':
+            unthrottled = self._rtf == 0
             self._rtf = float(tree['real_time_factor'])
             self._anchor = None
+            if unthrottled != (self._rtf == 0):  # unthrottled: step back to back
+                self.destroy_timer(self._timer)
+                self._timer = self.create_timer(0.0 if self._rtf == 0 else 0.002, self._tick,
+                                                clock=self._steady)
+                self._parked = False
+            if float(tree['feed_interval']) != self.sim.feed_interval:
+                self.sim.set_feed(float(tree['feed_interval']))
 
     def _steps_due(self) -> int:
         if self._rtf <= 0:
@@ -116,8 +145,21 @@ class PyBulletBridge(Node):
             due = self._chunk
         return max(due, 0)
 
+    def _wake(self) -> None:
+        if self._parked:
+            self._parked = False
+            self._timer.reset()
+
     def _tick(self) -> None:
         due = self._steps_due()
+        limit = self.gate.limit(self.sim.time)
+        if limit != float('inf'):
+            allowed = int(math.floor((limit - self.sim.time) / self.dt + 1e-6))
+            if allowed <= 0 < due:  # wait for the participants' answers, without spinning
+                self._parked = True
+                self._timer.cancel()
+                return
+            due = min(due, allowed)
         while due > 0:
             t = self.sim.time
             to_next = min(self._next.values()) - t
@@ -206,6 +248,8 @@ class PyBulletBridge(Node):
 
     def destroy_node(self) -> bool:
         """Close the simulator with the node."""
+        if self.gate.enabled:
+            self.get_logger().info(self.gate.summary())
         self.sim.close()
         return super().destroy_node()
 

@@ -21,7 +21,7 @@ from std_srvs.srv import SetBool
 from scara_collab.core.kinematics import base_to_world, fk
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import load_cell
-from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes.runner import run_node
 
 
@@ -47,6 +47,7 @@ class ReplicationManager(Node):
         self.create_subscription(JointState, '/joint_states', self._on_state,
                                  QoSProfile(depth=1))
         self.create_service(SetBool, '~/enable', self._on_enable)
+        lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'replicating {lead.name} -> {foll.name} '
                                f'({"on" if self.enabled else "off"})')
 

@@ -5,6 +5,8 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
+from scara_collab.nodes import lockstep
+
 
 def run_node(factory: Callable[[], Node], args: Optional[list] = None) -> None:
     """Create the node with ``factory()`` and spin it until Ctrl-C or an external shutdown.
@@ -21,6 +23,7 @@ def run_node(factory: Callable[[], Node], args: Optional[list] = None) -> None:
         pass
     finally:
         if node is not None:
+            lockstep.leave(node)
             node.destroy_node()
         rclpy.try_shutdown()
 
@@ -34,5 +37,6 @@ def close_graph(executor, nodes, context) -> None:
     """
     executor.shutdown()
     for node in nodes:
+        lockstep.leave(node)
         node.destroy_node()
     rclpy.try_shutdown(context=context)
