@@ -8,9 +8,10 @@ faster the simulation runs or the busier the CPU.
 
 The protocol, on one topic ``/sim/lockstep`` (``std_msgs/Header``):
 
-* a *participant* answers every ``/clock`` message it receives with a Header whose
-  ``frame_id`` is its node's full name and ``stamp`` the sim time it has reached; it answers
-  only between callbacks, so while it computes it does not answer;
+* a *participant* answers every advance of its node's sim clock (a clock jump callback, run
+  when the node's time source takes a ``/clock`` message, so no second subscription) with a
+  Header whose ``frame_id`` is its node's full name and ``stamp`` the sim time it has
+  reached; it answers only between callbacks, so while it computes it does not answer;
 * the bridge (:class:`LockstepGate`) never steps more than ``window`` sim seconds beyond the
   oldest answer of the participants it has heard. A busy node therefore holds sim time
   (within ``window``) until it is done, as if the whole graph ran in one thread;
@@ -27,9 +28,10 @@ import time
 from typing import Callable, Dict, Optional
 
 from builtin_interfaces.msg import Time
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
-from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import Header
 
 TOPIC = '/sim/lockstep'
@@ -48,12 +50,15 @@ class LockstepParticipant:
         self.node = node
         self.name = node.get_fully_qualified_name()
         self._pub = node.create_publisher(Header, TOPIC, QOS)
-        # depth 1: after a long callback only the newest clock is answered
-        node.create_subscription(ClockMsg, '/clock', self._on_clock, QoSProfile(depth=1))
+        self._clock = node.get_clock()
+        # every forward step of sim time (the time source keeps only the newest /clock)
+        self._handle = self._clock.create_jump_callback(
+            JumpThreshold(min_forward=Duration(nanoseconds=1), min_backward=None,
+                          on_clock_change=False), post_callback=self._on_advance)
         self.answered = 0
 
-    def _on_clock(self, msg: ClockMsg) -> None:
-        self._pub.publish(Header(stamp=msg.clock, frame_id=self.name))
+    def _on_advance(self, _jump) -> None:
+        self._pub.publish(Header(stamp=self._clock.now().to_msg(), frame_id=self.name))
         self.answered += 1
 
     def leave(self) -> None:
