@@ -14,6 +14,7 @@ console_scripts = [
     'replication_manager = scara_collab.nodes.replication_manager:main',
     'collision_monitor = scara_collab.nodes.collision_monitor:main',
     'automation_manager = scara_collab.nodes.automation_manager:main',
+    'cell_viewer = scara_collab.nodes.cell_viewer:main',
 ]
 
 

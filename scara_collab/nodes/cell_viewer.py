@@ -1,0 +1,489 @@
+"""``cell_viewer``: a live 3D view of the cell in the browser (viser).
+
+Serves a viser scene (``http://localhost:<port>``, default 8080; viser ships its own web client,
+so no internet is needed) built from the same cell URDF the simulator loads
+(:func:`scara_collab.core.model.load_cell`): both arms posed from ``/joint_states``, the belt,
+the bins (a coloured plate per item class), the items of ``/conveyor/items`` coloured by
+class, the ``/<robot>/planned_path`` polylines, each arm's collision capsules
+(:mod:`scara_collab.core.collision`) coloured by their distance to the other arm (green above
+twice the safety margin, orange above the margin, red below, as the collision monitor's
+markers) with the closest pair joined by a line, ``/collision_monitor/min_distance``, the
+``/emergency_stop`` state and ``/automation_manager/stats`` in the side panel.
+
+Callbacks only keep the latest message as arrays; the scene is pushed to the browser from a
+wall-clock timer at ``update_rate`` (default 25 Hz), and only what changed. The viewer is an
+observer: it does not take part in the bridge's lockstep, so it never paces the graph, and it
+keeps drawing when sim time stands still.
+
+Parameters (read-only): ``port`` (0 = any free port), ``host`` (default ``127.0.0.1``: this
+machine only; ``0.0.0.0`` serves every interface), ``profile`` (link profile, default the
+cell's), ``update_rate`` (Hz, wall), ``camera_position`` and ``camera_look_at`` (the initial
+view, world frame, m).
+"""
+import io
+import math
+from typing import Dict, List, Optional, Sequence, Tuple
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from nav_msgs.msg import Path
+import numpy as np
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64
+import trimesh
+import viser
+from viser.extras import ViserUrdf
+from visualization_msgs.msg import Marker, MarkerArray
+import yourdfpy
+
+from scara_collab.core import collision
+from scara_collab.core.model import CellModel, load_cell
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.runner import run_node
+
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+#: Item class colours, by the class's index in ``cell.item_classes`` (RGB 0-255).
+CLASS_COLOURS = ((217, 38, 38), (38, 89, 230), (51, 191, 51), (230, 204, 26))
+UNKNOWN_CLASS = (128, 128, 128)
+#: Planned-path colour per arm, by the arm's index in ``cell.arms``.
+PATH_COLOURS = ((230, 120, 20), (20, 160, 200))
+#: Capsule colours: apart (>= 2 margins), close (>= 1 margin), margin broken.
+MARGIN_COLOURS = ((26, 204, 51), (242, 153, 26), (230, 26, 26))
+CAPSULE_PARTS = ('link 1', 'link 2', 'quill')
+
+
+# --- presentation helpers (numpy, no rclpy) ------------------------------------------------
+def class_colour(cls: str, classes: Sequence[str]) -> Tuple[int, int, int]:
+    """RGB colour of an item class: by its index in ``classes``, grey if unknown."""
+    if cls not in classes:
+        return UNKNOWN_CLASS
+    return CLASS_COLOURS[list(classes).index(cls) % len(CLASS_COLOURS)]
+
+
+def margin_colour(distance: float, margin: float) -> Tuple[int, int, int]:
+    """RGB colour of a capsule ``distance`` m from the other arm, for a safety ``margin`` m."""
+    if distance < margin:
+        return MARGIN_COLOURS[2]
+    if distance < 2.0 * margin:
+        return MARGIN_COLOURS[1]
+    return MARGIN_COLOURS[0]
+
+
+def segment_pose(start: np.ndarray, end: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Pose that puts a mesh built along z around the origin onto the segment ``start-end``.
+
+    :param start: (3,) segment start, m.
+    :param end: (3,) segment end, m.
+    :return: ``(wxyz, position)``: the unit quaternion turning +z onto the segment direction,
+        and the segment midpoint.
+    """
+    start, end = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
+    d = end - start
+    n = float(np.linalg.norm(d))
+    u = d / n if n > 0 else np.array([0.0, 0.0, 1.0])
+    # Half-way quaternion between +z and u: (1 + z.u, z x u), normalised; antiparallel -> x.
+    q = np.array([1.0 + u[2], -u[1], u[0], 0.0])
+    norm = float(np.linalg.norm(q))
+    wxyz = q / norm if norm > 1e-9 else np.array([0.0, 1.0, 0.0, 0.0])
+    return wxyz, (start + end) / 2.0
+
+
+def closest_capsules(cell: CellModel, q_a: np.ndarray, q_b: np.ndarray):
+    """Capsule distances of the two arms and the closest pair.
+
+    :param cell: the cell (arms a = ``cell.arms[0]``, b = ``cell.arms[1]``).
+    :param q_a: (3,) joint state of arm a.
+    :param q_b: (3,) joint state of arm b.
+    :return: ``(per_capsule, distance, p, q)``: (2, 3) each capsule's surface distance to the
+        other arm (row 0 arm a, row 1 arm b), the arm-to-arm distance, and the closest points
+        (3,) of the closest pair's axes (m).
+    """
+    a, b = cell.arms
+    pairs = collision.arm_pair_distances(a, q_a, b, q_b)
+    i, j = np.unravel_index(int(np.argmin(pairs)), pairs.shape)
+    sa, ea, _ = collision.arm_capsules(a, q_a)
+    sb, eb, _ = collision.arm_capsules(b, q_b)
+    _, s, t = collision.segment_distance(sa[i], ea[i], sb[j], eb[j])
+    p = sa[i] + float(s) * (ea[i] - sa[i])
+    q = sb[j] + float(t) * (eb[j] - sb[j])
+    per_capsule = np.stack([pairs.min(axis=1), pairs.min(axis=0)])
+    return per_capsule, float(pairs[i, j]), p, q
+
+
+def urdf_subtree(robot: yourdfpy.Robot, roots: Sequence[str]) -> List[str]:
+    """Links of ``robot`` under (and including) the links ``roots``, in tree order."""
+    children: Dict[str, List[str]] = {}
+    for j in robot.joints:
+        children.setdefault(j.parent, []).append(j.child)
+    out, todo = [], list(roots)
+    while todo:
+        link = todo.pop(0)
+        out.append(link)
+        todo.extend(children.get(link, []))
+    return out
+
+
+def urdf_part(cell_urdf: yourdfpy.URDF, links: Sequence[str], name: str) -> yourdfpy.URDF:
+    """Return a URDF of some of the cell's links (and the joints between them), meshes loaded.
+
+    :param cell_urdf: the parsed cell URDF.
+    :param links: the links to keep; must include the root (``world``).
+    :param name: the new robot name.
+    """
+    keep = set(links)
+    robot = cell_urdf.robot
+    part = yourdfpy.Robot(name=name, links=[lk for lk in robot.links if lk.name in keep],
+                          joints=[j for j in robot.joints if j.child in keep],
+                          materials=list(robot.materials))
+    return yourdfpy.URDF(robot=part, build_scene_graph=True, load_meshes=True)
+
+
+def stats_markdown(status: Optional[Tuple[str, Dict[str, str]]]) -> str:
+    """Markdown of the automation stats (``(message, key-values)``), or a waiting note."""
+    if status is None:
+        return '*no `/automation_manager/stats` yet*'
+    message, values = status
+    rows = '\n'.join(f'| {k} | {v} |' for k, v in values.items())
+    return f'**{message}**\n\n| | |\n|---|---|\n{rows}'
+
+
+# --- message conversions -------------------------------------------------------------------
+def path_points(msg: Path) -> np.ndarray:
+    """``nav_msgs/Path`` -> (N, 3) positions."""
+    return np.array([[p.pose.position.x, p.pose.position.y, p.pose.position.z]
+                     for p in msg.poses], dtype=float).reshape(-1, 3)
+
+
+def marker_items(msg: MarkerArray) -> Dict[int, Tuple[str, np.ndarray]]:
+    """``/conveyor/items`` -> ``{id: (class, (3,) position)}``; DELETEALL and DELETE honoured.
+
+    The class is the marker's ``ns`` (its ``text`` if ``ns`` is empty); markers with
+    non-finite positions are skipped.
+    """
+    items: Dict[int, Tuple[str, np.ndarray]] = {}
+    for m in msg.markers:
+        if m.action == Marker.DELETEALL:
+            items.clear()
+        elif m.action == Marker.DELETE:
+            items.pop(m.id, None)
+        elif m.action == Marker.ADD:
+            p = m.pose.position
+            xyz = np.array([p.x, p.y, p.z], dtype=float)
+            if np.all(np.isfinite(xyz)):
+                items[int(m.id)] = (m.ns or m.text, xyz)
+    return items
+
+
+class CellScene:
+    """The viser scene of the cell; knows nothing of ROS (arrays in, scene out).
+
+    :ivar server: the viser server.
+    :ivar urdfs: ``{robot: yourdfpy.URDF}`` each arm's part of the cell URDF, as last posed.
+    :ivar root: ``{part: frame handle}`` of the parts :meth:`set_visible` shows and hides.
+    :ivar capsules: ``{robot: [3 mesh handles]}`` (link 1, link 2, quill).
+    :ivar items: ``{item id: box handle}``.
+    :ivar paths: ``{robot: line segments handle}``.
+    """
+
+    def __init__(self, server: viser.ViserServer, cell: CellModel):
+        self.server, self.cell = server, cell
+        scene = server.scene
+        scene.set_up_direction('+z')
+        scene.add_grid('/ground', width=12.0, height=10.0, position=(2.0, 0.0, 0.0),
+                       cell_size=0.5, section_size=1.0)
+        xml = yourdfpy.URDF.load(io.StringIO(cell.urdf), build_scene_graph=False,
+                                 load_meshes=False)
+        arm_links = {a.name: urdf_subtree(xml.robot, [f'{a.name}_base_link'])
+                     for a in cell.arms}
+        taken = {lk for links in arm_links.values() for lk in links}
+        env = [lk.name for lk in xml.robot.links if lk.name not in taken]
+        self.root = {'cell': scene.add_frame('/cell', show_axes=False)}
+        # ViserUrdf places its joint frames in update_cfg: once for the fixed belt and bins.
+        ViserUrdf(server, urdf_part(xml, env, 'cell'), root_node_name='/cell').update_cfg(
+            np.zeros(0))
+        self.urdfs: Dict[str, yourdfpy.URDF] = {}
+        self._views: Dict[str, ViserUrdf] = {}
+        self.root['arms'] = scene.add_frame('/arms', show_axes=False, visible=False)
+        self.posed = False  # the arms are hidden until the first joint state
+        for a in cell.arms:
+            scene.add_frame(f'/arms/{a.name}', show_axes=False)
+            self.urdfs[a.name] = urdf_part(xml, ['world'] + arm_links[a.name], a.name)
+            self._views[a.name] = ViserUrdf(server, self.urdfs[a.name],
+                                            root_node_name=f'/arms/{a.name}')
+        self._add_bin_plates()
+        self.root['capsules'] = scene.add_frame('/capsules', show_axes=False)
+        self.capsules: Dict[str, list] = {}
+        for a in cell.arms:
+            lengths = (a.l1, a.l2, a.quill_length)
+            radii = (a.link_radius, a.link_radius, a.quill_radius)
+            meshes = [trimesh.creation.capsule(height=h, radius=r, count=[16, 16])
+                      for h, r in zip(lengths, radii)]
+            self.capsules[a.name] = [  # hidden until the first joint state
+                scene.add_mesh_simple(f'/capsules/{a.name}/{k}', m.vertices, m.faces,
+                                      color=MARGIN_COLOURS[0], opacity=0.35, visible=False)
+                for k, m in enumerate(meshes)]
+        self.gap = scene.add_line_segments('/capsules/gap', np.zeros((1, 2, 3)),
+                                           MARGIN_COLOURS[0], thickness=0.015, visible=False)
+        self.gap_label = scene.add_label('/capsules/gap_label', '', visible=False)
+        self.root['items'] = scene.add_frame('/items', show_axes=False)
+        self.items: Dict[int, object] = {}
+        self.root['paths'] = scene.add_frame('/paths', show_axes=False)
+        self.paths: Dict[str, object] = {}
+        belt = cell.belt
+        self.estop_label = scene.add_label(
+            '/estop', 'EMERGENCY STOP', position=((belt.x_start + belt.x_end) / 2,
+                                                  belt.centre_y, 1.6),
+            font_screen_scale=2.0, visible=False)
+        self._q: Dict[str, np.ndarray] = {}
+        self.distance: Optional[float] = None  # arm-to-arm, from the drawn joint states
+        self._gui()
+
+    def _add_bin_plates(self) -> None:
+        size = self.cell.config['bins']['size']
+        self.server.scene.add_frame('/cell/bin_plates', show_axes=False)
+        for (robot, cls), centre in self.cell.bins.items():
+            self.server.scene.add_box(
+                f'/cell/bin_plates/{robot}_{cls}', dimensions=(size[0] * 0.8, size[1] * 0.8,
+                                                               0.01),
+                color=class_colour(cls, self.cell.item_classes),
+                position=(float(centre[0]), float(centre[1]), float(centre[2]) + 0.03))
+
+    def _gui(self) -> None:
+        gui = self.server.gui
+        self.status_md = gui.add_markdown('*waiting for `/joint_states`*')
+        with gui.add_folder('Automation'):
+            self.stats_md = gui.add_markdown(stats_markdown(None))
+        with gui.add_folder('Show'):
+            self.show = {name: gui.add_checkbox(name, True)
+                         for name in ('arms', 'capsules', 'paths', 'items', 'cell')}
+        for name, box in self.show.items():
+            box.on_update(lambda _event, n=name: self.set_visible(n, self.show[n].value))
+
+    def set_visible(self, part: str, visible: bool) -> None:
+        """Show or hide ``arms``, ``capsules``, ``paths``, ``items`` or ``cell``."""
+        self.root[part].visible = bool(visible) and (part != 'arms' or self.posed)
+        if self.show[part].value != bool(visible):
+            self.show[part].value = bool(visible)
+
+    def set_camera(self, position: Sequence[float], look_at: Sequence[float],
+                   fov: float = math.radians(50.0)) -> None:
+        """Set the view of new browser tabs (and their "Reset View"); ``fov`` vertical, rad."""
+        cam = self.server.initial_camera
+        cam.position = tuple(float(v) for v in position)
+        cam.look_at = tuple(float(v) for v in look_at)
+        cam.up = (0.0, 0.0, 1.0)
+        cam.fov = float(fov)
+
+    # --- updates ---------------------------------------------------------------------------
+    def set_arms(self, q: Dict[str, np.ndarray]) -> bool:
+        """Pose the arms (``{robot: (3,) joints}``) and their capsules; False if unchanged."""
+        if q.keys() != self.urdfs.keys():
+            return False
+        if self._q and all(np.allclose(q[n], self._q[n], atol=1e-6, rtol=0) for n in q):
+            return False
+        for name, view in self._views.items():
+            view.update_cfg(np.asarray(q[name], dtype=float))
+        self._q = {n: np.array(v, dtype=float) for n, v in q.items()}
+        if not self.posed:
+            self.posed = True
+            self.set_visible('arms', self.show['arms'].value)
+        a, b = self.cell.arms
+        per_capsule, d, p, pq = closest_capsules(self.cell, self._q[a.name], self._q[b.name])
+        margin = self.cell.safety_margin
+        for row, arm in enumerate(self.cell.arms):
+            starts, ends, _ = collision.arm_capsules(arm, self._q[arm.name])
+            for k, handle in enumerate(self.capsules[arm.name]):
+                handle.wxyz, handle.position = segment_pose(starts[k], ends[k])
+                handle.color = margin_colour(float(per_capsule[row, k]), margin)
+                handle.visible = True
+        colour = margin_colour(d, margin)
+        self.gap.points = np.array([[p, pq]], dtype=np.float32)
+        self.gap.colors = np.array([[colour, colour]], dtype=np.uint8)
+        self.gap.visible = True
+        self.gap_label.text = f'{d:.3f} m'
+        self.gap_label.position = tuple((p + pq) / 2.0 + np.array([0.0, 0.0, 0.15]))
+        self.gap_label.visible = True
+        self.distance = d
+        return True
+
+    def set_items(self, items: Dict[int, Tuple[str, np.ndarray]]) -> None:
+        """Show exactly ``items`` (``{id: (class, (3,) position)}``)."""
+        for k in [k for k in self.items if k not in items]:
+            self.items.pop(k).remove()
+        size = self.cell.item_size
+        for k, (cls, xyz) in items.items():
+            pos = tuple(float(v) for v in xyz)
+            if k in self.items:
+                self.items[k].position = pos
+            else:
+                self.items[k] = self.server.scene.add_box(
+                    f'/items/{k}', dimensions=(size, size, size),
+                    color=class_colour(cls, self.cell.item_classes), position=pos)
+
+    def set_path(self, robot: str, points: np.ndarray) -> None:
+        """Draw the planned path of ``robot`` ((N, 3) world points; N < 2 clears it)."""
+        old = self.paths.pop(robot, None)
+        if old is not None:
+            old.remove()
+        if len(points) < 2:
+            return
+        names = [a.name for a in self.cell.arms]
+        colour = PATH_COLOURS[names.index(robot) % len(PATH_COLOURS)]
+        segments = np.stack([points[:-1], points[1:]], axis=1)
+        self.paths[robot] = self.server.scene.add_line_segments(
+            f'/paths/{robot}', segments, colour, thickness=0.02)
+
+    def set_status(self, sim_time: float, estop: Optional[bool], monitor: Optional[float]) -> None:
+        """Side panel: sim time, e-stop, arm-to-arm distance (ours and the monitor's)."""
+        stop = ('**E-stop: ACTIVE** (both arms hold)' if estop else
+                'E-stop: clear' if estop is not None else 'E-stop: *unknown*')
+        dist = 'n/a' if self.distance is None else f'{self.distance:.3f} m'
+        mon = 'n/a' if monitor is None else f'{monitor:.3f} m'
+        text = (f'sim t = {sim_time:.2f} s\n\n{stop}\n\narm distance {dist} (monitor {mon}); '
+                f'margin {self.cell.safety_margin:g} m')
+        if self.status_md.content != text:
+            self.status_md.content = text
+        if self.estop_label.visible != bool(estop):
+            self.estop_label.visible = bool(estop)
+
+    def set_stats(self, status: Optional[Tuple[str, Dict[str, str]]]) -> None:
+        """Automation stats panel (``(message, key-values)``)."""
+        self.stats_md.content = stats_markdown(status)
+
+
+class CellViewer(Node):
+    """Serve the live 3D view; ``scene`` is the :class:`CellScene`, ``server`` its server."""
+
+    def __init__(self, **kwargs):
+        super().__init__('cell_viewer', **kwargs)
+        ro = ParameterDescriptor(read_only=True)
+        self.declare_parameter('port', 8080, ro)
+        self.declare_parameter('host', '127.0.0.1', ro)
+        self.declare_parameter('profile', '', ro)
+        self.declare_parameter('update_rate', 25.0, ro)
+        self.declare_parameter('camera_position', [0.2, -5.2, 5.6], ro)
+        self.declare_parameter('camera_look_at', [2.9, 0.3, 0.3], ro)
+        port = int(self.get_parameter('port').value)
+        rate = float(self.get_parameter('update_rate').value)
+        camera = [np.asarray(self.get_parameter(k).value, dtype=float)
+                  for k in ('camera_position', 'camera_look_at')]
+        if not 0 <= port <= 65535:
+            raise ValueError(f'cell_viewer: port must be in 0..65535 (0 = any), got {port}')
+        if not (math.isfinite(rate) and 0.0 < rate <= 60.0):
+            raise ValueError(f'cell_viewer: update_rate must be in (0, 60] Hz, got {rate}')
+        for name, v in zip(('camera_position', 'camera_look_at'), camera):
+            if v.shape != (3,) or not np.all(np.isfinite(v)):
+                raise ValueError(f'cell_viewer: {name} must be 3 finite numbers, got {v}')
+        self.cell = load_cell(self.get_parameter('profile').value or None)
+        self.scene: Optional[CellScene] = None
+        self.q: Dict[str, np.ndarray] = {}
+        self.items: Optional[Dict[int, Tuple[str, np.ndarray]]] = None
+        self.paths: Dict[str, np.ndarray] = {}
+        self.estop: Optional[bool] = None
+        self.monitor: Optional[float] = None
+        self.stats: Optional[Tuple[str, Dict[str, str]]] = None
+        self.frames = 0  # scene updates that moved the arms
+        self._dirty = set()
+
+        self.create_subscription(JointState, '/joint_states', self._on_state,
+                                 QoSProfile(depth=1))
+        self.create_subscription(MarkerArray, '/conveyor/items', self._on_items, 10)
+        for a in self.cell.arms:
+            self.create_subscription(Path, f'/{a.name}/planned_path',
+                                     lambda m, n=a.name: self._on_path(n, m), 10)
+        self.create_subscription(Float64, '/collision_monitor/min_distance',
+                                 self._on_distance, 10)
+        self.create_subscription(Bool, '/emergency_stop', self._on_estop, LATCHED)
+        self.create_subscription(DiagnosticStatus, '/automation_manager/stats', self._on_stats,
+                                 10)
+        self.create_timer(1.0 / rate, self._draw,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        # The server last: once its page answers, the node is on the graph (the launcher's
+        # readiness), and a failure here leaves no server thread behind.
+        self.server = viser.ViserServer(host=str(self.get_parameter('host').value), port=port,
+                                        label='scara_collab cell', verbose=False)
+        try:
+            self.scene = CellScene(self.server, self.cell)
+            self.scene.set_camera(*camera)
+        except BaseException:
+            self.server.stop()
+            raise
+        self.port = self.server.get_port()
+        self.get_logger().info(f'live 3D view of the cell on http://localhost:{self.port} '
+                               f'(host {self.server.get_host()}, {rate:g} Hz)')
+
+    # --- inputs ----------------------------------------------------------------------------
+    def _on_state(self, msg: JointState) -> None:
+        try:
+            q = {a.name: conv.joint_state_arrays(msg, a.joint_names)[0] for a in self.cell.arms}
+        except conv.MessageError as exc:
+            self.get_logger().warning(f'ignoring joint_states: {exc}', throttle_duration_sec=5.0)
+            return
+        if all(np.all(np.isfinite(v)) for v in q.values()):
+            self.q = q
+            self._dirty.add('arms')
+
+    def _on_items(self, msg: MarkerArray) -> None:
+        self.items = marker_items(msg)
+        self._dirty.add('items')
+
+    def _on_path(self, robot: str, msg: Path) -> None:
+        points = path_points(msg)
+        frame = msg.header.frame_id
+        if frame == f'{robot}_base':
+            base = self.cell.arm(robot).base
+            points = points @ base[:3, :3].T + base[:3, 3]
+        elif frame not in ('', 'world'):
+            self.get_logger().warning(f'{robot}/planned_path in unknown frame {frame!r}; '
+                                      'not drawn', throttle_duration_sec=5.0)
+            return
+        if not np.all(np.isfinite(points)):
+            self.get_logger().warning(f'{robot}/planned_path has non-finite points; not drawn',
+                                      throttle_duration_sec=5.0)
+            return
+        self.paths[robot] = points
+        self._dirty.add(f'path:{robot}')
+
+    def _on_distance(self, msg: Float64) -> None:
+        self.monitor = float(msg.data)
+
+    def _on_estop(self, msg: Bool) -> None:
+        self.estop = bool(msg.data)
+
+    def _on_stats(self, msg: DiagnosticStatus) -> None:
+        self.stats = (msg.message, conv.status_values(msg))
+        self._dirty.add('stats')
+
+    # --- output ----------------------------------------------------------------------------
+    def _draw(self) -> None:
+        if self.scene is None:  # still being built
+            return
+        dirty, self._dirty = self._dirty, set()
+        if 'arms' in dirty and self.scene.set_arms(self.q):
+            self.frames += 1
+        if 'items' in dirty and self.items is not None:
+            self.scene.set_items(self.items)
+        for robot, points in self.paths.items():
+            if f'path:{robot}' in dirty:
+                self.scene.set_path(robot, points)
+        if 'stats' in dirty:
+            self.scene.set_stats(self.stats)
+        sim = self.get_clock().now().nanoseconds * 1e-9
+        self.scene.set_status(sim, self.estop, self.monitor)
+
+    def destroy_node(self):
+        self.server.stop()
+        return super().destroy_node()
+
+
+def main(args=None) -> None:
+    """Run the live 3D view: ``ros2 run scara_collab cell_viewer``."""
+    run_node(CellViewer, args)
+
+
+if __name__ == '__main__':
+    main()
