@@ -107,7 +107,8 @@ def assert_children_gone(out: Path) -> dict:
 
 def test_idle_run_writes_report_and_files(launch, tmp_path):
     out = tmp_path / 'idle'
-    la = launch('--mode', 'idle', '--duration', '3', '--rtf', '0', '--output', str(out))
+    la = launch('--mode', 'idle', '--duration', '3', '--rtf', '0', '--output', str(out),
+                '--record', '--animation')
     assert la.wait() == 0, la.output
     text = la.output
     for stage in NODES:
@@ -132,6 +133,25 @@ def test_idle_run_writes_report_and_files(launch, tmp_path):
         assert (out / 'logs' / f'{node}.log').is_file(), node
     assert all(n['exit_code'] is not None for n in summary['nodes'].values())
     assert_children_gone(out)
+    # --record: every node's topics in run.mcap; --animation: run.gif after the report
+    topics = assert_complete_mcap(out, summary)
+    assert {'/conveyor/items', '/collision_monitor/min_distance',
+            '/replication_manager/mirror_error', '/emergency_stop'} <= topics
+    assert re.search(r'\[animation\] .*run\.gif \(\d+ frames', text)
+    assert (out / 'run.gif').read_bytes().startswith(b'GIF89a')
+
+
+def assert_complete_mcap(out: Path, summary: dict) -> set:
+    """``run.mcap`` has its footer, the summary's counts, /clock and /joint_states."""
+    from scara_collab.run.mcap_log import iter_messages, Reading
+    reading = Reading()
+    counts: dict = {}
+    for msg in iter_messages(out / 'run.mcap', reading=reading):
+        counts[msg.topic] = counts.get(msg.topic, 0) + 1
+    assert reading.complete, reading.error
+    assert counts == summary['mcap']['topics'] and sum(counts.values()) > 0
+    assert counts['/clock'] > 100 and counts['/joint_states'] > 100
+    return set(counts)
 
 
 def test_sigint_mid_run_shuts_down_cleanly(launch, tmp_path):
@@ -139,7 +159,7 @@ def test_sigint_mid_run_shuts_down_cleanly(launch, tmp_path):
     mode = 'collaborative' if HAVE_AUTOMATION else 'idle'
     out = tmp_path / 'sigint'
     la = launch('--mode', mode, '--duration', '600', '--rtf', '1', '--output', str(out),
-                '--no-plots')
+                '--no-plots', '--record')
     la.wait_for_line(r'\[launch\] (collaborative job started|graph idle) at sim t=')
     la.proc.send_signal(signal.SIGINT)
     assert la.wait(timeout=60) == 130, la.output
@@ -156,6 +176,7 @@ def test_sigint_mid_run_shuts_down_cleanly(launch, tmp_path):
     assert_complete_csv(out / 'events.csv', min_rows=0)
     assert 'did not stop on SIGINT' not in la.output
     assert_children_gone(out)
+    assert_complete_mcap(out, summary)  # closed with its footer on the way out
 
 
 def test_a_dead_node_ends_the_run_with_its_name(launch, tmp_path):
@@ -174,3 +195,27 @@ def test_a_dead_node_ends_the_run_with_its_name(launch, tmp_path):
     assert summary['nodes']['collision_monitor']['exit_code'] == -9
     assert_complete_csv(out / 'timeseries.csv', min_rows=1)
     assert_children_gone(out)
+
+
+def test_viewer_flag_adds_the_viewer_stage_last(monkeypatch):
+    import socket
+    from scara_collab.run import launcher
+    names = [s.name for s in launcher.stages(launcher.parse_args([]), True)]
+    assert 'cell_viewer' not in names
+    with socket.socket() as probe:
+        probe.bind(('', 0))
+        port = probe.getsockname()[1]  # free once closed
+    last = launcher.stages(launcher.parse_args(['--viewer', str(port)]), True)[-1]
+    assert last.name == 'cell_viewer' and last.params['port'] == str(port)
+    assert f'http://localhost:{port}' in last.ready
+    monkeypatch.setattr(launcher, 'port_free', lambda port: True)
+    assert launcher.parse_args(['--viewer']).viewer == launcher.VIEWER_PORT == 8080
+    monkeypatch.undo()
+    with socket.socket() as busy:  # a port in use is refused before anything starts
+        busy.bind(('', 0))
+        busy.listen()
+        with pytest.raises(SystemExit) as exc:
+            launcher.parse_args(['--viewer', str(busy.getsockname()[1])])
+    assert exc.value.code == 2
+    with pytest.raises(SystemExit):
+        launcher.parse_args(['--viewer', '0'])

@@ -175,6 +175,23 @@ def test_automation_stats_are_preferred(make_recorder, cell):
     json.loads((rec.directory / 'summary.json').read_text())
 
 
+def test_mirrored_summary_prefers_the_jobs_in_step_mirror_error(make_recorder, cell):
+    rec = make_recorder('mirrored')
+    q = np.array([0.3, 1.0, 0.1])
+    rec.on_joint_state(state_msg(cell, 1.0, q, mirror_joints(q)))
+    rec.on_joint_state(state_msg(cell, 1.01, q, mirror_joints(q + 0.2)))  # one arm parks
+    rec.on_stats(conv.status('automation_manager', 'OK', 'running', {
+        'mode': 'mirrored', 'sorted': 2, 'missed': 0, 'mirror_error_max_m': 0.0009,
+        'running': 'true'}))
+    summary = rec.finish('duration reached', False, plots=False)
+    assert summary['mirror_error_max_m'] == pytest.approx(0.0009)
+    assert summary['mirror_error_source'] == 'automation_manager, in-step moves'
+    assert summary['mirror_error_whole_run_max_m'] > 0.1
+    assert summary['mirror_error_whole_run_time'] == pytest.approx(1.01)
+    text = report.format_report(summary)
+    assert 'max 0.90 mm over the moves the arms ran in step' in text
+
+
 def test_interrupted_recording_keeps_complete_files(make_recorder, cell):
     rec = make_recorder('collaborative', batch=10)
     q = random_joints(cell, 37, seed=5)

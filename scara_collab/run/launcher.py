@@ -12,14 +12,20 @@ replication_manager    service ``/replication_manager/enable`` available
 collision_monitor      service ``/collision_monitor/clear`` available
 automation_manager     service ``/automation_manager/start`` available; then ``start`` is
                        called (not in ``--mode idle``)
+cell_viewer            ``--viewer [PORT]`` only: node ``cell_viewer`` subscribed to
+                       ``/joint_states`` and http://localhost:PORT answering (the URL is
+                       printed; a port in use is refused at the command line)
 =====================  ==================================================================
 
 Every wait has a timeout that ends the launch with an error naming the stage, and a node
 process that dies ends it at once (its name, exit code and the tail of its log are printed).
 
 The bridge is the clock and steps from the moment it starts. So that the launch does not burn
-sim time (and items) at full speed, the bridge starts at ``--launch-rtf`` (default 1.0) and is
-set to ``--rtf`` (its dynamic parameter ``real_time_factor``) when the job starts. The bridge
+sim time at full speed, the bridge starts at ``--launch-rtf`` (default 1.0) and is set to
+``--rtf`` (its dynamic parameter ``real_time_factor``) when the job starts; the belt feeds
+items from then on too (``feed_interval`` is 0 until the job starts). The nodes run in
+lockstep with the bridge (:mod:`scara_collab.nodes.lockstep`), so the job does not depend on
+how fast the machine is. The bridge
 picks its tick at start-up (2 ms when throttled) and steps ``step_chunk`` per tick, so when it
 will be released to more than 4x (or unthrottled) the launcher also passes ``step_chunk``
 0.02 s, which allows up to 10x real time (``--step-chunk`` to change it; ``--launch-rtf 0``
@@ -31,6 +37,10 @@ process dies: the bridge is slowed back to the launch pace, the job is stopped
 starting), what remains after a grace period is killed, and the run files are written
 (:mod:`scara_collab.run.recorder`). Exit status: 0 clean run, 1 a node died / was not ready /
 refused to start, 2 bad arguments, 130 SIGINT, 143 SIGTERM.
+
+``--record`` also writes the run's topics to ``run.mcap`` from the launcher's own process
+(:mod:`scara_collab.run.mcap_log`, closed with the other run files); ``--animation`` renders
+``run.gif`` once the run's files are written (:mod:`scara_collab.run.animation`).
 """
 import argparse
 from dataclasses import dataclass, field
@@ -40,11 +50,13 @@ import json
 import os
 from pathlib import Path
 import signal
+import socket
 import subprocess
 import sys
 import time
 import traceback
 from typing import Callable, Dict, IO, List, Optional, Sequence, Tuple
+import urllib.request
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -64,6 +76,7 @@ AUTOMATION_MODULE = 'scara_collab.nodes.automation_manager'
 EXIT_FAILED = 1
 EXIT_USAGE = 2
 FAST_CHUNK = 0.02  # s: with the bridge's 2 ms tick, up to 10x real time
+VIEWER_PORT = 8080  # --viewer without a port
 
 
 @dataclass
@@ -119,6 +132,27 @@ def describe_exit(code: int) -> str:
     return f'code {code}'
 
 
+def port_free(port: int) -> bool:
+    """Return ``True`` if a TCP server could listen on ``port`` (all interfaces) now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as the viewer's server
+        try:
+            s.bind(('', port))
+        except OSError:
+            return False
+    return True
+
+
+def http_ok(url: str, timeout: float = 0.5) -> bool:
+    """Return ``True`` if ``url`` answers HTTP 200 (directly: no proxy from the environment)."""
+    opener = urllib.request.build_opener(urllib.request.ProxyHandler({}))
+    try:
+        with opener.open(url, timeout=timeout) as res:
+            return res.status == 200
+    except (OSError, ValueError):
+        return False
+
+
 def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     """Command line of ``scripts/launch_cell.py``."""
     profiles = sorted(load_config('cell')['profiles'])
@@ -144,6 +178,9 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    f'{FAST_CHUNK} when the bridge is released to more than 4x, else the '
                    'bridge default)')
     p.add_argument('--gui', action='store_true', help='PyBullet GUI (bridge gui:=true)')
+    p.add_argument('--viewer', type=int, nargs='?', const=VIEWER_PORT, default=None,
+                   metavar='PORT', help='also start the live 3D view (cell_viewer) on '
+                   f'http://localhost:PORT (default port: {VIEWER_PORT})')
     p.add_argument('--output', type=Path, default=None, metavar='DIR',
                    help='run folder (default: runs/<timestamp>_<mode>)')
     p.add_argument('--profile', choices=profiles, default=None,
@@ -158,6 +195,11 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    help='end the run if sim time stands still this many wall seconds '
                    '(default: %(default)s)')
     p.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
+    p.add_argument('--record', action='store_true',
+                   help='also record the topics of the run to <run folder>/run.mcap '
+                   '(ros2 bag, Foxglove)')
+    p.add_argument('--animation', action='store_true',
+                   help='render <run folder>/run.gif after the run (items too with --record)')
     args = p.parse_args(argv)
     if not args.duration > 0:
         p.error('--duration must be > 0')
@@ -167,6 +209,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error('--launch-rtf must be >= 0')
     if args.step_chunk is not None and not args.step_chunk > 0:
         p.error('--step-chunk must be > 0')
+    if args.viewer is not None and not 0 < args.viewer < 65536:
+        p.error('--viewer PORT must be in 1..65535')
+    if args.viewer is not None and not port_free(args.viewer):
+        p.error(f'--viewer: port {args.viewer} is in use (another viewer?); pick another PORT')
     if args.rtf is None:
         args.rtf = float(load_config('simulation')['real_time_factor'])
     if args.launch_rtf == 0 or (args.rtf != 0 and args.rtf <= args.launch_rtf):
@@ -189,8 +235,8 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
         bridge['item_seed'] = str(args.seed)
     if args.mode == 'mirrored':  # items must arrive in mirror pairs
         bridge['feed_pattern'] = 'mirror_pairs'
-    if args.mode == 'idle':  # no job: no items to go missed
-        bridge['feed_interval'] = '0.0'
+    # the belt feeds from when the job starts (Launcher.start_job), not while the graph starts
+    bridge['feed_interval'] = '0.0'
     out = [
         Stage('pybullet_bridge', 'scara_collab.nodes.pybullet_bridge:main',
               ('simulation', 'controllers'), '/clock messages', bridge),
@@ -209,6 +255,11 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
             auto['mode'] = args.mode
         out.append(Stage('automation_manager', f'{AUTOMATION_MODULE}:main', ('automation',),
                          'service /automation_manager/start', auto))
+    port = getattr(args, 'viewer', None)
+    if port is not None:
+        out.append(Stage('cell_viewer', 'scara_collab.nodes.cell_viewer:main', (),
+                         f'node cell_viewer subscribed to /joint_states, live 3D view on '
+                         f'http://localhost:{port}', dict(common, port=str(port))))
     return out
 
 
@@ -282,6 +333,12 @@ class Launcher:
         self.recorder = RunRecorder(output, args.mode, profile=args.profile,
                                     context=self.context)
         self.node = self.recorder
+        if getattr(args, 'record', False):  # raw subscriptions on the recorder; finish() closes
+            from scara_collab.run.mcap_log import MCAP_FILE, McapLog
+            mcap = McapLog(self.recorder, output / MCAP_FILE,
+                           robots=[a.name for a in self.recorder.cell.arms])
+            self.recorder.sinks.append(mcap)
+            console.say(f'[launch] recording {len(mcap.topics)} topics to {mcap.path}')
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.recorder)
         self._clients: Dict[str, object] = {}
@@ -379,6 +436,9 @@ class Launcher:
             return self._service_ready(Trigger, '/collision_monitor/clear')
         if name == 'automation_manager':
             return self._service_ready(Trigger, '/automation_manager/start')
+        if name == 'cell_viewer':  # on the graph, and its page answers
+            url = f'http://127.0.0.1:{stage.params["port"]}/'
+            return lambda: self._subscribed(name, '/joint_states') and http_ok(url)
         raise ValueError(f'no readiness check for {name}')
 
     # --- processes -------------------------------------------------------------------------
@@ -422,9 +482,9 @@ class Launcher:
         (self.output / 'launch.json').write_text(json.dumps(info, indent=2) + '\n',
                                                  encoding='utf-8')
 
-    def set_bridge_rtf(self, value: float, timeout: Optional[float] = None,
-                       supervise: bool = True) -> None:
-        """Set the bridge's ``real_time_factor`` (its parameter services; waits for them)."""
+    def set_bridge(self, timeout: Optional[float] = None, supervise: bool = True,
+                   **values: float) -> None:
+        """Set the bridge's dynamic parameters (``real_time_factor``, ``feed_interval``)."""
         timeout = timeout or self.args.ready_timeout
         if self._bridge_params is None:
             self._bridge_params = AsyncParameterClient(self.node, 'pybullet_bridge')
@@ -433,13 +493,15 @@ class Launcher:
                         lambda: f'pybullet_bridge parameter services not available after '
                         f'{timeout:g} s', supervise)
         future = client.set_parameters(
-            [Parameter('real_time_factor', Parameter.Type.DOUBLE, float(value))])
+            [Parameter(k, Parameter.Type.DOUBLE, float(v)) for k, v in values.items()])
         self.wait_until(future.done, timeout, lambda: 'pybullet_bridge did not answer '
                         f'set_parameters within {timeout:g} s', supervise)
         results = future.result().results if future.result() is not None else []
-        if not results or not results[0].successful:
-            reason = results[0].reason if results else 'no result'
-            raise RunEnd(f'pybullet_bridge refused real_time_factor {value}: {reason}')
+        for (key, value), res in zip(values.items(), results):
+            if not res.successful:
+                raise RunEnd(f'pybullet_bridge refused {key} {value}: {res.reason}')
+        if len(results) != len(values):
+            raise RunEnd(f'pybullet_bridge did not set {sorted(values)}')
 
     def _duplicates(self, name: str) -> int:
         return sum(1 for n, ns in self.node.get_node_names_and_namespaces()
@@ -482,9 +544,14 @@ class Launcher:
                 raise RunEnd(f'automation_manager refused to start: {res.message}')
             self.job_started = True
         t0 = self.recorder.start_job()
+        release = {}
+        if self.args.mode != 'idle':  # the belt starts feeding now
+            release['feed_interval'] = float(load_config('simulation')['feed_interval'])
         if self.launch_rtf != self.rtf:
-            self.set_bridge_rtf(self.rtf)
-            self.rtf_released = True
+            release['real_time_factor'] = self.rtf
+        if release:
+            self.set_bridge(**release)
+            self.rtf_released = 'real_time_factor' in release
         self.recorder.extra['launch_wall_seconds'] = time.monotonic() - self.t_launch
         job = f'{self.args.mode} job started' if self.job_started else 'graph idle'
         self.console.say(f'[launch] {job} at sim t={t0:.2f} s after '
@@ -523,7 +590,8 @@ class Launcher:
             bridge = self.children[0] if self.children else None
             if bridge is not None and bridge.proc.poll() is None:
                 try:
-                    self.set_bridge_rtf(self.launch_rtf, timeout=2.0, supervise=False)
+                    self.set_bridge(timeout=2.0, supervise=False,
+                                    real_time_factor=self.launch_rtf)
                 except RunEnd:
                     pass
 
@@ -649,6 +717,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             text = format_report(summary)
             (output / 'report.txt').write_text(text + '\n', encoding='utf-8')
             console.say(text, error=True)
+            if getattr(args, 'animation', False):  # after the run: never slows it down
+                from scara_collab.run.animation import render_after_run
+                signals = len(launcher.signals)  # another Ctrl-C stops the rendering
+                render_after_run(output, console.say, lambda: len(launcher.signals) > signals)
         finally:
             launcher.close()
             console.close()

@@ -11,6 +11,10 @@ The launcher tells the recorder when the job window starts (:meth:`RunRecorder.s
 and ends (:meth:`RunRecorder.freeze`); ``sim_seconds``, ``wall_seconds``, the real-time factor
 and the item counts of the summary refer to that window. The handlers ``on_*`` are public so a
 test can feed them messages directly.
+
+Other recordings that live on this node (the launcher's ``--record``:
+:class:`scara_collab.run.mcap_log.McapLog`) go into :attr:`RunRecorder.sinks`; they record
+until the end of the run, past the window, and :meth:`RunRecorder.finish` closes them first.
 """
 import math
 from pathlib import Path
@@ -75,6 +79,9 @@ class RunRecorder(Node):
         self.first_state_wall: Optional[float] = None
         self.summary: Optional[Dict] = None
         self.plots: List[Path] = []
+        # more recordings on this node (e.g. mcap_log.McapLog): closed by finish(), first;
+        # close() returns a dict merged into the summary
+        self.sinks: List = []
         self._index: Dict[tuple, np.ndarray] = {}
         self._names = list(self.cell.leader.joint_names) + list(self.cell.follower.joint_names)
         self.create_subscription(JointState, '/joint_states', self.on_joint_state, STATE_QOS)
@@ -191,6 +198,10 @@ class RunRecorder(Node):
         sim_seconds = t_end - t_start
         wall = (wall_end - wall_start) if wall_start is not None else 0.0
         log = self.log
+        mirrored = self.mode == 'mirrored' and log.rows > 0
+        whole = log.max_mirror_error if mirrored else None
+        in_step = self.stats.get('mirror_error_max_m') if mirrored else None
+        in_step = in_step if isinstance(in_step, float) else None
         summary: Dict[str, object] = {
             'mode': self.mode,
             'profile': self.profile or self.cell.profile,
@@ -203,9 +214,13 @@ class RunRecorder(Node):
             'min_separation_time': log.min_distance_time,
             'safety_margin_m': self.cell.safety_margin,
             'margin_ok': bool(log.min_distance >= self.cell.safety_margin) if log.rows else None,
-            'mirror_error_max_m': log.max_mirror_error if (
-                self.mode == 'mirrored' and log.rows) else None,
-            'mirror_error_max_time': log.max_mirror_error_time if self.mode == 'mirrored'
+            # the job's figure (moves both arms run in step) when it reports one; the whole
+            # series also holds the moments the arms are not meant to mirror (one parks)
+            'mirror_error_max_m': in_step if in_step is not None else whole,
+            'mirror_error_source': None if whole is None else (
+                'automation_manager, in-step moves' if in_step is not None else 'whole run'),
+            'mirror_error_whole_run_max_m': whole,
+            'mirror_error_whole_run_time': log.max_mirror_error_time if whole is not None
             else None,
             'emergency_stops': len(self.estops),
             'emergency_stop_times': list(self.estops),
@@ -242,6 +257,12 @@ class RunRecorder(Node):
         if self.summary is not None:
             return self.summary
         self.freeze()
+        for sink in self.sinks:
+            try:
+                self.extra.update(sink.close() or {})
+            except Exception as exc:  # noqa: BLE001 - the CSV files and summary come first
+                self.extra.setdefault('sink_errors', []).append(f'{type(exc).__name__}: {exc}')
+                self.get_logger().error(f'recording not closed cleanly: {exc}')
         summary = self.build_summary(exit_reason, interrupted)
         self.log.close()
         report.write_summary(self.directory, summary)  # first, so it exists whatever happens

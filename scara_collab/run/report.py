@@ -265,6 +265,14 @@ def format_progress(p: Dict, duration: float) -> str:
             f'{_num(sep, ".3f", "-")} m | RTF {format_rtf(p.get("rtf"))}')
 
 
+def _mirror_note(s: Dict) -> str:
+    whole = s.get('mirror_error_whole_run_max_m')
+    if s.get('mirror_error_source') != 'automation_manager, in-step moves' or whole is None:
+        return ''
+    return (f' over the moves the arms ran in step; {whole * 1e3:.2f} mm over the whole run '
+            f'(t={_num(s.get("mirror_error_whole_run_time"), ".1f")} s, arms not in step)')
+
+
 def format_report(s: Dict) -> str:
     """Return the final report of a run (several lines) from its summary."""
     margin = s.get('safety_margin_m') or 0.0
@@ -285,7 +293,7 @@ def format_report(s: Dict) -> str:
         f'  min arm sep.   {_num(sep, ".3f", "n/a (no joint states)")}'
         + ('' if sep is None else ' m') + verdict,
         '  mirror error   ' + ('n/a (mirrored mode only)' if mirror is None
-                               else f'max {mirror * 1e3:.2f} mm'),
+                               else f'max {mirror * 1e3:.2f} mm' + _mirror_note(s)),
     ]
     missing = s.get('joint_states_missing') or 0
     if missing:

@@ -1,0 +1,412 @@
+"""Record a run's ROS topics into an MCAP file that ``ros2 bag`` and Foxglove open.
+
+:class:`McapLog` subscribes the topics raw (``raw=True``: the CDR bytes as they came off the
+wire, never deserialized or re-encoded) on a node of its own that no executor spins; a
+wall-clock timer on the node it is given (the launcher's run recorder) drains their queues
+every ``period`` and writes every message, in receive order, into one MCAP file in the layout
+of rosbag2's MCAP storage plugin:
+
+- the ``ros2`` profile; per topic a channel with message encoding ``cdr`` and a schema named
+  by the full type (``sensor_msgs/msg/JointState``) with encoding ``ros2msg``;
+- the schema text is the type's ``.msg`` file followed by every nested type's, each after a
+  line of 80 ``=`` and ``MSG: pkg/Type`` (:func:`ros2msg_definition`, the concatenation
+  rosbag2 writes), read at run time from the message packages' ``share/<pkg>/msg`` folders;
+- ``log_time`` is the receive time in sim time (as ``ros2 bag record --use-sim-time``): if
+  the given node has ``use_sim_time`` (the run recorder) and ``/clock`` is recorded, a
+  ``/clock`` message is logged at its own time and every other message at the last tick
+  received before it (receive order from the middleware's receive timestamps), so the file
+  is consistent in itself; otherwise the wall receive time. Log times never go backwards.
+  ``publish_time`` is the same (there is no sim-time send stamp); ``sequence`` counts the
+  messages of each channel.
+
+The channels carry no ``offered_qos_profiles`` metadata (rosbag2 reads its absence as
+"default QoS" when it plays the file back).
+
+The file is chunked (``chunk_size`` bytes of messages, zstd-compressed) and the stream is
+flushed at least every ``flush_period`` wall seconds, so a run that is killed without
+:meth:`McapLog.close` loses at most the last chunk; such a file has no footer but
+:func:`iter_messages` (and ``mcap recover``) still read it. :meth:`McapLog.close` (the run
+recorder calls it when the run ends) writes the summary and the footer.
+
+Example::
+
+    >>> log = McapLog(node, 'runs/x/run.mcap', run_topics(('scara_left', 'scara_right')))
+    >>> ...                                   # spin the node: its timer drains the topics
+    >>> log.close()                           # {'mcap': {'file': ..., 'messages': ...}}
+    >>> for topic, type_name, log_time, data in iter_messages('runs/x/run.mcap'): ...
+"""
+from functools import lru_cache
+import importlib
+import importlib.util
+import os
+from pathlib import Path
+import re
+import struct
+import sys
+import time
+from typing import Dict, Iterable, Iterator, List, NamedTuple, Optional, Sequence, Tuple, Union
+
+from mcap.exceptions import McapError
+from mcap.reader import NonSeekingReader
+from mcap.writer import CompressionType, Writer
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+MCAP_FILE = 'run.mcap'
+CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
+PROFILE = 'ros2'
+SCHEMA_ENCODING = 'ros2msg'
+MESSAGE_ENCODING = 'cdr'
+SEPARATOR = '=' * 80
+PRIMITIVES = frozenset((
+    'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16', 'int32',
+    'uint32', 'int64', 'uint64', 'string', 'wstring'))
+LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                     reliability=ReliabilityPolicy.RELIABLE)
+STREAM = QoSProfile(depth=200)  # a burst while the launcher is busy
+_TYPE = re.compile(r'^([A-Za-z][A-Za-z0-9_]*)/(?:msg/)?([A-Za-z][A-Za-z0-9_]*)$')
+_FIELD = re.compile(r'^([A-Za-z][A-Za-z0-9_/]*)')
+
+
+class Topic(NamedTuple):
+    """One recorded topic: absolute name, full type name, and whether it is latched."""
+
+    name: str
+    type: str
+    latched: bool = False
+
+
+def run_topics(robots: Sequence[str]) -> List[Topic]:
+    """Return the topics of a run (SPEC section 3 and what the nodes publish besides).
+
+    :param robots: the robot namespaces, e.g. ``('scara_left', 'scara_right')``.
+    :return: the cell-wide topics, then five per robot (target, joint_trajectory,
+        planned_path, planner_status, execution_status).
+    """
+    status = 'diagnostic_msgs/msg/DiagnosticStatus'
+    out = [
+        Topic('/clock', CLOCK_TYPE),
+        Topic('/joint_states', 'sensor_msgs/msg/JointState'),
+        Topic('/conveyor/items', 'visualization_msgs/msg/MarkerArray'),
+        Topic('/conveyor/events', status),
+        Topic('/collab/target', 'geometry_msgs/msg/PointStamped'),
+        Topic('/collision_monitor/min_distance', 'std_msgs/msg/Float64'),
+        Topic('/collision_monitor/status', status),
+        Topic('/collision_monitor/capsules', 'visualization_msgs/msg/MarkerArray'),
+        Topic('/replication_manager/mirror_error', 'std_msgs/msg/Float64'),
+        Topic('/replication_manager/status', status),
+        Topic('/automation_manager/stats', status),
+        Topic('/emergency_stop', 'std_msgs/msg/Bool', latched=True),
+    ]
+    for robot in robots:
+        out += [
+            Topic(f'/{robot}/target', 'geometry_msgs/msg/PointStamped'),
+            Topic(f'/{robot}/joint_trajectory', 'trajectory_msgs/msg/JointTrajectory'),
+            Topic(f'/{robot}/planned_path', 'nav_msgs/msg/Path'),
+            Topic(f'/{robot}/planner_status', status),
+            Topic(f'/{robot}/execution_status', status),
+        ]
+    return out
+
+
+# --- message definitions ---------------------------------------------------------------------
+def _split_type(type_name: str) -> Tuple[str, str]:
+    """``'sensor_msgs/msg/JointState'`` or ``'sensor_msgs/JointState'`` -> package, name."""
+    m = _TYPE.match(type_name)
+    if m is None:
+        raise ValueError(f'not a ROS 2 message type name: {type_name!r} (want pkg/msg/Type)')
+    return m.group(1), m.group(2)
+
+
+def _share_candidates(package: str) -> Iterator[Path]:
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix:
+            yield Path(prefix) / 'share' / package
+    try:  # the prefix the Python package was installed into (a venv, a colcon install)
+        spec = importlib.util.find_spec(package)
+    except (ImportError, ValueError):
+        spec = None
+    if spec is not None and spec.origin:
+        for parent in Path(spec.origin).resolve().parents:
+            yield parent / 'share' / package
+    yield Path(sys.prefix) / 'share' / package
+
+
+@lru_cache(maxsize=None)
+def msg_file(type_name: str) -> Path:
+    """Return the ``.msg`` file of a message type.
+
+    Looked for in ``<prefix>/share/<pkg>/msg/<Type>.msg`` for every prefix of
+    ``AMENT_PREFIX_PATH``, the prefixes above the installed Python package ``<pkg>`` and
+    ``sys.prefix``.
+
+    :param type_name: ``pkg/msg/Type`` or ``pkg/Type``.
+    :raises FileNotFoundError: if no prefix has it.
+    """
+    package, name = _split_type(type_name)
+    tried = []
+    for share in _share_candidates(package):
+        path = share / 'msg' / f'{name}.msg'
+        if path.is_file():
+            return path
+        tried.append(str(path))
+    raise FileNotFoundError(f'no .msg file for {type_name}; looked in: ' + ', '.join(tried))
+
+
+def msg_dependencies(text: str, package: str) -> List[str]:
+    """Return the non-primitive field types of a ``.msg`` text, sorted, as written.
+
+    A type without a package (``Point`` in ``geometry_msgs``) gets ``package``; constants
+    and comments are skipped (constants have primitive types).
+
+    :param text: the ``.msg`` file.
+    :param package: the package the file belongs to.
+    :return: e.g. ``['std_msgs/Header']`` for ``sensor_msgs/msg/JointState``.
+    """
+    deps = set()
+    for line in text.splitlines():
+        m = _FIELD.match(line.strip())
+        if m is None or len(line.strip().split()) < 2:
+            continue
+        field_type = m.group(1)
+        if field_type in PRIMITIVES:
+            continue
+        deps.add(field_type if '/' in field_type else f'{package}/{field_type}')
+    return sorted(deps)
+
+
+@lru_cache(maxsize=None)
+def ros2msg_definition(type_name: str) -> str:
+    """Return the full ``ros2msg`` schema text of a type, as rosbag2's MCAP plugin writes it.
+
+    The type's ``.msg`` text, then for every nested type not yet written (depth first, the
+    dependencies of each file in sorted order) a newline, 80 ``=``, ``MSG: pkg/Type`` and
+    that type's ``.msg`` text.
+
+    :param type_name: ``pkg/msg/Type``.
+    :raises FileNotFoundError: if a ``.msg`` file is missing.
+    """
+    seen = set()
+
+    def expand(name: str, depth: int) -> str:
+        if depth > 50:
+            raise ValueError(f'message definition of {type_name} nests deeper than 50 levels')
+        text = msg_file(name).read_text(encoding='utf-8')
+        out = text
+        for dep in msg_dependencies(text, _split_type(name)[0]):
+            if dep not in seen:
+                seen.add(dep)
+                out += f'\n{SEPARATOR}\nMSG: {dep}\n' + expand(dep, depth + 1)
+        return out
+
+    return expand(type_name, 0)
+
+
+def message_class(type_name: str):
+    """Return the Python class of a message type (``'std_msgs/msg/Bool'`` -> ``Bool``)."""
+    package, name = _split_type(type_name)
+    return getattr(importlib.import_module(f'{package}.msg'), name)
+
+
+# --- writing ---------------------------------------------------------------------------------
+def clock_nanoseconds(data: bytes) -> int:
+    """Return the time in a serialized ``rosgraph_msgs/msg/Clock``, ns (0 if unreadable).
+
+    CDR: a 4-byte encapsulation header (byte 1 is 1 for little endian), then ``int32 sec``
+    and ``uint32 nanosec``.
+    """
+    if len(data) < 12:
+        return 0
+    sec, nsec = struct.unpack_from('<iI' if data[1] & 1 else '>iI', data, 4)
+    return max(0, sec * 1_000_000_000 + nsec)
+
+
+class McapLog:
+    """Write the topics of a run into an MCAP file (see the module docstring).
+
+    :param node: the node whose executor drives the recording (a wall-clock timer on it drains
+        the subscriptions every ``period``) and whose ``use_sim_time`` selects sim log times.
+    :param path: the ``.mcap`` file (its folder is created; an existing file is replaced).
+    :param topics: what to record; default :func:`run_topics` of ``robots``.
+    :param robots: robot namespaces for the default topics.
+    :param chunk_size: bytes of messages per chunk (an unclean kill loses at most one).
+    :param compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
+    :param period: wall seconds between drains (each subscription queues ``depth`` messages:
+        200 = 2 sim s of a 100 Hz topic, enough up to 40x real time).
+    :param flush_period: wall seconds between flushes of the file stream.
+    :raises FileNotFoundError: if a message definition is missing (nothing is subscribed).
+    """
+
+    def __init__(self, node: Node, path: Union[str, Path],
+                 topics: Optional[Iterable[Topic]] = None,
+                 robots: Sequence[str] = ('scara_left', 'scara_right'),
+                 chunk_size: int = 256 * 1024, compression: str = 'zstd',
+                 period: float = 0.05, flush_period: float = 2.0):
+        self.node = node
+        self.path = Path(path)
+        self.topics = list(run_topics(robots) if topics is None else topics)
+        definitions = {t.type: ros2msg_definition(t.type) for t in self.topics}  # fail early
+        classes = {t.type: message_class(t.type) for t in self.topics}
+        compressions = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
+                        'none': CompressionType.NONE}
+        if compression not in compressions:
+            raise ValueError(f'compression must be one of {sorted(compressions)}')
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._stream = open(self.path, 'wb')
+        self._writer = Writer(self._stream, chunk_size=int(chunk_size),
+                              compression=compressions[compression])
+        self._writer.start(profile=PROFILE, library='scara_collab mcap_log')
+        schemas = {name: self._writer.register_schema(name, SCHEMA_ENCODING, text.encode())
+                   for name, text in definitions.items()}
+        self.counts: Dict[str, int] = {t.name: 0 for t in self.topics}
+        self.closed = False
+        self.last_log_time = 0
+        self.first_log_time: Optional[int] = None
+        self._flush_period = float(flush_period)
+        self._next_flush = time.monotonic() + self._flush_period
+        self._clock = node.get_clock()
+        # on sim time the recorded /clock is the clock: every message is logged at the last
+        # tick received before it (by receive order, so the file is consistent in itself)
+        self.sim_clock = any(t.name == '/clock' and t.type == CLOCK_TYPE
+                             for t in self.topics) and bool(
+            node.get_parameter('use_sim_time').value)
+        # The subscriptions live on a node of their own that no executor spins: drain() takes
+        # their queues in one go (rclpy's take_message), which costs a fifth of an executor
+        # callback per message and leaves the recorder node's wait set as it was.
+        self._reader = Node(f'{node.get_name()}_mcap_log', context=node.context,
+                            start_parameter_services=False)
+        self._subs: List[tuple] = []
+        for topic in self.topics:
+            channel = self._writer.register_channel(topic.name, MESSAGE_ENCODING,
+                                                    schemas[topic.type])
+            sub = self._reader.create_subscription(
+                classes[topic.type], topic.name, _never_called,
+                LATCHED if topic.latched else STREAM, raw=True)
+            self._subs.append((sub, channel, topic.name, topic.type == CLOCK_TYPE))
+        self._timer = node.create_timer(float(period), self.drain,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    @property
+    def messages(self) -> int:
+        """Messages written so far."""
+        return sum(self.counts.values())
+
+    def drain(self) -> int:
+        """Write every message waiting in the subscriptions, in receive order; return how many.
+
+        Log times: see the module docstring (receive order from the middleware's receive
+        timestamps; sim time from the ``/clock`` messages among them).
+        """
+        if self.closed:
+            return 0
+        batch = []
+        for k, (sub, _, _, _) in enumerate(self._subs):
+            with sub.handle:
+                while True:
+                    taken = sub.handle.take_message(sub.msg_type, True)
+                    if taken is None:
+                        break
+                    batch.append((taken[1].get('received_timestamp') or 0, k, taken[0]))
+        if not batch:
+            return 0
+        batch.sort(key=_receive_order)
+        add = self._writer.add_message
+        counts, subs = self.counts, self._subs
+        last = self.last_log_time
+        now = None if self.sim_clock else self._clock.now().nanoseconds
+        for received, k, data in batch:
+            _, channel, topic, is_clock = subs[k]
+            if self.sim_clock:
+                t = max(clock_nanoseconds(data), last) if is_clock else last
+            else:
+                t = max(received or now, last)
+            last = t
+            seq = counts[topic] = counts[topic] + 1
+            add(channel_id=channel, log_time=t, publish_time=t, data=data, sequence=seq)
+            if self.first_log_time is None:
+                self.first_log_time = t
+        self.last_log_time = last
+        if time.monotonic() >= self._next_flush:
+            self.flush()
+        return len(batch)
+
+    def flush(self) -> None:
+        """Push what the writer has handed to the file stream to the OS (not the open chunk)."""
+        self._next_flush = time.monotonic() + self._flush_period
+        if not self.closed:
+            self._stream.flush()
+
+    def close(self) -> Dict[str, object]:
+        """Drain what is still queued, then write the summary and the footer (idempotent).
+
+        :return: ``{'mcap': {'file', 'messages', 'topics', 'bytes'}}`` for the run summary.
+        """
+        if not self.closed:
+            try:
+                self.drain()
+            finally:
+                self.closed = True
+                try:
+                    self.node.destroy_timer(self._timer)
+                    self._reader.destroy_node()
+                except Exception:  # noqa: BLE001 - the context may be gone; write the file
+                    pass
+                try:
+                    self._writer.finish()
+                finally:
+                    self._stream.close()
+        return {'mcap': {'file': self.path.name, 'messages': self.messages,
+                         'topics': {k: v for k, v in self.counts.items() if v},
+                         'bytes': self.path.stat().st_size if self.path.exists() else 0}}
+
+
+def _never_called(_msg) -> None:
+    """Do nothing: the drained subscriptions' node is spun by no executor."""
+
+
+def _receive_order(entry: tuple) -> int:
+    return entry[0]
+
+
+# --- reading ---------------------------------------------------------------------------------
+class RawMessage(NamedTuple):
+    """One recorded message: topic, full type name, log time (ns), CDR bytes."""
+
+    topic: str
+    type: str
+    log_time: int
+    data: bytes
+
+
+class Reading:
+    """What :func:`iter_messages` found: ``complete`` is False for a file without a footer."""
+
+    def __init__(self):
+        self.complete = True
+        self.error = ''
+
+
+def iter_messages(path: Union[str, Path], topics: Optional[Iterable[str]] = None,
+                  reading: Optional[Reading] = None) -> Iterator[RawMessage]:
+    """Yield the messages of an MCAP file in file order (= log time order for our files).
+
+    Reads linearly, so it also reads a file that was cut short (a killed run): the messages
+    of every complete chunk are yielded and ``reading.complete`` is set to False.
+
+    :param path: the ``.mcap`` file.
+    :param topics: only these topics (default all).
+    :param reading: filled in with ``complete`` and ``error`` when the iteration ends.
+    """
+    reading = reading if reading is not None else Reading()
+    wanted = None if topics is None else set(topics)
+    with open(path, 'rb') as f:
+        reader = NonSeekingReader(f)
+        try:
+            for schema, channel, msg in reader.iter_messages(topics=wanted,
+                                                             log_time_order=False):
+                yield RawMessage(channel.topic, schema.name if schema else '', msg.log_time,
+                                 msg.data)
+        except (McapError, EOFError, ValueError, struct.error) as exc:  # cut short: keep the rest
+            reading.complete = False
+            reading.error = f'{type(exc).__name__}: {exc}'

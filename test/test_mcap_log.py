@@ -1,0 +1,243 @@
+"""MCAP recording of a run: schema texts, a short in-process run read back two ways, cut files.
+
+The run: the bridge (unthrottled, items fed) and the launcher's run recorder with a
+:class:`McapLog` attached, in one executor; the probe moves the left arm and publishes the
+three target topics. The file is read back with mcap + mcap_ros2's decoder (the ``ros2msg``
+schemas stored in it) and by deserializing the raw bytes with rclpy against the real classes.
+"""
+from pathlib import Path
+import subprocess
+import sys
+
+from geometry_msgs.msg import PointStamped
+from mcap.reader import make_reader
+from mcap.records import Schema
+from mcap_ros2.decoder import DecoderFactory
+import numpy as np
+import pytest
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message, serialize_message
+from ros_harness import Graph, params_args
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import Marker, MarkerArray
+
+from scara_collab.core.trajectory import joint_move
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.pybullet_bridge import PyBulletBridge
+from scara_collab.run.mcap_log import (
+    iter_messages, McapLog, message_class, msg_file, Reading, ros2msg_definition, run_topics,
+    SEPARATOR)
+from scara_collab.run.recorder import RunRecorder
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOTS = ('scara_left', 'scara_right')
+TARGETS = {'/scara_left/target': (3.0, -0.8, 0.4), '/scara_right/target': (3.0, 0.8, 0.4),
+           '/collab/target': (2.5, -0.6, 0.35)}
+STATE_PERIOD = 0.01  # s, the bridge's joint states (config/simulation.yaml state_rate)
+
+
+def _bridge(g: Graph, feed_interval: float = 0.0) -> PyBulletBridge:
+    return g.add(PyBulletBridge(context=g.context, cli_args=params_args(
+        'simulation', 'controllers',
+        overrides={'real_time_factor': 0.0, 'feed_interval': feed_interval})))
+
+
+def record_run(directory: Path, cell, seconds: float = 3.0) -> dict:
+    """Record a short run into ``directory`` (timeseries.csv, events.csv, run.mcap, ...).
+
+    The left arm makes a joint move; the three target topics get one message each.
+
+    :return: ``{'summary', 'targets': {topic: msg}, 'trajectory': msg, 'mcap': path}``.
+    """
+    g = Graph()
+    try:
+        bridge = _bridge(g, feed_interval=0.4)
+        rec = g.add(RunRecorder(directory, 'collaborative', cell=cell, context=g.context))
+        log = McapLog(rec, directory / 'run.mcap', robots=ROBOTS)
+        rec.sinks.append(log)
+        assert g.spin_until(lambda: rec.log.t_last is not None and rec.sim_time > 0.2, 30)
+        rec.start_job()
+        arm = cell.leader
+        q0 = bridge.sim.arm_state(arm.name)[0]
+        move = joint_move(arm, q0, q0 + np.array([0.6, -0.5, 0.15]))
+        traj = conv.trajectory_msg(arm.joint_names, move.t, move.q, move.qd, move.qdd)
+        pubs = {name: g.probe.create_publisher(PointStamped, name, 10) for name in TARGETS}
+        pubs['traj'] = g.probe.create_publisher(JointTrajectory, f'/{arm.name}/joint_trajectory',
+                                                10)
+        assert g.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs.values()))
+        pubs.pop('traj').publish(traj)
+        targets = {}
+        for name, xyz in TARGETS.items():
+            targets[name] = conv.make_point_stamped(xyz, 'world', rec.sim_time + 0.5)
+            pubs[name].publish(targets[name])
+        end = rec.job_start + seconds
+        assert g.spin_until(lambda: rec.sim_time > end and all(
+            log.counts[n] for n in TARGETS), timeout=40)
+        summary = rec.finish('test', False, plots=False)
+        assert log.closed and summary['mcap']['file'] == 'run.mcap'
+    finally:
+        g.close()
+    return {'summary': summary, 'targets': targets, 'trajectory': traj,
+            'mcap': directory / 'run.mcap'}
+
+
+@pytest.fixture(scope='module')
+def recorded(tmp_path_factory, cell):
+    return record_run(tmp_path_factory.mktemp('mcap_run'), cell)
+
+
+def read_all(path: Path):
+    """Every message of the file, decoded by mcap_ros2: ``[(schema, channel, msg, decoded)]``."""
+    with open(path, 'rb') as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        header = reader.get_header()
+        summary = reader.get_summary()
+        out = list(reader.iter_decoded_messages(log_time_order=False))
+    return header, summary, out
+
+
+# --- schemas ---------------------------------------------------------------------------------
+def test_schema_text_is_the_main_msg_then_every_nested_type():
+    text = ros2msg_definition('geometry_msgs/msg/PointStamped')
+
+    def block(name, msg):
+        return f'\n{SEPARATOR}\nMSG: {name}\n' + msg_file(msg).read_text()
+
+    # rosbag2's order: the dependencies of each file sorted, depth first, each type once
+    expected = (msg_file('geometry_msgs/msg/PointStamped').read_text()
+                + block('geometry_msgs/Point', 'geometry_msgs/msg/Point')
+                + block('std_msgs/Header', 'std_msgs/msg/Header')
+                + block('builtin_interfaces/Time', 'builtin_interfaces/msg/Time'))
+    assert text == expected
+    assert 'std_msgs/Header header' in text and 'float64 x' in text
+    path = ros2msg_definition('nav_msgs/msg/Path')
+    names = [ln[5:] for ln in path.splitlines() if ln.startswith('MSG: ')]
+    assert names == ['geometry_msgs/PoseStamped', 'geometry_msgs/Pose', 'geometry_msgs/Point',
+                     'geometry_msgs/Quaternion', 'std_msgs/Header', 'builtin_interfaces/Time']
+    with pytest.raises(FileNotFoundError, match='NoSuchType'):
+        ros2msg_definition('std_msgs/msg/NoSuchType')
+
+
+@pytest.mark.parametrize('topic', run_topics(ROBOTS), ids=lambda t: t.name)
+def test_every_schema_parses_with_mcap_ros2_and_decodes_real_bytes(topic):
+    schema = Schema(id=1, name=topic.type, encoding='ros2msg',
+                    data=ros2msg_definition(topic.type).encode())
+    decode = DecoderFactory().decoder_for('cdr', schema)
+    assert decode is not None
+    msg = message_class(topic.type)()
+    decoded = decode(serialize_message(msg))  # a default message, through the stored schema
+    assert list(decoded.__slots__) == list(msg.get_fields_and_field_types())
+
+
+# --- a recorded run --------------------------------------------------------------------------
+def test_the_recorded_run_reads_back_with_types_and_sim_timestamps(recorded):
+    header, summary, messages = read_all(recorded['mcap'])
+    assert header.profile == 'ros2'
+    assert summary is not None and summary.statistics.message_count == len(messages)
+    assert len(messages) == recorded['summary']['mcap']['messages']
+    types = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    assert types['/clock'] == 'rosgraph_msgs/msg/Clock'
+    assert types['/joint_states'] == 'sensor_msgs/msg/JointState'
+    assert types['/conveyor/items'] == 'visualization_msgs/msg/MarkerArray'
+    for name in TARGETS:
+        assert types[name] == 'geometry_msgs/msg/PointStamped'
+    assert types['/scara_left/joint_trajectory'] == 'trajectory_msgs/msg/JointTrajectory'
+    assert types['/scara_left/planned_path'] == 'nav_msgs/msg/Path'
+    assert all(c.message_encoding == 'cdr' for c in summary.channels.values())
+    assert all(s.encoding == 'ros2msg' for s in summary.schemas.values())
+
+    log_times = np.array([m.log_time for _, _, m, _ in messages])
+    assert np.all(np.diff(log_times) >= 0), 'log times never go backwards (file order)'
+    by_topic = {}
+    for schema, channel, msg, decoded in messages:
+        by_topic.setdefault(channel.topic, []).append((msg, decoded))
+    assert {'/clock', '/joint_states', '/conveyor/items', *TARGETS} <= set(by_topic)
+
+    # /joint_states: mcap_ros2 and rclpy agree; sim stamps increase; log time = stamp
+    states = by_topic['/joint_states']
+    assert len(states) > 200
+    stamps, lags = [], []
+    for msg, decoded in states:
+        real = deserialize_message(msg.data, JointState)
+        assert list(real.name) == list(decoded.name) and len(real.name) == 6
+        np.testing.assert_array_equal(real.position, decoded.position)
+        assert (real.header.stamp.sec, real.header.stamp.nanosec) == (
+            decoded.header.stamp.sec, decoded.header.stamp.nanosec)
+        stamp = conv.to_sec(real.header.stamp)
+        stamps.append(stamp)
+        lags.append(msg.log_time * 1e-9 - stamp)
+        assert msg.publish_time == msg.log_time
+    assert np.all(np.diff(stamps) > 0)
+    lags = np.array(lags[5:])  # the first states may come before the recorder's first tick
+    print(f'\njoint_states log time - stamp: median {np.median(lags) * 1e3:.1f} ms, '
+          f'range {lags.min() * 1e3:.1f}..{lags.max() * 1e3:.1f} ms')
+    assert np.all(np.abs(lags) <= 3 * STATE_PERIOD + 1e-9), 'log time is the sim receive time'
+    assert abs(np.median(lags)) <= STATE_PERIOD + 1e-9
+
+    # /clock: the tick's own time
+    clocks = by_topic['/clock']
+    ticks = np.array([conv.to_sec(deserialize_message(m.data, Clock).clock) for m, _ in clocks])
+    assert np.all(np.diff(ticks) > 0)
+    decoded_ticks = [conv.to_sec(d.clock) for _, d in clocks]
+    np.testing.assert_array_equal(decoded_ticks, ticks)
+    clock_lag = np.array([m.log_time * 1e-9 for m, _ in clocks]) - ticks
+    assert np.all(clock_lag >= -1e-9) and np.median(clock_lag) <= 1e-9
+
+    # the targets as published (the bytes' CDR padding is arbitrary: compare the fields)
+    for name, sent in recorded['targets'].items():
+        (msg, decoded), = by_topic[name]
+        assert len(msg.data) == len(serialize_message(sent))
+        real = deserialize_message(msg.data, PointStamped)
+        assert real == sent and decoded.point.x == sent.point.x
+        assert decoded.header.frame_id == 'world'
+        assert abs(msg.log_time * 1e-9 - (conv.to_sec(sent.header.stamp) - 0.5)) < 0.1
+    (msg, _), = by_topic['/scara_left/joint_trajectory']
+    assert deserialize_message(msg.data, JointTrajectory) == recorded['trajectory']
+
+    items = [deserialize_message(m.data, MarkerArray) for m, _ in by_topic['/conveyor/items']]
+    cubes = [mk for arr in items for mk in arr.markers if mk.type == Marker.CUBE]
+    assert cubes and {mk.ns for mk in cubes} <= {'red', 'blue'}
+
+
+def test_read_mcap_script_summarises_and_dumps(recorded):
+    proc = subprocess.run([sys.executable, str(ROOT / 'scripts' / 'read_mcap.py'),
+                           str(recorded['mcap']), '--dump', '1', '--topic', '/joint_states',
+                           '--topic', '/collab/target'],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    out = proc.stdout
+    assert "profile 'ros2'" in out and 'complete' in out
+    n = recorded['summary']['mcap']['topics']['/joint_states']
+    line = next(ln for ln in out.splitlines() if ln.startswith('/joint_states '))
+    assert 'sensor_msgs/msg/JointState' in line and f' {n} ' in line
+    assert 'scara_left_joint_1' in out and 'frame_id' in out
+    assert f'x: {TARGETS["/collab/target"][0]:.9g}' in out
+
+
+def test_an_unclosed_recording_keeps_its_chunks_and_close_completes_it(tmp_path):
+    path = tmp_path / 'cut.mcap'
+    g = Graph()
+    try:
+        _bridge(g)
+        node = g.add(Node('recorder', context=g.context, parameter_overrides=[
+            Parameter('use_sim_time', Parameter.Type.BOOL, True)]))
+        log = McapLog(node, path, robots=ROBOTS, chunk_size=16 * 1024)
+        assert g.spin_until(lambda: log.messages >= 600, timeout=30)
+        log.flush()  # what a killed run leaves: the chunks so far, no summary, no footer
+        reading = Reading()
+        cut = list(iter_messages(path, reading=reading))
+        assert not reading.complete
+        assert len(cut) >= log.messages - 200  # at most the open chunk (~16 KiB) is missing
+        assert {m.topic for m in cut} >= {'/clock', '/joint_states'}
+        assert all(m.type for m in cut)
+        log.close()
+        written = log.messages
+    finally:
+        g.close()
+    reading = Reading()
+    full = list(iter_messages(path, reading=reading))
+    assert reading.complete and len(full) == written
+    assert full[:len(cut)] == cut
