@@ -1,0 +1,198 @@
+"""Mirrored moves through the ROS graph, executed in physics: mirror error and start lag.
+
+The bridge, both planners and the replication manager run in one process on one executor,
+unthrottled on sim time, the bridge's lockstep gate at its default (see
+:mod:`scara_collab.bench.job`). Targets go to ``/collab/target``: the left arm moves there,
+the right arm to the mirror image, with one common start stamp. For every move after the
+first (which only brings both arms to the first target), measured from ``/joint_states``
+(100 Hz) and the bridge's ``/<robot>/execution_status``:
+
+- mirror error: distance of the right tool from the mirror image of the left tool, max and
+  mean over the move;
+- start lag: difference of the two trajectories' start stamps (what the replication manager
+  asked), of the starts the bridge reports (what physics did, 1 ms resolution), and of the
+  measured motion onsets (first sample 0.1 mm from rest, 10 ms resolution);
+- the leader's deviation from the straight segment (in ``line`` mode).
+"""
+import time
+from typing import Dict, List, Optional, Sequence
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PointStamped
+import numpy as np
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+
+from scara_collab.bench.util import Log
+from scara_collab.core.kinematics import fk, IKError
+from scara_collab.core.mirror import mirror_point
+from scara_collab.core.model import load_cell
+from scara_collab.core.planning import plan_path
+from scara_collab.core.trajectory import segment_deviation
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.params import ros_args
+from scara_collab.nodes.planner import Planner
+from scara_collab.nodes.pybullet_bridge import PyBulletBridge
+from scara_collab.nodes.replication_manager import ReplicationManager
+from scara_collab.nodes.runner import close_graph
+
+ROBOTS = ('scara_left', 'scara_right')
+MOVE = (np.array([3.4, -1.15, 0.4]), np.array([2.2, -0.25, 0.4]))
+"""A 1.5 m move towards the belt like the seeds' "rest position to the conveyor centre", but
+ending 0.25 m short of the centre line: mirrored, the seeds' own move would put both tools on
+the same belt point, and the right arm (correctly) waits for the left instead."""
+ONSET = 1e-4  # m: a tool has started moving once it is this far from where it rested
+SETTLE = 0.3  # s of sim time observed after the later arm's move ends
+
+
+def mirrored_targets(n_moves: int, seed: int = 0) -> List[np.ndarray]:
+    """Return ``n_moves + 1`` left-arm targets: :data:`MOVE`, then random straight lines.
+
+    Random targets keep the left tool at ``y <= -0.25`` (its mirror at ``y >= 0.25``, so the
+    two arms never need to wait for each other), ``0.5 m`` or more from the previous one,
+    with a straight line from it that the planner accepts.
+    """
+    arm = load_cell().leader
+    targets = [MOVE[0], MOVE[1]]
+    rng = np.random.default_rng(seed)
+    q = plan_path(arm, plan_path(arm, np.array([0.0, np.pi / 2, 0.0]), MOVE[0],
+                                 mode='line_or_joint').q[-1], MOVE[1]).q[-1]
+    while len(targets) < n_moves + 1:
+        p = np.array([rng.uniform(1.6, 3.4), rng.uniform(-1.3, -0.25), rng.uniform(0.3, 0.5)])
+        if np.linalg.norm(p - targets[-1]) < 0.5:
+            continue
+        try:
+            q = plan_path(arm, q, p, mode='line').q[-1]
+        except IKError:
+            continue
+        targets.append(p)
+    return targets[:n_moves + 1]
+
+
+def measure(mode: str = 'line', targets: Optional[Sequence[np.ndarray]] = None,
+            timeout: float = 120.0, log: Optional[Log] = None) -> Dict[str, object]:
+    """Send ``targets`` one after another to ``/collab/target`` through a fresh graph.
+
+    :param mode: the planners' ``mode`` (``'line'`` or ``'joint'``).
+    :param targets: left-arm targets in world; the first only positions the arms (default
+        :data:`MOVE`: one measured 1.5 m move).
+    :param timeout: wall seconds to wait for any one step.
+    :return: ``{'mode', 'moves': [per move dict], 'physics_step_s', 'state_period_s',
+        summary keys (worst over the moves)}``.
+    """
+    targets = [np.asarray(p, float) for p in (targets if targets is not None else MOVE)]
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    nodes = [
+        PyBulletBridge(context=ctx, cli_args=ros_args(
+            'simulation', 'controllers', real_time_factor=0.0, feed_interval=0.0)),
+        Planner('scara_left', 'left_planner', context=ctx,
+                cli_args=ros_args('controllers', mode=mode)),
+        Planner('scara_right', 'right_planner', context=ctx,
+                cli_args=ros_args('controllers', mode=mode)),
+        ReplicationManager(context=ctx, cli_args=ros_args()),
+        Node('bench', context=ctx),
+    ]
+    bridge, left_pl, right_pl, _, probe = nodes
+    for n in nodes:
+        ex.add_node(n)
+    states: List[JointState] = []
+    trajs: Dict[str, JointTrajectory] = {}
+    starts: Dict[str, float] = {}
+    probe.create_subscription(JointState, '/joint_states', states.append, 1000)
+    for r in ROBOTS:
+        probe.create_subscription(JointTrajectory, f'/{r}/joint_trajectory',
+                                  lambda m, r=r: trajs.__setitem__(r, m), 10)
+
+        def on_status(msg: DiagnosticStatus, r=r) -> None:
+            values = conv.status_values(msg)
+            if 'start' in values:
+                starts[r] = float(values['start'])
+        probe.create_subscription(DiagnosticStatus, f'/{r}/execution_status', on_status, 100)
+
+    def spin_until(pred, what: str) -> None:
+        end = time.monotonic() + timeout
+        while not pred() and time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.005)
+        if not pred():
+            raise RuntimeError(f'mirrored moves: timed out waiting for {what}')
+
+    try:
+        cell = bridge.cell
+        left, right = cell.leader, cell.follower
+        spin_until(lambda: left_pl.q is not None and right_pl.q is not None
+                   and left_pl._now() > 0.1, 'the planners to see the arms')
+        pub = probe.create_publisher(PointStamped, '/collab/target', 10)
+        spin_until(lambda: pub.get_subscription_count() > 0, 'the replication manager')
+        moves = []
+        for i, target in enumerate(targets):
+            trajs.clear()
+            starts.clear()
+            t_send = bridge.sim.time
+            pub.publish(conv.make_point_stamped(target))
+            spin_until(lambda: len(trajs) == 2, 'both trajectories')
+            end = max(conv.to_sec(m.header.stamp) + conv.to_sec(m.points[-1].time_from_start)
+                      for m in trajs.values())
+            spin_until(lambda: bridge.sim.time > end + SETTLE, 'the end of the move')
+            if log:
+                log(f'mirrored move {i}/{len(targets) - 1} ({mode}) done at sim '
+                    f't={bridge.sim.time:.1f} s')
+            if i == 0:
+                continue
+            stamps = {r: conv.to_sec(m.header.stamp) for r, m in trajs.items()}
+            moves.append(_move_metrics(left, right, states, t_send, targets[i - 1], target,
+                                       stamps, dict(starts)))
+        period = float(np.median(np.diff([conv.to_sec(m.header.stamp) for m in states[-50:]])))
+        out: Dict[str, object] = {'mode': mode, 'moves': moves, 'physics_step_s': bridge.dt,
+                                  'state_period_s': period}
+        for key in ('mirror_error_max_m', 'start_stamp_difference_s',
+                    'bridge_start_difference_s', 'start_lag_measured_s',
+                    'leader_line_deviation_m', 'leader_end_error_m'):
+            vals = [m[key] for m in moves if m[key] is not None]
+            out[key] = max(vals) if vals else None
+        out['mirror_error_mean_m'] = float(np.mean([m['mirror_error_mean_m'] for m in moves])) \
+            if moves else None
+        return out
+    finally:
+        close_graph(ex, nodes, ctx)
+
+
+def _move_metrics(left, right, states: List[JointState], t_send: float, start: np.ndarray,
+                  goal: np.ndarray, stamps: Dict[str, float],
+                  starts: Dict[str, float]) -> Dict[str, object]:
+    """Mirror error, start lags and line deviation of one move, from the joint states."""
+    t, pl, pr = [], [], []
+    for m in states:
+        ts = conv.to_sec(m.header.stamp)
+        if ts >= t_send:
+            t.append(ts)
+            pl.append(conv.joint_state_arrays(m, left.joint_names)[0])
+            pr.append(conv.joint_state_arrays(m, right.joint_names)[0])
+    t = np.array(t)
+    pl, pr = fk(left, np.array(pl)), fk(right, np.array(pr))
+    err = np.linalg.norm(pr - mirror_point(left, right, pl), axis=1)
+
+    def onset(p):
+        moved = np.linalg.norm(p - p[0], axis=1) > ONSET
+        return float(t[np.argmax(moved)]) if moved.any() else None
+
+    on_l, on_r = onset(pl), onset(pr)
+    bridge_diff = abs(starts[ROBOTS[0]] - starts[ROBOTS[1]]) \
+        if all(r in starts for r in ROBOTS) else None
+    return {
+        'start': start.tolist(), 'goal': goal.tolist(),
+        'length_m': float(np.linalg.norm(goal - start)),
+        'duration_s': float(t[-1] - t[0]),
+        'mirror_error_max_m': float(err.max()),
+        'mirror_error_mean_m': float(err.mean()),
+        'start_stamp_difference_s': abs(stamps[ROBOTS[0]] - stamps[ROBOTS[1]]),
+        'bridge_start_difference_s': bridge_diff,
+        'start_lag_measured_s': None if on_l is None or on_r is None else abs(on_l - on_r),
+        'leader_line_deviation_m': float(segment_deviation(pl, start, goal).max()),
+        'leader_end_error_m': float(np.linalg.norm(pl[-1] - goal)),
+        'series': {'t': t - t[0], 'mirror_error': err},
+    }

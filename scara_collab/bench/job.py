@@ -1,0 +1,136 @@
+"""The sorting job, measured: in one process (:func:`run_job`) or through the launcher.
+
+:func:`run_job` builds the whole graph (bridge, both planners, replication manager, collision
+monitor, automation manager) in ONE process on one executor, unthrottled: sim time cannot
+run ahead of the planners and the automation manager while they compute, so the figures are
+the job's own, free of the cross-process latency the launcher's separate processes add. The
+bridge's lockstep gate stays on (its default window): even in one process, messages travel
+through DDS asynchronously, and without the gate a loaded machine lets the bridge step on
+before they arrive, which changes what the job does (seen as late moves and, once, a margin
+breach). The wall time it takes gives the real-time factor of the graph in one process.
+
+:func:`run_launcher` runs ``scara_collab.run.launcher`` (what ``scripts/launch_cell.py`` and
+the demo run: one process per node) unthrottled and reads the run's ``summary.json``: the
+real-time factor of the whole graph as separate processes.
+"""
+import json
+from pathlib import Path
+import signal
+import subprocess
+import sys
+import time
+from typing import Dict, Optional
+
+import rclpy
+
+from scara_collab.bench.util import Log
+from scara_collab.core.config import load_config
+from scara_collab.nodes.automation_manager import AutomationManager
+from scara_collab.nodes.collision_monitor import CollisionMonitor
+from scara_collab.nodes.params import ros_args
+from scara_collab.nodes.planner import Planner
+from scara_collab.nodes.pybullet_bridge import PyBulletBridge
+from scara_collab.nodes.replication_manager import ReplicationManager
+from scara_collab.nodes.runner import close_graph, make_executor
+
+MODES = ('single', 'collaborative', 'mirrored')
+
+
+def default_feed() -> float:
+    """Seconds between items of ``simulation.yaml`` (the feed every mode uses)."""
+    return float(load_config('simulation')['feed_interval'])
+
+
+def run_job(mode: str, duration: float, feed: Optional[float] = None,
+            seed: Optional[int] = None, log: Optional[Log] = None,
+            report_every: float = 10.0) -> Dict[str, object]:
+    """Run one mode for ``duration`` sim seconds in one process; return the job's stats.
+
+    :param mode: ``'single'``, ``'collaborative'`` or ``'mirrored'``.
+    :param feed: sim seconds between items (default: ``simulation.yaml``); mirrored mode
+        feeds mirror pairs.
+    :param seed: item feed seed (the bridge's ``item_seed``; default ``simulation.yaml``).
+    :param report_every: sim seconds between progress lines.
+    :return: the automation manager's stats (sorted, missed, dropped, wrong_bin,
+        items_per_minute, min_separation_m, mirror_error_max_m, ...) plus ``wall_seconds``,
+        ``sim_seconds``, ``real_time_factor``, ``feed_interval``, ``seed``.
+    """
+    feed = default_feed() if feed is None else float(feed)
+    seed = int(load_config('simulation')['item_seed'] if seed is None else seed)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    ex = make_executor(context=ctx)  # the executables' executor ($SCARA_COLLAB_EXECUTOR)
+    pattern = 'mirror_pairs' if mode == 'mirrored' else 'random'
+    bridge = PyBulletBridge(context=ctx, cli_args=ros_args(
+        'simulation', 'controllers', real_time_factor=0.0, feed_interval=feed,
+        feed_pattern=pattern, item_seed=seed))
+    nodes = [bridge,
+             Planner('scara_left', 'left_planner', context=ctx, cli_args=ros_args('controllers')),
+             Planner('scara_right', 'right_planner', context=ctx,
+                     cli_args=ros_args('controllers')),
+             ReplicationManager(context=ctx, cli_args=ros_args()),
+             CollisionMonitor(context=ctx, cli_args=ros_args())]
+    job = AutomationManager(context=ctx, cli_args=ros_args('automation', mode=mode,
+                                                           auto_start='true'))
+    nodes.append(job)
+    for n in nodes:
+        ex.add_node(n)
+    wall = time.monotonic()
+    next_report = report_every
+    try:
+        while bridge.sim.time < duration:
+            ex.spin_once(timeout_sec=0.01)
+            if log and bridge.sim.time >= next_report:
+                s = job.stats()
+                log(f'{mode} (seed {seed}): {bridge.sim.time:.0f}/{duration:.0f} sim s, sorted '
+                    f'{s["sorted"]}, missed {s["missed"]}, '
+                    f'{time.monotonic() - wall:.0f} s wall')
+                next_report += report_every
+        out = dict(job.stats())
+        took = time.monotonic() - wall
+        out.update(wall_seconds=took, sim_seconds=bridge.sim.time,
+                   real_time_factor=bridge.sim.time / took if took > 0 else None,
+                   feed_interval=feed, seed=seed)
+        return out
+    finally:
+        close_graph(ex, nodes, ctx)
+
+
+def run_launcher(mode: str, duration: float, output: Path, rtf: float = 0.0,
+                 seed: Optional[int] = None, timeout: float = 600.0) -> Dict[str, object]:
+    """Run the launcher (one process per node) unthrottled; return its ``summary.json``.
+
+    :param output: the run folder (created by the launcher).
+    :param rtf: the bridge's real-time factor (0 = as fast as the machine allows).
+    :param timeout: wall seconds before the launcher is stopped.
+    :return: the summary plus ``exit_code`` and ``launcher_wall_seconds`` (start-up
+        included); ``{'error': ...}`` if it did not produce a summary.
+    """
+    cmd = [sys.executable, '-c',
+           'import sys; from scara_collab.run.launcher import main; sys.exit(main(sys.argv[1:]))',
+           '--mode', mode, '--duration', f'{duration:g}', '--rtf', f'{rtf:g}', '--output',
+           str(output), '--quiet', '--no-plots']
+    if seed is not None:
+        cmd += ['--seed', str(seed)]
+    start = time.monotonic()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGINT)  # the launcher stops its nodes and writes its files
+        try:
+            stdout, stderr = proc.communicate(timeout=60.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            stdout, stderr = proc.communicate()
+        return {'error': f'the launcher did not finish within {timeout:.0f} s',
+                'exit_code': proc.returncode}
+    took = time.monotonic() - start
+    summary = Path(output) / 'summary.json'
+    if not summary.is_file():
+        tail = (stderr or stdout).strip().splitlines()[-5:]
+        return {'error': f'no summary.json (exit code {proc.returncode}): ' + ' / '.join(tail),
+                'exit_code': proc.returncode}
+    out = json.loads(summary.read_text())
+    out.update(exit_code=proc.returncode, launcher_wall_seconds=took)
+    return out

@@ -1,0 +1,138 @@
+"""Shared helpers of the benchmarks: the machine, timing, progress lines, number formats."""
+import math
+import os
+import platform
+import sys
+import time
+import timeit
+from typing import Callable, Dict, Iterable, Optional, Sequence, TextIO
+
+import numpy as np
+
+Log = Callable[[str], None]
+
+
+def cpu_name() -> str:
+    """Return the CPU model name (``/proc/cpuinfo``), or what ``platform`` knows."""
+    try:
+        with open('/proc/cpuinfo') as f:
+            for line in f:
+                if line.startswith('model name'):
+                    return line.split(':', 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def machine() -> Dict[str, object]:
+    """Describe this machine: CPU, cores, load, Python and numpy versions."""
+    try:
+        load = os.getloadavg()[0]
+    except OSError:
+        load = None
+    return {'cpu': cpu_name(), 'cores': os.cpu_count(), 'load_1min': load,
+            'python': platform.python_version(), 'numpy': np.__version__,
+            'system': f'{platform.system()} {platform.release()}'}
+
+
+def per_call(fn: Callable[[], object], number: int, repeat: int = 5) -> float:
+    """Return the median seconds per call of ``fn`` over ``repeat`` runs of ``number`` calls."""
+    return float(np.median(timeit.repeat(fn, number=number, repeat=repeat))) / number
+
+
+def stderr_log(msg: str) -> None:
+    """Print a progress message to stderr at once."""
+    print(msg, file=sys.stderr, flush=True)
+
+
+class Progress:
+    """Progress lines with the elapsed wall time: one per section, plus notes inside it.
+
+    Example::
+
+        >>> progress = Progress()
+        >>> with progress.section('payload response'):
+        ...     progress.note('0 kg, PID')
+        [    0.0 s] payload response ...
+        [    0.0 s]    0 kg, PID
+        [    1.2 s] payload response done in 1.2 s
+    """
+
+    def __init__(self, stream: Optional[TextIO] = None):
+        self.stream = stream if stream is not None else sys.stderr
+        self.start = time.monotonic()
+        self.sections: Dict[str, float] = {}
+
+    def elapsed(self) -> float:
+        """Wall seconds since this object was made."""
+        return time.monotonic() - self.start
+
+    def _line(self, text: str) -> None:
+        print(f'[{self.elapsed():7.1f} s] {text}', file=self.stream, flush=True)
+
+    def note(self, text: str) -> None:
+        """Print one indented line (progress inside a section)."""
+        self._line(f'   {text}')
+
+    def section(self, name: str) -> '_Section':
+        """Return a context manager that prints the section's start and its duration."""
+        return _Section(self, name)
+
+
+class _Section:
+    def __init__(self, progress: Progress, name: str):
+        self.progress, self.name = progress, name
+
+    def __enter__(self) -> Progress:
+        self.t0 = time.monotonic()
+        self.progress._line(f'{self.name} ...')
+        return self.progress
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        took = time.monotonic() - self.t0
+        self.progress.sections[self.name] = took
+        status = 'done' if exc_type is None else f'FAILED ({exc_type.__name__}: {exc})'
+        self.progress._line(f'{self.name} {status} in {took:.1f} s')
+        return False
+
+
+def fmt_seconds(seconds: Optional[float], digits: int = 3) -> str:
+    """Format a duration with a readable unit: ``'3.52 µs'``, ``'14.7 ms'``, ``'0.838 s'``."""
+    if seconds is None or not math.isfinite(seconds):
+        return 'n/a'
+    for unit, scale in (('s', 1.0), ('ms', 1e-3), ('µs', 1e-6), ('ns', 1e-9)):
+        if abs(seconds) >= scale or unit == 'ns':
+            return f'{seconds / scale:.{digits}g} {unit}'
+    return f'{seconds:g} s'
+
+
+def fmt_rate(per_second: float) -> str:
+    """Format a throughput: ``'6.3 M/s'``, ``'850 k/s'``."""
+    if per_second >= 1e6:
+        return f'{per_second / 1e6:.3g} M/s'
+    if per_second >= 1e3:
+        return f'{per_second / 1e3:.3g} k/s'
+    return f'{per_second:.3g} /s'
+
+
+def spread(values: Iterable[float]) -> Dict[str, float]:
+    """Return n, mean, sample standard deviation, min and max of the finite values."""
+    x = np.array([v for v in values if v is not None and math.isfinite(v)], dtype=float)
+    if x.size == 0:
+        return {'n': 0, 'mean': float('nan'), 'std': float('nan'), 'min': float('nan'),
+                'max': float('nan')}
+    return {'n': int(x.size), 'mean': float(x.mean()),
+            'std': float(x.std(ddof=1)) if x.size > 1 else 0.0,
+            'min': float(x.min()), 'max': float(x.max())}
+
+
+def md_table(head: Sequence[str], rows: Iterable[Sequence[object]],
+             align: Optional[str] = None) -> str:
+    """Return a Markdown table; ``align`` is one of ``l r c`` per column (default left)."""
+    align = align or 'l' * len(head)
+    marks = {'l': '---', 'r': '---:', 'c': ':---:'}
+    lines = ['| ' + ' | '.join(head) + ' |',
+             '|' + '|'.join(marks[a] for a in align) + '|']
+    for row in rows:
+        lines.append('| ' + ' | '.join(str(c) for c in row) + ' |')
+    return '\n'.join(lines)

@@ -1,0 +1,121 @@
+"""The one-command benchmark runs (smoke sizes) and writes every section, figure and claim."""
+import json
+from pathlib import Path
+import re
+import subprocess
+import sys
+
+import pytest
+
+from scara_collab.bench import report, suite
+from scara_collab.bench.claims import CLAIMS
+from scara_collab.bench.figures import FIGURES
+from scara_collab.bench.util import fmt_seconds, md_table, spread
+
+ROOT = Path(__file__).resolve().parents[1]
+SEEDS = ROOT.parent / 'shared' / 'seeds'
+
+
+@pytest.fixture(scope='module')
+def smoke(tmp_path_factory):
+    out = tmp_path_factory.mktemp('bench')
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / 'scripts' / 'benchmark.py'), '--smoke', '--out', str(out),
+         '--json', str(out / 'results.json')],
+        capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, proc.stdout + proc.stderr[-3000:]
+    return out, proc, json.loads((out / 'results.json').read_text())
+
+
+def _sections(text):
+    """Return {title: body} of the ``## `` sections of a Markdown text."""
+    parts = re.split(r'^## (.+)$', text, flags=re.M)
+    return dict(zip(parts[1::2], parts[2::2]))
+
+
+def test_every_section_reports_progress_with_elapsed_time(smoke):
+    _, proc, _ = smoke
+    for title, _ in suite.SECTIONS.values():
+        assert re.search(rf'^\[\s*\d+\.\d s\] {re.escape(title)} done in \d+\.\d s$',
+                         proc.stderr, re.M), f'no progress line for {title!r}'
+
+
+def test_results_md_has_every_section_with_the_claims_beside(smoke):
+    out, _, _ = smoke
+    text = (out / 'RESULTS.md').read_text()
+    sections = _sections(text)
+    assert 'Summary' in sections
+    for title in report.TITLES.values():
+        assert title in sections, f'section {title!r} missing'
+        body = sections[title]
+        assert 'This section failed' not in body, body[:300]
+        assert "seeds' claim" in body, f'{title}: no claim column'
+        assert re.search(r'^> .+ — \*seeds/00\d', body, re.M), f'{title}: no quoted claim'
+    assert 'smoke run' in text and 'Machine:' in text
+
+
+def test_figures_exist_are_small_pngs_and_are_linked(smoke):
+    out, _, results = smoke
+    text = (out / 'RESULTS.md').read_text()
+    for key in FIGURES:
+        png = out / 'figures' / f'{key}.png'
+        assert png.is_file(), f'{png} missing ({results["figures"].get(key)})'
+        data = png.read_bytes()
+        assert data[:8] == b'\x89PNG\r\n\x1a\n'
+        assert 5_000 < len(data) < 200_000
+        assert f'](figures/{key}.png)' in text
+
+
+def test_numbers_come_from_the_run(smoke):
+    out, _, results = smoke
+    text = (out / 'RESULTS.md').read_text()
+    ik = next(r for r in results['solvers']['rows'] if r['what'] == 'IK, one target')
+    assert ik['ours'] > 0 and ik['reference'] > 0
+    assert fmt_seconds(ik['ours']) in text
+    paths = results['paths']
+    assert paths['planned']['line']['max_deviation'] < 1e-6
+    assert 0.05 < paths['planned']['joint']['max_deviation'] < 1.0
+    assert paths['executed']['line']['max_deviation'] < 5e-3
+    assert f'{paths["planned"]["joint"]["max_deviation"]:.3g} m' in text
+    jobs = results['throughput']['runs']
+    assert jobs and all(r['sim_seconds'] >= results['meta']['sizes']['job_duration']
+                        for r in jobs)
+    sync = results['sync']
+    assert sync['moves'] and sync['mirror_error_max_m'] < 0.01
+    sing = {c['name']: c for c in results['singularity']['cases']}
+    radial = sing['outer circle, radial approach to 2.5 m']
+    assert radial['pinv']['peak_speed'] > radial['dls']['peak_speed']
+    pairs = results['foresight']['pairs']
+    assert len(pairs) == results['foresight']['n_pairs']
+    for p in pairs:
+        if p['conflict']:
+            assert p['foresight_s'] >= results['foresight']['lead']
+
+
+def test_update_readme_replaces_only_the_marked_block(tmp_path, smoke):
+    _, _, results = smoke
+    readme = tmp_path / 'README.md'
+    readme.write_text(f'# x\n\nbefore\n{report.README_BEGIN}\nold\n{report.README_END}\nafter\n')
+    assert report.update_readme(readme, results)
+    text = readme.read_text()
+    assert text.startswith('# x\n\nbefore\n') and text.endswith('\nafter\n')
+    assert 'old' not in text and 'docs/RESULTS.md' in text and '| IK latency |' in text
+    unmarked = tmp_path / 'OTHER.md'
+    unmarked.write_text('no markers\n')
+    assert not report.update_readme(unmarked, results)
+    assert unmarked.read_text() == 'no markers\n'
+
+
+def test_helpers():
+    assert fmt_seconds(3.5e-6) == '3.5 µs' and fmt_seconds(0.0147) == '14.7 ms'
+    s = spread([1.0, 2.0, 3.0, None, float('nan')])
+    assert s['n'] == 3 and s['mean'] == 2.0 and s['std'] == 1.0
+    assert md_table(('a', 'b'), [(1, 2)], 'lr') == '| a | b |\n|---|---:|\n| 1 | 2 |'
+
+
+@pytest.mark.skipif(not SEEDS.is_dir(), reason='the design documents are not beside the repo')
+@pytest.mark.parametrize('key', ['ik_latency', 'solver_latency', 'mirror_error', 'lag',
+                                 'foresight', 'collision_risk', 'throughput', 'path_length'])
+def test_sentence_claims_are_verbatim_quotes(key):
+    seeds = ' '.join(p.read_text().replace('**', '') for p in SEEDS.glob('0*.txt'))
+    assert CLAIMS[key].quote in seeds
