@@ -238,7 +238,12 @@ class AutomationManager(Node):
                 self._pick_next(job, now)
             elif job.phase in ('to_item', 'to_bin', 'to_park'):
                 if any(e is None for e in job.ends.values()):
-                    if now - job.asked > self.move_timeout:
+                    # an arm with an item waits longer for the other arm to clear the way to
+                    # its bin: giving up would put the item down where it is (collaborative;
+                    # in mirrored mode both arms wait on the same move, and 3x measured worse)
+                    longer = job.phase == 'to_bin' and self.mode == 'collaborative'
+                    limit = self.move_timeout * (3.0 if longer else 1.0)
+                    if now - job.asked > limit:
                         self._give_up(job, 'no plan from the planner in time')
                 elif min(now, self.q_stamp) >= max(job.ends.values()):  # seen to have ended
                     self._arrived(job, now)
