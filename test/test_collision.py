@@ -10,7 +10,7 @@ from numpy.testing import assert_allclose
 import pytest
 
 from scara_collab.core.collision import (arm_capsules, arm_distance, arm_pair_distances,
-                                         capsule_distance, segment_distance,
+                                         capsule_distance, closest_points, segment_distance,
                                          smallest_safe_delay, trajectory_min_distance)
 from scara_collab.core.model import load_cell
 
@@ -404,3 +404,17 @@ def test_smallest_safe_delay_when_safety_is_not_monotonic(arms):
     assert trajectory_min_distance(left, t_a, q_a, right, t_b, q_b, start_b=delay)[0] >= margin
     # ... although a later delay, inside left's second visit, is unsafe again.
     assert trajectory_min_distance(left, t_a, q_a, right, t_b, q_b, start_b=7.25)[0] < margin
+
+
+def test_closest_points_are_on_the_closest_capsule_axes(cell):
+    left, right = cell.arms
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        q_l = rng.uniform(left.lower, left.upper)
+        q_r = rng.uniform(right.lower, right.upper)
+        pairs, d, p, q = closest_points(left, q_l, right, q_r)
+        assert_allclose(pairs, arm_pair_distances(left, q_l, right, q_r))
+        assert d == pytest.approx(float(arm_distance(left, q_l, right, q_r)), abs=1e-12)
+        i, j = np.unravel_index(int(np.argmin(pairs)), pairs.shape)
+        radii = arm_capsules(left, q_l)[2][i] + arm_capsules(right, q_r)[2][j]
+        assert np.linalg.norm(p - q) - radii == pytest.approx(d, abs=1e-9)

@@ -1,4 +1,6 @@
 """The bridge node in-process: clock, joint states, trajectory execution, refusals, e-stop."""
+from types import SimpleNamespace
+
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
@@ -138,3 +140,16 @@ def test_gripper_refuses_with_nothing_to_grasp_and_items_are_published(graph):
     graph.bridge.sim.spawn_item()
     classes = set(graph.bridge.cell.item_classes)
     assert graph.spin_until(lambda: any(m.ns in classes for a in items for m in a.markers))
+
+
+def test_item_markers_read_back(cell):
+    items = [SimpleNamespace(id=3, cls=cell.item_classes[0], position=np.array([1.0, 0.1, 0.3])),
+             SimpleNamespace(id=7, cls=cell.item_classes[1], position=np.array([2.0, -0.2, 0.3]))]
+    back = conv.item_positions(conv.item_markers(items, cell.item_classes, cell.item_size, 4.5))
+    assert sorted(back) == [3, 7]
+    for it in items:
+        cls, xyz, stamp = back[it.id]
+        assert cls == it.cls and stamp == pytest.approx(4.5)
+        np.testing.assert_allclose(xyz, it.position)
+    line = np.array([[1.0, 0.0, 0.4], [2.0, 0.5, 0.3]])
+    np.testing.assert_allclose(conv.path_points(conv.path_msg(line, 1.0)), line)

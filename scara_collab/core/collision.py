@@ -187,6 +187,27 @@ def arm_pair_distances(arm_a: ArmModel, q_a: ArrayLike, arm_b: ArmModel,
     return dist - radii_a[:, None] - radii_b[None, :]
 
 
+def closest_points(arm_a: ArmModel, q_a: ArrayLike, arm_b: ArmModel, q_b: ArrayLike):
+    """Return the closest capsule pair of two arms at one state each, with its axis points.
+
+    :param arm_a: the first arm.
+    :param q_a: (3,) its joint state.
+    :param arm_b: the second arm.
+    :param q_b: (3,) its joint state.
+    :return: ``(pairs, distance, p, q)``: the (3, 3) capsule surface distances of
+        :func:`arm_pair_distances`, the smallest of them (m), and the closest points (3,) of
+        that pair's axes on arm a and arm b.
+    """
+    pairs = arm_pair_distances(arm_a, q_a, arm_b, q_b)
+    i, j = np.unravel_index(int(np.argmin(pairs)), pairs.shape)
+    start_a, end_a, _ = arm_capsules(arm_a, q_a)
+    start_b, end_b, _ = arm_capsules(arm_b, q_b)
+    _, s, t = segment_distance(start_a[i], end_a[i], start_b[j], end_b[j])
+    p = start_a[i] + float(s) * (end_a[i] - start_a[i])
+    q = start_b[j] + float(t) * (end_b[j] - start_b[j])
+    return pairs, float(pairs[i, j]), p, q
+
+
 def arm_distance(arm_a: ArmModel, q_a: ArrayLike, arm_b: ArmModel, q_b: ArrayLike) -> np.ndarray:
     """Smallest capsule surface distance between two arms.
 

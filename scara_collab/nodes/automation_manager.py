@@ -25,7 +25,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool, Trigger
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 
 from scara_collab.core import sorting
 from scara_collab.core.kinematics import IKError
@@ -138,17 +138,10 @@ class AutomationManager(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_items(self, msg: MarkerArray) -> None:
-        seen = {}
         top = self.cell.belt.top_z + self.cell.item_size / 2
-        for m in msg.markers:
-            if m.action != Marker.ADD:
-                continue
-            p = m.pose.position
-            if abs(p.z - top) > 0.02:  # held, falling or in a bin: not on the belt
-                continue
-            seen[m.id] = sorting.SeenItem(m.id, m.ns, np.array([p.x, p.y, p.z]),
-                                          conv.to_sec(m.header.stamp))
-        self.items = seen
+        self.items = {i: sorting.SeenItem(i, cls, xyz, stamp)
+                      for i, (cls, xyz, stamp) in conv.item_positions(msg).items()
+                      if abs(xyz[2] - top) <= 0.02}  # not held, falling or in a bin
 
     def _on_event(self, msg: DiagnosticStatus) -> None:
         kind = msg.name

@@ -36,7 +36,7 @@ from std_msgs.msg import Bool, Float64
 import trimesh
 import viser
 from viser.extras import ViserUrdf
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 import yourdfpy
 
 from scara_collab.core import collision
@@ -92,28 +92,6 @@ def segment_pose(start: np.ndarray, end: np.ndarray) -> Tuple[np.ndarray, np.nda
     return wxyz, (start + end) / 2.0
 
 
-def closest_capsules(cell: CellModel, q_a: np.ndarray, q_b: np.ndarray):
-    """Capsule distances of the two arms and the closest pair.
-
-    :param cell: the cell (arms a = ``cell.arms[0]``, b = ``cell.arms[1]``).
-    :param q_a: (3,) joint state of arm a.
-    :param q_b: (3,) joint state of arm b.
-    :return: ``(per_capsule, distance, p, q)``: (2, 3) each capsule's surface distance to the
-        other arm (row 0 arm a, row 1 arm b), the arm-to-arm distance, and the closest points
-        (3,) of the closest pair's axes (m).
-    """
-    a, b = cell.arms
-    pairs = collision.arm_pair_distances(a, q_a, b, q_b)
-    i, j = np.unravel_index(int(np.argmin(pairs)), pairs.shape)
-    sa, ea, _ = collision.arm_capsules(a, q_a)
-    sb, eb, _ = collision.arm_capsules(b, q_b)
-    _, s, t = collision.segment_distance(sa[i], ea[i], sb[j], eb[j])
-    p = sa[i] + float(s) * (ea[i] - sa[i])
-    q = sb[j] + float(t) * (eb[j] - sb[j])
-    per_capsule = np.stack([pairs.min(axis=1), pairs.min(axis=0)])
-    return per_capsule, float(pairs[i, j]), p, q
-
-
 def urdf_subtree(robot: yourdfpy.Robot, roots: Sequence[str]) -> List[str]:
     """Links of ``robot`` under (and including) the links ``roots``, in tree order."""
     children: Dict[str, List[str]] = {}
@@ -149,33 +127,6 @@ def stats_markdown(status: Optional[Tuple[str, Dict[str, str]]]) -> str:
     message, values = status
     rows = '\n'.join(f'| {k} | {v} |' for k, v in values.items())
     return f'**{message}**\n\n| | |\n|---|---|\n{rows}'
-
-
-# --- message conversions -------------------------------------------------------------------
-def path_points(msg: Path) -> np.ndarray:
-    """``nav_msgs/Path`` -> (N, 3) positions."""
-    return np.array([[p.pose.position.x, p.pose.position.y, p.pose.position.z]
-                     for p in msg.poses], dtype=float).reshape(-1, 3)
-
-
-def marker_items(msg: MarkerArray) -> Dict[int, Tuple[str, np.ndarray]]:
-    """``/conveyor/items`` -> ``{id: (class, (3,) position)}``; DELETEALL and DELETE honoured.
-
-    The class is the marker's ``ns`` (its ``text`` if ``ns`` is empty); markers with
-    non-finite positions are skipped.
-    """
-    items: Dict[int, Tuple[str, np.ndarray]] = {}
-    for m in msg.markers:
-        if m.action == Marker.DELETEALL:
-            items.clear()
-        elif m.action == Marker.DELETE:
-            items.pop(m.id, None)
-        elif m.action == Marker.ADD:
-            p = m.pose.position
-            xyz = np.array([p.x, p.y, p.z], dtype=float)
-            if np.all(np.isfinite(xyz)):
-                items[int(m.id)] = (m.ns or m.text, xyz)
-    return items
 
 
 class CellScene:
@@ -292,7 +243,8 @@ class CellScene:
             self.posed = True
             self.set_visible('arms', self.show['arms'].value)
         a, b = self.cell.arms
-        per_capsule, d, p, pq = closest_capsules(self.cell, self._q[a.name], self._q[b.name])
+        pairs, d, p, pq = collision.closest_points(a, self._q[a.name], b, self._q[b.name])
+        per_capsule = np.stack([pairs.min(axis=1), pairs.min(axis=0)])  # row 0 a, row 1 b
         margin = self.cell.safety_margin
         for row, arm in enumerate(self.cell.arms):
             starts, ends, _ = collision.arm_capsules(arm, self._q[arm.name])
@@ -428,11 +380,11 @@ class CellViewer(Node):
             self._dirty.add('arms')
 
     def _on_items(self, msg: MarkerArray) -> None:
-        self.items = marker_items(msg)
+        self.items = {k: (cls, xyz) for k, (cls, xyz, _) in conv.item_positions(msg).items()}
         self._dirty.add('items')
 
     def _on_path(self, robot: str, msg: Path) -> None:
-        points = path_points(msg)
+        points = conv.path_points(msg)
         frame = msg.header.frame_id
         if frame == f'{robot}_base':
             base = self.cell.arm(robot).base

@@ -195,6 +195,33 @@ def item_markers(items: List, classes: Sequence[str], size: float, stamp: float,
     return out
 
 
+def item_positions(msg: MarkerArray) -> Dict[int, Tuple[str, np.ndarray, float]]:
+    """Return ``/conveyor/items`` as ``{id: (class, (3,) position, stamp)}``.
+
+    The inverse of :func:`item_markers`: DELETEALL and DELETE are honoured, markers with
+    non-finite positions skipped. The class is the marker's ``ns`` (its ``text`` if ``ns``
+    is empty).
+    """
+    items: Dict[int, Tuple[str, np.ndarray, float]] = {}
+    for m in msg.markers:
+        if m.action == Marker.DELETEALL:
+            items.clear()
+        elif m.action == Marker.DELETE:
+            items.pop(m.id, None)
+        elif m.action == Marker.ADD:
+            p = m.pose.position
+            xyz = np.array([p.x, p.y, p.z], dtype=float)
+            if np.all(np.isfinite(xyz)):
+                items[int(m.id)] = (m.ns or m.text, xyz, to_sec(m.header.stamp))
+    return items
+
+
+def path_points(msg: Path) -> np.ndarray:
+    """``nav_msgs/Path`` -> (N, 3) positions (inverse of :func:`path_msg`)."""
+    return np.array([[p.pose.position.x, p.pose.position.y, p.pose.position.z]
+                     for p in msg.poses], dtype=float).reshape(-1, 3)
+
+
 def finite(xyz) -> bool:
     """Return ``True`` if every coordinate is finite."""
     return all(math.isfinite(float(v)) for v in xyz)
