@@ -26,7 +26,6 @@ def test_all_files_load_with_spec_defaults():
     assert ctl['control_rate'] == 100.0
     assert ctl['pid']['planar'] == {'kp': 15.0, 'ki': 0.5, 'kd': 2.0}
     assert ctl['pid']['quill'] == {'kp': 10.0, 'ki': 0.1, 'kd': 1.0}
-    assert cfg['automation']['payload_tiers'] == [0.0, 1.0, 2.5]
 
 
 def _cell():

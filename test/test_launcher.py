@@ -125,8 +125,8 @@ def test_idle_run_writes_report_and_files(launch, tmp_path):
     assert summary['mirror_error_max_m'] is None and summary['margin_ok'] is True
     rows = assert_complete_csv(out / 'timeseries.csv', min_rows=300)
     assert rows[0][0] == 't' and rows[0][-2:] == ['mirror_error_m', 'arm_distance_m']
-    assert_complete_csv(out / 'events.csv', min_rows=0)[0] == ['time', 'kind', 'item', 'class',
-                                                               'robot']
+    assert assert_complete_csv(out / 'events.csv', min_rows=0)[0] == [
+        'time', 'kind', 'item', 'class', 'robot', 'cause']
     for png in ('tool_paths.png', 'arm_distance.png', 'item_counts.png'):
         assert (out / png).read_bytes().startswith(b'\x89PNG'), png
     for node in NODES:
@@ -177,6 +177,31 @@ def test_sigint_mid_run_shuts_down_cleanly(launch, tmp_path):
     assert 'did not stop on SIGINT' not in la.output
     assert_children_gone(out)
     assert_complete_mcap(out, summary)  # closed with its footer on the way out
+
+
+@pytest.mark.skipif(not HAVE_AUTOMATION, reason='needs the automation manager')
+def test_a_lost_start_answer_and_lost_gripper_answers_cost_a_retry(launch, tmp_path):
+    """Fault injection through the launcher: lost start and gripper answers cost a retry.
+
+    The first answer to /automation_manager/start and the first gripper answers are lost;
+    the run still completes and its files agree.
+    """
+    out = tmp_path / 'faults'
+    la = launch('--mode', 'collaborative', '--duration', '25', '--rtf', '0', '--output',
+                str(out), '--no-plots', '--fault', 'drop:/automation_manager/start:1',
+                '--fault', 'drop:/scara_left/gripper:1', '--fault',
+                'drop:/scara_right/gripper:1')
+    assert la.wait() == 0, la.output
+    assert '/automation_manager/start: no answer in 5 s; asking again (2/4)' in la.output
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['exit_reason'] == 'duration reached'
+    assert summary['sorted'] > 0 and summary['missed'] == 0
+    assert summary['job']['retries'] >= 2  # the two lost gripper answers were asked again
+    # one source per figure: the top-level counts are the events' counts of the window
+    assert all(summary[k] == summary['events'][k] for k in summary['events'])
+    assert summary['min_separation_source'] == 'collision_monitor'
+    events = assert_complete_csv(out / 'events.csv', min_rows=1)
+    assert sum(1 for r in events[1:] if r[1] == 'sorted') >= summary['sorted']
 
 
 def test_a_dead_node_ends_the_run_with_its_name(launch, tmp_path):

@@ -15,6 +15,7 @@ from visualization_msgs.msg import MarkerArray
 
 from scara_collab.core.trajectory import joint_move
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
@@ -71,7 +72,9 @@ def test_a_trajectory_is_tracked(graph):
     pub.publish(conv.trajectory_msg(arm.joint_names, traj.t, traj.q, traj.qd, traj.qdd))
     assert graph.spin_until(lambda: any(s.level == DiagnosticStatus.OK
                                         for s in graph.status[arm.name]))
-    start = float(graph.status[arm.name][-1].values[0].value)
+    accepted = proto.ExecutionStatus.from_msg(graph.status[arm.name][-1])
+    assert accepted.state == 'accepted' and accepted.move == ''  # a raw trajectory: no id
+    start = accepted.start
     end = start + traj.duration + 0.5
     assert graph.spin_until(lambda: sim_time(graph) > end, timeout=60)
     errors = []
@@ -135,7 +138,7 @@ def test_gripper_refuses_with_nothing_to_grasp_and_items_are_published(graph):
     res = graph.call(SetBool, '/scara_left/gripper', SetBool.Request(data=True))
     assert not res.success and res.message
     res = graph.call(SetBool, '/scara_left/gripper', SetBool.Request(data=False))
-    assert not res.success and res.message
+    assert res.success and 'holds nothing' in res.message  # idempotent: release while empty
     items = graph.collect(MarkerArray, '/conveyor/items')
     graph.bridge.sim.spawn_item()
     classes = set(graph.bridge.cell.item_classes)

@@ -15,6 +15,7 @@ from scara_collab.core.collision import arm_distance
 from scara_collab.core.kinematics import fk
 from scara_collab.core.mirror import mirror_joints, mirror_point
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
 from scara_collab.run import report
 from scara_collab.run.recorder import RunRecorder
 from scara_collab.run.telemetry import parse_value, RunLog, state_columns
@@ -22,7 +23,8 @@ from scara_collab.run.telemetry import parse_value, RunLog, state_columns
 PNG = b'\x89PNG\r\n\x1a\n'
 SUMMARY_KEYS = ('mode', 'sim_seconds', 'wall_seconds', 'sorted', 'missed', 'wrong_bin',
                 'items_per_minute', 'min_separation_m', 'mirror_error_max_m',
-                'real_time_factor', 'interrupted', 'exit_reason', 'stats')
+                'real_time_factor', 'interrupted', 'exit_reason', 'job', 'counts_source',
+                'min_separation_source')
 
 
 @pytest.fixture
@@ -62,8 +64,7 @@ def state_msg(cell, t, q_lead, q_foll, reverse=False):
 
 
 def event_msg(kind, t, item, cls='red', robot=''):
-    return conv.status(kind, 'OK', f'item {item} {kind}',
-                       {'item': item, 'class': cls, 'robot': robot, 'time': f'{t:.3f}'})
+    return proto.ItemEvent(kind, item, cls, t, robot).to_msg()
 
 
 def read_csv(path):
@@ -116,7 +117,8 @@ def test_mirrored_states_have_zero_mirror_error(make_recorder, cell):
     err = np.array([float(r[header.index('mirror_error_m')]) for r in rows])
     assert len(err) == 50 and np.all(err < 1e-9)
     summary = rec.finish('duration reached', False)
-    assert summary['mirror_error_max_m'] < 1e-9
+    assert summary['mirror_error_whole_run_max_m'] < 1e-9
+    assert summary['mirror_error_max_m'] is None  # no replication manager heard
     assert [p.name for p in rec.plots] == list(report.PLOTS)
     for p in rec.plots:
         assert_png(p)
@@ -137,13 +139,15 @@ def test_summary_plots_and_counts(make_recorder, cell):
         assert key in summary, key
     assert summary['mode'] == 'collaborative' and summary['interrupted'] is False
     assert summary['sim_seconds'] == pytest.approx(2.0)
-    assert summary['counts_source'] == 'conveyor events'
+    assert summary['counts_source'] == 'pybullet_bridge /conveyor/events in the job window'
+    assert all(summary[k] == summary['events'][k] for k in summary['events'])
     # the window starts at the job: the item spawned before it is not counted
     assert (summary['spawned'], summary['sorted'], summary['missed']) == (1, 1, 1)
     assert summary['items_per_minute'] == pytest.approx(30.0)
     assert summary['mirror_error_max_m'] is None
-    assert summary['min_separation_m'] == pytest.approx(
+    assert summary['min_separation_m'] == pytest.approx(  # no monitor heard: the states'
         float(arm_distance(cell.leader, q, cell.follower, mirror_joints(q))))
+    assert summary['min_separation_source'].startswith('recorded joint states')
     assert summary['margin_ok'] is True and summary['joint_state_rows'] == 301
     on_disk = json.loads((rec.directory / 'summary.json').read_text())
     assert on_disk['plots'] == list(report.PLOTS[:3])
@@ -151,45 +155,42 @@ def test_summary_plots_and_counts(make_recorder, cell):
     for name in report.PLOTS[:3]:
         assert_png(rec.directory / name)
     _, events = read_csv(rec.directory / 'events.csv')
-    assert events[2] == ['12.000', 'sorted', '2', 'red', 'scara_left']
+    assert events[2] == ['12.000', 'sorted', '2', 'red', 'scara_left', '']
     text = report.format_report(on_disk)
     assert 'sorted 1' in text and 'min arm sep.' in text and str(rec.directory) in text
 
 
-def test_automation_stats_are_preferred(make_recorder, cell):
+def test_each_figure_comes_from_its_one_source(make_recorder, cell):
     rec = make_recorder('single')
     q = np.array([0.3, 1.0, 0.1])
     rec.on_joint_state(state_msg(cell, 1.0, q, mirror_joints(q)))
     rec.on_event(event_msg('sorted', 1.0, 1))
-    rec.on_stats(conv.status('automation_manager', 'OK', 'running', {
-        'mode': 'single', 'sorted': 7, 'missed': 1, 'wrong_bin': 0, 'dropped': 0,
-        'spawned': 9, 'items_per_minute': 12.5, 'min_separation_m': 0.8,
-        'mirror_error_max_m': 'nan', 'first_item_time': 3.0, 'running': 'true'}))
+    rec.on_stats(proto.JobStats('single', True, 2.0, 0.0, {'sorted': 7, 'missed': 1},
+                                give_ups=2, retries=5).to_msg())
+    rec.on_monitor(proto.MonitorStatus(2.0, 0.9, 0.42, 1.5, 0.1, False).to_msg())
     rec.on_joint_state(state_msg(cell, 2.0, q, mirror_joints(q)))
     summary = rec.finish('duration reached', False, plots=False)
-    assert summary['counts_source'] == 'automation_manager'
-    assert (summary['sorted'], summary['missed'], summary['spawned']) == (7, 1, 9)
-    assert summary['items_per_minute'] == 12.5
-    assert summary['stats']['running'] is True and summary['stats']['mode'] == 'single'
-    assert summary['stats']['mirror_error_max_m'] is None  # NaN is not JSON
+    assert (summary['sorted'], summary['missed']) == (1, 0)  # the events, not the job's view
+    assert summary['job']['give_ups'] == 2 and summary['job']['retries'] == 5
+    assert summary['min_separation_m'] == 0.42 and summary['min_separation_time'] == 1.5
+    assert summary['min_separation_source'] == 'collision_monitor'
     json.loads((rec.directory / 'summary.json').read_text())
 
 
-def test_mirrored_summary_prefers_the_jobs_in_step_mirror_error(make_recorder, cell):
+def test_mirrored_summary_takes_the_replication_managers_in_step_error(make_recorder, cell):
     rec = make_recorder('mirrored')
     q = np.array([0.3, 1.0, 0.1])
     rec.on_joint_state(state_msg(cell, 1.0, q, mirror_joints(q)))
     rec.on_joint_state(state_msg(cell, 1.01, q, mirror_joints(q + 0.2)))  # one arm parks
-    rec.on_stats(conv.status('automation_manager', 'OK', 'running', {
-        'mode': 'mirrored', 'sorted': 2, 'missed': 0, 'mirror_error_max_m': 0.0009,
-        'running': 'true'}))
+    rec.on_mirror(proto.MirrorStatus(True, 1.0, 0.0, 0.0009, 0.5, 3, 1, 'yielded').to_msg())
     summary = rec.finish('duration reached', False, plots=False)
     assert summary['mirror_error_max_m'] == pytest.approx(0.0009)
-    assert summary['mirror_error_source'] == 'automation_manager, in-step moves'
+    assert summary['mirror_error_source'] == 'replication_manager, in-step moves'
+    assert summary['mirror_not_in_step'] == 1
     assert summary['mirror_error_whole_run_max_m'] > 0.1
     assert summary['mirror_error_whole_run_time'] == pytest.approx(1.01)
     text = report.format_report(summary)
-    assert 'max 0.90 mm over the moves the arms ran in step' in text
+    assert 'max 0.90 mm over 3 moves the arms ran in step (1 not in step)' in text
 
 
 def test_interrupted_recording_keeps_complete_files(make_recorder, cell):
@@ -267,9 +268,6 @@ def test_parse_value_and_run_log_windows(tmp_path, cell):
     for t, kind in ((1.0, 'sorted'), (2.0, 'sorted'), (3.0, 'missed')):
         log.add_event(t, kind, 1)
     assert log.event_counts(1.5, 3.0)['sorted'] == 1
-    counts, source = log.counts(0.0, 60.0)
-    assert counts['sorted'] == 2 and counts['items_per_minute'] == pytest.approx(2.0)
-    assert source == 'conveyor events'
     log.close()
     assert math.isinf(log.min_distance)  # no states: no separation yet
 

@@ -3,7 +3,7 @@
 Random pairs of crossing moves (:func:`random_pair`: the two tool paths cross in plan view,
 and the poses the arms rest in are compatible, so a delay can resolve any conflict). Both
 moves are decided at ``t = 0`` and asked to start at ``t = lead`` (the automation manager's
-``start_lead``), planned as the planner nodes plan them
+``decision_lead``), planned as the planner nodes plan them
 (:func:`scara_collab.core.planning.plan_path`) and scheduled as they schedule them
 (:func:`scara_collab.core.planning.schedule`: left has priority, the right arm is delayed by
 the smallest safe shift, keeping the cell's safety margin plus the planners' buffer).
@@ -144,7 +144,7 @@ def measure(n_pairs: int = 300, n_execute: int = 40, seed: int = 1, max_delay: f
     left, right = cell.leader, cell.follower
     margin = cell.safety_margin
     plan_margin = margin + PLANNING_BUFFER
-    lead = float(load_config('automation')['start_lead'])
+    lead = float(load_config('automation')['decision_lead'])
     rng = np.random.default_rng(seed)
     pairs: List[Dict[str, object]] = []
     executed = 0

@@ -33,6 +33,7 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.planning import plan_path
 from scara_collab.core.trajectory import segment_deviation
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.params import ros_args
 from scara_collab.nodes.planner import Planner
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
@@ -109,9 +110,9 @@ def measure(mode: str = 'line', targets: Optional[Sequence[np.ndarray]] = None,
                                   lambda m, r=r: trajs.__setitem__(r, m), 10)
 
         def on_status(msg: DiagnosticStatus, r=r) -> None:
-            values = conv.status_values(msg)
-            if 'start' in values:
-                starts[r] = float(values['start'])
+            st = proto.ExecutionStatus.from_msg(msg)
+            if st.state == 'accepted':
+                starts[r] = st.start
         probe.create_subscription(DiagnosticStatus, f'/{r}/execution_status', on_status, 100)
 
     def spin_until(pred, what: str) -> None:

@@ -19,7 +19,7 @@ import signal
 import subprocess
 import sys
 import time
-from typing import Dict, Optional
+from typing import Dict, Optional, Sequence
 
 import rclpy
 
@@ -43,7 +43,7 @@ def default_feed() -> float:
 
 def run_job(mode: str, duration: float, feed: Optional[float] = None,
             seed: Optional[int] = None, log: Optional[Log] = None,
-            report_every: float = 10.0) -> Dict[str, object]:
+            report_every: float = 10.0, faults: Sequence[str] = ()) -> Dict[str, object]:
     """Run one mode for ``duration`` sim seconds in one process; return the job's stats.
 
     :param mode: ``'single'``, ``'collaborative'`` or ``'mirrored'``.
@@ -51,9 +51,9 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
         feeds mirror pairs.
     :param seed: item feed seed (the bridge's ``item_seed``; default ``simulation.yaml``).
     :param report_every: sim seconds between progress lines.
-    :return: the automation manager's stats (sorted, missed, dropped, wrong_bin,
-        items_per_minute, min_separation_m, mirror_error_max_m, ...) plus ``wall_seconds``,
-        ``sim_seconds``, ``real_time_factor``, ``feed_interval``, ``seed``.
+    :param faults: fault injection entries for every node (:mod:`scara_collab.nodes.faults`).
+    :return: :func:`job_result` of the graph plus ``wall_seconds``, ``sim_seconds``,
+        ``real_time_factor``, ``feed_interval``, ``seed``.
     """
     feed = default_feed() if feed is None else float(feed)
     seed = int(load_config('simulation')['item_seed'] if seed is None else seed)
@@ -61,17 +61,21 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
     rclpy.init(context=ctx)
     ex = make_executor(context=ctx)  # the executables' executor ($SCARA_COLLAB_EXECUTOR)
     pattern = 'mirror_pairs' if mode == 'mirrored' else 'random'
+    extra = {'faults': list(faults)} if faults else {}
     bridge = PyBulletBridge(context=ctx, cli_args=ros_args(
         'simulation', 'controllers', real_time_factor=0.0, feed_interval=feed,
-        feed_pattern=pattern, item_seed=seed))
+        feed_pattern=pattern, item_seed=seed, **extra))
+    replication = ReplicationManager(context=ctx, cli_args=ros_args())
+    monitor = CollisionMonitor(context=ctx, cli_args=ros_args())
     nodes = [bridge,
-             Planner('scara_left', 'left_planner', context=ctx, cli_args=ros_args('controllers')),
+             Planner('scara_left', 'left_planner', context=ctx,
+                     cli_args=ros_args('controllers', **extra)),
              Planner('scara_right', 'right_planner', context=ctx,
-                     cli_args=ros_args('controllers')),
-             ReplicationManager(context=ctx, cli_args=ros_args()),
-             CollisionMonitor(context=ctx, cli_args=ros_args())]
-    job = AutomationManager(context=ctx, cli_args=ros_args('automation', mode=mode,
-                                                           auto_start='true'))
+                     cli_args=ros_args('controllers', **extra)),
+             replication, monitor]
+    job = AutomationManager(context=ctx, cli_args=ros_args('automation', 'controllers',
+                                                           mode=mode, auto_start='true',
+                                                           **extra))
     nodes.append(job)
     for n in nodes:
         ex.add_node(n)
@@ -81,12 +85,12 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
         while bridge.sim.time < duration:
             ex.spin_once(timeout_sec=0.01)
             if log and bridge.sim.time >= next_report:
-                s = job.stats()
+                c = job.job.counts
                 log(f'{mode} (seed {seed}): {bridge.sim.time:.0f}/{duration:.0f} sim s, sorted '
-                    f'{s["sorted"]}, missed {s["missed"]}, '
+                    f'{c.get("sorted", 0)}, missed {c.get("missed", 0)}, '
                     f'{time.monotonic() - wall:.0f} s wall')
                 next_report += report_every
-        out = dict(job.stats())
+        out = job_result(job, monitor, replication)
         took = time.monotonic() - wall
         out.update(wall_seconds=took, sim_seconds=bridge.sim.time,
                    real_time_factor=bridge.sim.time / took if took > 0 else None,
@@ -94,6 +98,30 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
         return out
     finally:
         close_graph(ex, nodes, ctx)
+
+
+def job_result(job: AutomationManager, monitor: CollisionMonitor,
+               replication: ReplicationManager) -> Dict[str, object]:
+    """Return the figures of an in-process job, each from its one source.
+
+    Counts: the bridge's item events (as the automation manager heard them); minimum
+    separation and emergency stop: the collision monitor; mirror error: the replication
+    manager (in-step moves, mirrored mode only); give-ups and retries: the job.
+    """
+    stats = job.stats()
+    mirror = replication.status()
+    guard = monitor.status()
+    return {'mode': stats.mode, **stats.counts,
+            'items_per_minute': stats.items_per_minute,
+            **{f'sorted_by_{r}': n for r, n in stats.sorted_by.items()},
+            'give_ups': stats.give_ups, 'retries': stats.retries,
+            'last_give_up': stats.last_give_up,
+            'min_separation_m': guard.minimum, 'min_separation_time': guard.minimum_time,
+            'estop': guard.stopped, 'estop_reason': guard.reason,
+            'mirror_error_max_m': mirror.error_max if stats.mode == 'mirrored' else None,
+            'mirror_error_max_time': mirror.error_max_time,
+            'mirror_in_step_moves': mirror.in_step_moves,
+            'mirror_not_in_step': mirror.not_in_step}
 
 
 def run_launcher(mode: str, duration: float, output: Path, rtf: float = 0.0,

@@ -46,6 +46,15 @@ class Intercept:
     start: float
 
 
+#: m: an item whose centre is this close to its resting height on the belt lies on the belt
+BELT_HEIGHT_TOLERANCE = 0.01
+
+
+def at_belt_height(cell: CellModel, z: float) -> bool:
+    """Return True if an item centre at height ``z`` rests on the belt (not held or falling)."""
+    return abs(z - (cell.belt.top_z + cell.item_size / 2.0)) < BELT_HEIGHT_TOLERANCE
+
+
 def predict(cell: CellModel, item: SeenItem, t: float) -> np.ndarray:
     """Return the item centre at time ``t`` if it stays on the belt."""
     return item.position + np.array([cell.belt.speed * (t - item.stamp), 0.0, 0.0])

@@ -1,16 +1,22 @@
-"""Collision monitor: the runtime safety net behind the planners.
+"""Collision monitor: the runtime safety net behind the planners, and the separation's source.
 
 On every ``/joint_states`` message it computes the arm-to-arm capsule surface distance,
 publishes it on ``/collision_monitor/min_distance``, and latches ``/emergency_stop`` true
-(transient local; the bridge holds both arms) when it falls below the safety margin.
-``/collision_monitor/clear`` (std_srvs/Trigger) releases the stop once the arms are apart
-again. Capsule markers coloured by distance go to ``/collision_monitor/capsules``.
+(transient local; the bridge holds both arms) when it falls below the safety margin. It fails
+closed: a joint state it cannot use (non-finite, missing joints) or no valid state for
+``stale_after`` sim seconds also latches the stop. ``/collision_monitor/clear``
+(std_srvs/Trigger, idempotent) releases the stop once the arms are apart again and the state is
+fresh. ``~/status`` (:class:`~scara_collab.nodes.protocol.MonitorStatus`, 1 Hz and on every
+change) carries the smallest distance seen and when: the run's one source of the minimum
+separation. Capsule markers coloured by distance go to ``~/capsules``.
 """
+import math
+from typing import Optional
+
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Point
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, ColorRGBA, Float64, Header
 from std_srvs.srv import Trigger
@@ -19,10 +25,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 from scara_collab.core import collision
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv, lockstep
-from scara_collab.nodes.runner import run_node
+from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.qos import LATCHED, LATEST
+from scara_collab.nodes.runner import guarded, run_node
 
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                     reliability=ReliabilityPolicy.RELIABLE)
+PARTS = ('link 1', 'link 2', 'quill')
 
 
 class CollisionMonitor(Node):
@@ -33,63 +40,104 @@ class CollisionMonitor(Node):
         self.declare_parameter('profile', '')
         self.declare_parameter('safety_margin', -1.0)  # < 0: the cell's margin
         self.declare_parameter('marker_rate', 10.0)
+        self.declare_parameter('stale_after', 0.2)     # sim s without a valid state: stop
         self.cell = load_cell(self.get_parameter('profile').value or None)
         margin = float(self.get_parameter('safety_margin').value)
         self.margin = self.cell.safety_margin if margin < 0 else margin
-        self.marker_period = 1.0 / float(self.get_parameter('marker_rate').value)
+        rate = float(self.get_parameter('marker_rate').value)
+        self.stale_after = float(self.get_parameter('stale_after').value)
+        if not (rate > 0 and self.stale_after > 0 and math.isfinite(self.margin)):
+            raise ValueError('marker_rate and stale_after must be > 0 and the margin finite')
+        self.marker_period = 1.0 / rate
         self.stopped = False
-        self.last = float('inf')
-        self.minimum = float('inf')
+        self.reason = ''
+        self.last: Optional[float] = None
+        self.last_time: Optional[float] = None  # sim time of the last valid state
+        self.minimum: Optional[float] = None
+        self.minimum_time: Optional[float] = None
         self._next_marker = 0.0
+        self._published_min: Optional[float] = None
         self.dist_pub = self.create_publisher(Float64, '~/min_distance', 10)
         self.estop_pub = self.create_publisher(Bool, '/emergency_stop', LATCHED)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
         self.marker_pub = self.create_publisher(MarkerArray, '~/capsules', 10)
-        self.create_subscription(JointState, '/joint_states', self._on_state,
-                                 QoSProfile(depth=1))
-        self.create_service(Trigger, '~/clear', self._on_clear)
+        self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
+                                 LATEST)
+        self.create_service(Trigger, '~/clear', guarded(self, self._on_clear, True))
+        self.create_timer(self.stale_after / 2, guarded(self, self._watch))
+        self.create_timer(1.0, guarded(self, self._publish_status))
         self.estop_pub.publish(Bool(data=False))
         lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'watching {self.cell.leader.name} vs '
                                f'{self.cell.follower.name}, margin {self.margin} m')
+
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _stop(self, text: str) -> None:
+        if self.stopped:
+            return
+        self.stopped, self.reason = True, text
+        self.estop_pub.publish(Bool(data=True))
+        self.get_logger().error(text + '; emergency stop')
+        self._publish_status()
 
     def _on_state(self, msg: JointState) -> None:
         a, b = self.cell.arms
         try:
             qa, _ = conv.joint_state_arrays(msg, a.joint_names)
             qb, _ = conv.joint_state_arrays(msg, b.joint_names)
-        except conv.MessageError as exc:
-            self.get_logger().warning(f'ignoring joint_states: {exc}', throttle_duration_sec=5.0)
+        except conv.MessageError as exc:  # fail closed: a state we cannot check stops the arms
+            self._stop(f'unusable joint state: {exc}')
             return
         pairs = collision.arm_pair_distances(a, qa, b, qb)
         d = float(pairs.min())
-        self.last, self.minimum = d, min(self.minimum, d)
-        self.dist_pub.publish(Float64(data=d))
         stamp = conv.to_sec(msg.header.stamp)
-        if d < self.margin and not self.stopped:
-            self.stopped = True
-            self.estop_pub.publish(Bool(data=True))
+        self.last, self.last_time = d, self._now()
+        if self.minimum is None or d < self.minimum:
+            self.minimum, self.minimum_time = d, stamp
+            if self._published_min is None or d < self._published_min - 5e-4:
+                self._published_min = d  # a new minimum is news: the run summary reads it
+                self._publish_status()
+        self.dist_pub.publish(Float64(data=d))
+        if d < self.margin:
             i, j = np.unravel_index(np.argmin(pairs), pairs.shape)
-            parts = ('link 1', 'link 2', 'quill')
-            text = (f'margin broken: {a.name} {parts[i]} to {b.name} {parts[j]} {d:.4f} m < '
-                    f'{self.margin} m at t={stamp:.3f} s; emergency stop')
-            self.get_logger().error(text)
-            self.status_pub.publish(conv.status('collision_monitor', 'ERROR', text,
-                                                {'distance': f'{d:.4f}', 'time': f'{stamp:.3f}'}))
+            self._stop(f'margin broken: {a.name} {PARTS[i]} to {b.name} {PARTS[j]} {d:.4f} m '
+                       f'< {self.margin} m at t={stamp:.3f} s')
         if stamp >= self._next_marker:
             self._next_marker = stamp + self.marker_period
             self.marker_pub.publish(self._markers(qa, qb, d, msg.header))
 
+    def _watch(self) -> None:
+        """Fail closed when the valid states stop coming (sim time runs on without them)."""
+        now = self._now()
+        if self.last_time is not None and now - self.last_time > self.stale_after:
+            self._stop(f'no valid joint state for {now - self.last_time:.3f} s (sim)')
+
     def _on_clear(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
-        if self.last < self.margin:
+        fresh = self.last_time is not None and self._now() - self.last_time <= self.stale_after
+        if not self.stopped:
+            res.success, res.message = True, 'no emergency stop to clear'
+        elif self.last is None or not fresh or self.last < self.margin:
             res.success = False
-            res.message = f'arms still {self.last:.3f} m apart (< {self.margin} m); not cleared'
-            return res
-        self.stopped = False
-        self.estop_pub.publish(Bool(data=False))
-        res.success, res.message = True, 'emergency stop cleared'
-        self.get_logger().info(res.message)
+            res.message = ('no fresh joint state; not cleared' if not fresh or self.last is None
+                           else f'arms still {self.last:.3f} m apart (< {self.margin} m); '
+                           'not cleared')
+        else:
+            self.stopped, self.reason = False, ''
+            self.estop_pub.publish(Bool(data=False))
+            res.success, res.message = True, 'emergency stop cleared'
+            self.get_logger().info(res.message)
+            self._publish_status()
         return res
+
+    def status(self) -> proto.MonitorStatus:
+        """Return the monitor's figures so far."""
+        return proto.MonitorStatus(round(self._now(), 6), self.last, self.minimum,
+                                   self.minimum_time, self.margin, self.stopped, self.reason)
+
+    def _publish_status(self) -> None:
+        self.status_pub.publish(self.status().to_msg())
 
     def _markers(self, qa, qb, d: float, header: Header) -> MarkerArray:
         colour = (ColorRGBA(r=0.9, g=0.1, b=0.1, a=0.6) if d < self.margin else

@@ -31,6 +31,12 @@ def to_time(seconds: float) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
+def time_from_ns(ns: int) -> Time:
+    """Integer nanoseconds -> ``builtin_interfaces/Time`` (exact)."""
+    ns = int(ns)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
 def to_duration(seconds: float) -> Duration:
     """Seconds -> ``builtin_interfaces/Duration``."""
     ns = int(round(seconds * 1e9))
@@ -51,7 +57,8 @@ def joint_state(stamp: float, names: Sequence[str], position, velocity, effort) 
 def joint_state_arrays(msg: JointState, names: Sequence[str]) -> Tuple[np.ndarray, np.ndarray]:
     """Positions and velocities of ``names`` from a ``JointState`` (any order).
 
-    :raises MessageError: a name is missing or the arrays are inconsistent.
+    :raises MessageError: a name is missing, the arrays are inconsistent, or a value is not
+        finite (a NaN state is refused at the door, never planned from or measured).
     """
     index = {n: i for i, n in enumerate(msg.name)}
     missing = [n for n in names if n not in index]
@@ -63,6 +70,8 @@ def joint_state_arrays(msg: JointState, names: Sequence[str]) -> Tuple[np.ndarra
     pos = np.asarray(msg.position, dtype=float)[idx]
     vel = (np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) == len(msg.name)
            else np.zeros(len(names)))
+    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(vel))):
+        raise MessageError(f'joint_states: non-finite position or velocity of {list(names)}')
     return pos, vel
 
 

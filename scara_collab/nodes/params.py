@@ -111,5 +111,7 @@ def ros_args(*files: str, sim_time: bool = True, **params) -> List[str]:
     for f in files:
         out += ['--params-file', str(config_dir() / f'{f}.yaml')]
     for key, value in params.items():
+        if isinstance(value, (list, tuple)):  # a string array parameter
+            value = '[' + ','.join(f"'{v}'" for v in value) + ']'
         out += ['-p', f'{key}:={value}']
     return out

@@ -11,21 +11,28 @@ priority rule of :mod:`scara_collab.core.planning`, and publishes ``/<robot>/joi
 stamped with its start, ``/<robot>/planned_path`` and ``/<robot>/planner_status`` (OK, WARN
 when delayed, ERROR with the reason when refused; the arm then stays where it is).
 
+Every status names its move (:mod:`scara_collab.nodes.protocol`): the id is
+``<robot>/<request>``, the request being the target's stamp in ns (the receipt time for a
+target stamped zero), and it goes to the bridge in the trajectory's ``header.frame_id``. The
+planner is idempotent: a target it already has (same stamp, e.g. re-sent after a lost
+status) is not planned again, its current status is published again.
+
 A target that arrives while the arm's own move is still running is queued and planned when
-that move ends (the bridge replaces a running trajectory, so it is not published earlier).
+that move ends (the bridge replaces a running trajectory, so it is not published earlier);
+a queued or waiting target replaced by a newer one is reported ``superseded``.
 The follower re-times its not-yet-started move when a new leader move would conflict with it.
 When the other arm's resting pose blocks a move (no delay helps until that arm moves again),
 the planner reports WARN "waiting", retries whenever the other arm commits a new move, and
 refuses after ``max_wait`` seconds.
 """
-from typing import Optional
+from collections import OrderedDict
+from typing import Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
@@ -34,20 +41,13 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.planning import MODES, Plan, plan_path, schedule, Timeline
 from scara_collab.core.trajectory import path_metrics
 from scara_collab.nodes import conversions as conv, lockstep
+from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.faults import declare_faults, FaultyPublisher
 from scara_collab.nodes.params import declare_config
-from scara_collab.nodes.runner import run_node
+from scara_collab.nodes.qos import EVENTS, LATEST
+from scara_collab.nodes.runner import guarded, run_node
 
-
-LATEST = QoSProfile(depth=1)
-
-
-def _lateness(msg: DiagnosticStatus) -> float:
-    """Seconds by which the bridge started a trajectory after its stamp (0 if on time)."""
-    values = conv.status_values(msg)
-    if msg.level != DiagnosticStatus.OK or 'start' not in values or 'stamp' not in values:
-        return 0.0
-    stamp = float(values['stamp'])
-    return float(values['start']) - stamp if stamp > 0 else 0.0
+HISTORY = 64  # requests whose last status is kept, to answer a re-sent one
 
 
 class Planner(Node):
@@ -59,7 +59,7 @@ class Planner(Node):
         self.declare_parameter('robot', robot)
         self.declare_parameter('profile', '')
         self.declare_parameter('mode', 'line_or_joint')
-        self.declare_parameter('start_lead', 0.05)
+        self.declare_parameter('planning_lead', 0.05)
         self.declare_parameter('planning_buffer', 0.03)
         self.declare_parameter('max_delay', 30.0)
         self.declare_parameter('max_wait', 60.0)
@@ -75,33 +75,45 @@ class Planner(Node):
         if self.mode not in MODES:
             raise ValueError(f'parameter mode must be one of {MODES}, got {self.mode!r}')
         self.traj_cfg = cfg['trajectory']
-        self.lead = float(self.get_parameter('start_lead').value)
+        self.lead = float(self.get_parameter('planning_lead').value)
         self.margin = self.cell.safety_margin + float(self.get_parameter('planning_buffer').value)
         self.max_delay = float(self.get_parameter('max_delay').value)
         self.max_wait = float(self.get_parameter('max_wait').value)
+        for key, value in (('planning_lead', self.lead), ('max_delay', self.max_delay),
+                           ('max_wait', self.max_wait)):
+            if not value > 0:
+                raise ValueError(f'parameter {key} must be > 0, got {value}')
 
         self.q: Optional[np.ndarray] = None
         self.q_stamp = 0.0  # sim time of the state in self.q
         self.q_other: Optional[np.ndarray] = None
         self.mine: Optional[Plan] = None            # my committed move
-        self.pending_target = None                  # (xyz, frame, asked) of my move
+        self.mine_id = ''                           # ... its move id
+        self.pending_target = None                  # (xyz, frame, asked, request) of my move
         self.theirs: Optional[Timeline] = None      # the other arm's committed move
         self.theirs_before: Optional[Timeline] = None  # ... and the one it replaced
-        self.queued = None                          # (xyz, frame, stamp) after my move
-        self.waiting = None                         # (xyz, frame, asked): blocked target
+        self.queued = None                          # (xyz, frame, stamp, request) after mine
+        self.waiting = None                         # (xyz, frame, asked, request): blocked
+        self.history: 'OrderedDict[int, proto.PlannerStatus]' = OrderedDict()
+        self._last_auto = 0
 
         r, o = self.arm.name, self.other.name
+        faults = declare_faults(self)
         self.traj_pub = self.create_publisher(JointTrajectory, f'/{r}/joint_trajectory', 10)
         self.path_pub = self.create_publisher(Path, f'/{r}/planned_path', 10)
-        self.status_pub = self.create_publisher(DiagnosticStatus, f'/{r}/planner_status', 10)
+        self.status_pub = FaultyPublisher(self, faults, self.create_publisher(
+            DiagnosticStatus, f'/{r}/planner_status', EVENTS))
         # only the latest state matters: a backlog of old ones would make plans start stale
-        self.create_subscription(JointState, '/joint_states', self._on_state, LATEST)
-        self.create_subscription(PointStamped, f'/{r}/target', self._on_target, 10)
-        self.create_subscription(JointTrajectory, f'/{o}/joint_trajectory', self._on_other, 10)
+        self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
+                                 LATEST)
+        self.create_subscription(PointStamped, f'/{r}/target', guarded(self, self._on_target),
+                                 10)
+        self.create_subscription(JointTrajectory, f'/{o}/joint_trajectory',
+                                 guarded(self, self._on_other), 10)
         self.create_subscription(DiagnosticStatus, f'/{o}/execution_status',
-                                 self._on_other_execution, 10)
+                                 guarded(self, self._on_other_execution), EVENTS)
         self.create_subscription(DiagnosticStatus, f'/{r}/execution_status',
-                                 self._on_own_execution, 10)
+                                 guarded(self, self._on_own_execution), EVENTS)
         lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'{r} planner ready ({self.mode} moves, '
                                f'{"leader" if self.leader else "follower, yields to " + o})')
@@ -110,30 +122,41 @@ class Planner(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
-    def _status(self, level: str, message: str, **values) -> None:
-        if level == 'ERROR':
-            self.get_logger().warning(message)
-        self.status_pub.publish(conv.status(f'{self.arm.name}/planner', level, message, values))
+    def _status(self, state: str, request: int, reason: str = '', plan: Optional[Plan] = None,
+                kind: str = '') -> None:
+        st = proto.PlannerStatus(
+            self.arm.name, state, proto.move_id(self.arm.name, request), request, reason,
+            start=None if plan is None else plan.start, end=None if plan is None else plan.end,
+            delay=0.0 if plan is None else plan.delay, kind=kind)
+        if state == 'refused':
+            self.get_logger().warning(st.text())
+        if request:
+            self.history[request] = st
+            self.history.move_to_end(request)
+            while len(self.history) > HISTORY:
+                self.history.popitem(last=False)
+        self.status_pub.publish(st.to_msg())
 
     def _other_timeline(self, now: float) -> Timeline:
         if self.theirs is not None and self.theirs.end > now:
             return self.theirs
         return Timeline.hold(now, self.q_other)
 
-    def _publish(self, plan: Plan, note: str) -> None:
+    def _publish(self, plan: Plan, request: int, note: str = '') -> None:
         t = plan.traj
+        self.mine, self.mine_id = plan, proto.move_id(self.arm.name, request)
         self.traj_pub.publish(conv.trajectory_msg(self.arm.joint_names, t.t, t.q, t.qd, t.qdd,
-                                                  start=plan.start))
+                                                  start=plan.start, frame_id=self.mine_id))
         self.path_pub.publish(conv.path_msg(t.p, plan.start))
-        self._publish_status(plan, note)
+        kind = 'line' if path_metrics(t).max_deviation < 1e-4 else 'joint move'
+        self._status('planned', request, note, plan, kind)
 
-    def _publish_status(self, plan: Plan, note: str) -> None:
-        t = plan.traj
-        level = 'WARN' if plan.delay > 0 else 'OK'
-        msg = note + (f'; delayed by {plan.delay:.2f} s for {self.other.name}'
-                      if plan.delay > 0 else '')
-        self._status(level, msg, start=f'{plan.start:.3f}', duration=f'{t.duration:.3f}',
-                     delay=f'{plan.delay:.3f}', end=f'{plan.end:.3f}')
+    def _request_of(self, stamp_ns: int) -> int:
+        """Return the request id of a target: its stamp, or (stamped zero) the receipt time."""
+        if stamp_ns:
+            return stamp_ns
+        self._last_auto = max(self.get_clock().now().nanoseconds, self._last_auto + 1)
+        return self._last_auto
 
     # --- callbacks --------------------------------------------------------------------------
     def _on_state(self, msg: JointState) -> None:
@@ -145,34 +168,52 @@ class Planner(Node):
             self.get_logger().warning(f'ignoring joint_states: {exc}', throttle_duration_sec=5.0)
             return
         if self.queued is not None and (self.mine is None or self.q_stamp >= self.mine.end):
-            xyz, frame, stamp = self.queued
+            xyz, frame, stamp, request = self.queued
             self.queued = None
-            self._plan(xyz, frame, stamp)
+            self._plan(xyz, frame, stamp, request)
+
+    def _known(self, request: int) -> bool:
+        """Re-publish the status of a request already handled (a re-sent target)."""
+        st = self.history.get(request)
+        if st is None:
+            return False
+        self.status_pub.publish(st.to_msg())
+        return True
+
+    def _supersede(self, held: Optional[Tuple], why: str) -> None:
+        if held is not None:
+            self._status('superseded', held[-1], why)
 
     def _on_target(self, msg: PointStamped) -> None:
         frame, xyz, stamp = conv.point_stamped(msg)
+        request = self._request_of(proto.stamp_ns(msg.header.stamp))
+        if self._known(request):
+            return
         if self.q is None or self.q_other is None:
-            self._status('ERROR', 'refused: no joint state yet (is the bridge up?)')
+            self._status('refused', request, 'no joint state yet (is the bridge up?)')
             return
         if not conv.finite(xyz):
-            self._status('ERROR', f'refused: non-finite target {xyz.tolist()}')
+            self._status('refused', request, f'non-finite target {xyz.tolist()}')
             return
         frames = {'world': 'world', f'{self.arm.name}_base': 'base',
                   f'{self.arm.name}_base_link': 'base'}
         if frame not in frames:
-            self._status('ERROR', f'refused: unknown frame {frame!r}; use world or '
+            self._status('refused', request, f'unknown frame {frame!r}; use world or '
                          f'{self.arm.name}_base')
             return
-        self.waiting = None  # a new target supersedes one that was waiting
+        # a new target supersedes one that was waiting or queued
+        self._supersede(self.waiting, f'replaced by request {request}')
+        self._supersede(self.queued, f'replaced by request {request}')
+        self.waiting = self.queued = None
         if self.mine is not None and self.mine.end > self._now():
             # the bridge replaces a running trajectory: hold this one until mine has ended
-            self.queued = (xyz, frames[frame], stamp)
-            self._status('OK', f'queued behind the running move (ends t={self.mine.end:.3f} s)',
-                         target=xyz.tolist())
+            self.queued = (xyz, frames[frame], stamp, request)
+            self._status('queued', request, f'behind the running move (ends '
+                         f't={self.mine.end:.3f} s)')
             return
-        self._plan(xyz, frames[frame], stamp)
+        self._plan(xyz, frames[frame], stamp, request)
 
-    def _plan(self, xyz: np.ndarray, frame: str, stamp: float,
+    def _plan(self, xyz: np.ndarray, frame: str, stamp: float, request: int,
               asked: Optional[float] = None) -> None:
         now = self._now()
         start = max(stamp, now + self.lead) if stamp > 0 else now + self.lead
@@ -182,22 +223,20 @@ class Planner(Node):
                              dt=self.traj_cfg['sample_period'],
                              dls_threshold=self.traj_cfg['dls_threshold'],
                              dls_max_damping=self.traj_cfg['dls_max_damping'])
-        except IKError as exc:
-            self._status('ERROR', f'refused: {exc}', target=xyz.tolist())
+        except (IKError, ValueError) as exc:
+            self._status('refused', request, str(exc))
             return
         start = max(start, self._now() + self.lead)  # planning took (sim) time too
         plan = schedule(self.arm, traj, start, self.other, self._other_timeline(start),
                         self.margin, self.leader, self.max_delay)
         if plan is None:
-            self._wait(xyz, frame, asked)
+            self._wait(xyz, frame, asked, request)
             return
         if plan.start - asked > 1e-9:  # count the time spent waiting, not just the last delay
             plan = Plan(plan.traj, plan.start, plan.start - asked)
         self.waiting = None
-        self.mine, self.pending_target = plan, (xyz, frame, asked)
-        kind = 'line' if path_metrics(traj).max_deviation < 1e-4 else 'joint move'
-        self._publish(plan, f'moving to {np.round(xyz, 4).tolist()} ({kind}, '
-                      f'{traj.duration:.2f} s)')
+        self.pending_target = (xyz, frame, asked, request)
+        self._publish(plan, request)
 
     def _on_other_execution(self, msg: DiagnosticStatus) -> None:
         """Track what the bridge really runs for the other arm.
@@ -205,36 +244,39 @@ class Planner(Node):
         A refused trajectory is forgotten (the prior one runs on); one the bridge started
         late is shifted to its actual start.
         """
-        if msg.level == DiagnosticStatus.ERROR and 'refused' in msg.message:
+        st = proto.ExecutionStatus.from_msg(msg)
+        if st.state == 'refused':
             self.theirs = self.theirs_before
-            return
-        late = _lateness(msg)
-        if late > 0 and self.theirs is not None:
-            self.theirs = self.theirs.shifted(late)
+        elif st.late > 0 and self.theirs is not None:
+            self.theirs = self.theirs.shifted(st.late)
 
     def _on_own_execution(self, msg: DiagnosticStatus) -> None:
         """Re-base my move if the bridge started it late, and announce its real end."""
-        late = _lateness(msg)
-        if late <= 0 or self.mine is None:
-            return
-        values = conv.status_values(msg)
-        if abs(float(values['stamp']) - self.mine.start) > 1e-3:
+        st = proto.ExecutionStatus.from_msg(msg)
+        if self.mine is None or st.move != self.mine_id:
             return  # not my current move
-        self.mine = Plan(self.mine.traj, float(values['start']), self.mine.delay + late)
-        self._publish_status(self.mine, f'started {late:.3f} s late by the bridge')
+        if st.state == 'accepted' and st.late > 0:
+            self.mine = Plan(self.mine.traj, st.start, self.mine.delay + st.late)
+            _, request = proto.parse_move_id(st.move)
+            self._status('planned', request, f'started {st.late:.3f} s late by the bridge',
+                         self.mine, self.history[request].kind if request in self.history
+                         else '')
+        elif st.state in ('refused', 'preempted', 'held'):
+            self.mine = None  # nothing of mine runs: the next target is planned at once
 
-    def _wait(self, xyz: np.ndarray, frame: str, asked: float) -> None:
+    def _wait(self, xyz: np.ndarray, frame: str, asked: float, request: int) -> None:
         """Wait for the other arm: it blocks the move even after its committed motion."""
         now = self._now()
-        since = asked
-        if now - since > self.max_wait:
+        if now - asked > self.max_wait:
             self.waiting = None
-            self._status('ERROR', f'refused: {self.other.name} has blocked the move for '
-                         f'{now - since:.1f} s', target=xyz.tolist())
+            self._status('refused', request, f'{self.other.name} has blocked the move for '
+                         f'{now - asked:.1f} s')
             return
-        self.waiting = (xyz, frame, asked)
-        self._status('WARN', f'waiting for {self.other.name} to clear: no start within '
-                     f'{self.max_delay:.0f} s keeps {self.margin:.2f} m', target=xyz.tolist())
+        first = self.waiting is None or self.waiting[-1] != request
+        self.waiting = (xyz, frame, asked, request)
+        if first:
+            self._status('waiting', request, f'{self.other.name} blocks it: no start within '
+                         f'{self.max_delay:.0f} s keeps {self.margin:.2f} m')
 
     def _on_other(self, msg: JointTrajectory) -> None:
         try:
@@ -247,23 +289,23 @@ class Planner(Node):
             t, q = np.concatenate(([0.0], t)), np.vstack([self.q_other, q])
         self.theirs_before, self.theirs = self.theirs, Timeline(start + t, q)
         if self.waiting is not None:  # the other arm moves: maybe it clears the way
-            xyz, frame, asked = self.waiting
-            self._plan(xyz, frame, 0.0, asked)
+            xyz, frame, asked, request = self.waiting
+            self._plan(xyz, frame, 0.0, request, asked)
             return
         if self.leader or self.mine is None or self.mine.start <= now:
             return
         # follower: my committed move has not started; does the new leader move hit it?
         replan = schedule(self.arm, self.mine.traj, self.mine.start, self.other, self.theirs,
                           self.margin, leader=False, max_delay=self.max_delay)
+        xyz, frame, asked, request = self.pending_target
         if replan is None:
             self.mine = None
             self.traj_pub.publish(conv.trajectory_msg(
                 self.arm.joint_names, np.array([0.0]), self.q.reshape(1, 3)))
-            self._wait(*self.pending_target)
+            self._wait(xyz, frame, asked, request)
         elif replan.delay > 0:
-            asked = self.pending_target[2]
-            self.mine = Plan(replan.traj, replan.start, replan.start - asked)
-            self._publish(self.mine, f're-timed for a new {self.other.name} move')
+            self._publish(Plan(replan.traj, replan.start, replan.start - asked), request,
+                          f're-timed for a new {self.other.name} move')
 
 
 def main_left(args=None) -> None:

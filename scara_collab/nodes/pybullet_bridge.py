@@ -5,13 +5,18 @@ runs on sim time, at ``real_time_factor`` times real time, or as fast as the mac
 (``real_time_factor: 0``).
 
 Publishes ``/clock``, ``/joint_states`` (all six joints, ``state_rate``), ``/conveyor/items``
-(MarkerArray), ``/conveyor/events`` (one DiagnosticStatus per item event: spawned, grasped,
-released, sorted, wrong_bin, missed, dropped) and ``/<robot>/execution_status``. Subscribes
+(MarkerArray), ``/conveyor/events`` (one :class:`~scara_collab.nodes.protocol.ItemEvent` per
+item event: spawned, grasped, released, sorted, wrong_bin, missed, dropped; the one source of
+the run's counts) and ``/<robot>/execution_status``
+(:class:`~scara_collab.nodes.protocol.ExecutionStatus` for the move named in the trajectory's
+``header.frame_id``: accepted, refused, finished, preempted, held). Subscribes
 ``/<robot>/joint_trajectory`` (executed like ros2_control's joint trajectory controller: stamp
 zero = start now, else at the stamp; a new trajectory replaces the running one; a bad one is
 refused with the reason and the arm keeps its current command) and ``/emergency_stop``
 (transient local; true = both arms hold). Serves ``/<robot>/gripper`` (std_srvs/SetBool:
-true = grasp, false = release).
+true = grasp, false = release), idempotent: a grasp while holding an item and a release with
+an empty gripper succeed and say so, so a client may repeat a request whose answer was lost.
+Parameter ``faults`` (:mod:`scara_collab.nodes.faults`) can lose or delay its statuses.
 
 Lockstep (:mod:`scara_collab.nodes.lockstep`): the nodes on sim time answer each ``/clock``
 on ``/sim/lockstep``, and the bridge never steps more than ``lockstep_window`` sim seconds
@@ -27,7 +32,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
@@ -39,15 +44,15 @@ from scara_collab.core.kinematics import within_limits
 from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.faults import declare_faults, FaultyPublisher
 from scara_collab.nodes.lockstep import LockstepGate
 from scara_collab.nodes.params import declare_config
-from scara_collab.nodes.runner import run_node
+from scara_collab.nodes.qos import EVENTS, LATCHED
+from scara_collab.nodes.runner import guarded, run_node
 from scara_collab.sim.cell_sim import CellSim
 
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                     reliability=ReliabilityPolicy.RELIABLE)
 STATE_QOS = QoSProfile(depth=10)
-EVENTS_QOS = QoSProfile(depth=100)
 
 
 class PyBulletBridge(Node):
@@ -85,20 +90,24 @@ class PyBulletBridge(Node):
         self._chunk = max(1, int(round(float(self.get_parameter('step_chunk').value) / self.dt)))
         self._anchor: Optional[tuple] = None  # (wall, sim) at the last rate change
 
+        self.faults = declare_faults(self)
+        self.running: Dict[str, tuple] = {}  # robot -> (move id, end) of what it executes
         self.clock_pub = self.create_publisher(ClockMsg, '/clock', STATE_QOS)
         self.state_pub = self.create_publisher(JointState, 'joint_states', STATE_QOS)
         self.items_pub = self.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
-        self.events_pub = self.create_publisher(DiagnosticStatus, 'conveyor/events', EVENTS_QOS)
+        self.events_pub = self.create_publisher(DiagnosticStatus, 'conveyor/events', EVENTS)
         self.status_pub: Dict[str, object] = {}
         for arm in self.cell.arms:
             name = arm.name
-            self.status_pub[name] = self.create_publisher(
-                DiagnosticStatus, f'{name}/execution_status', EVENTS_QOS)
-            self.create_subscription(JointTrajectory, f'{name}/joint_trajectory',
-                                     lambda msg, n=name: self._on_trajectory(n, msg), 10)
-            self.create_service(SetBool, f'{name}/gripper',
-                                lambda req, res, n=name: self._on_gripper(n, req, res))
-        self.create_subscription(Bool, 'emergency_stop', self._on_estop, LATCHED)
+            self.status_pub[name] = FaultyPublisher(self, self.faults, self.create_publisher(
+                DiagnosticStatus, f'{name}/execution_status', EVENTS))
+            self.create_subscription(
+                JointTrajectory, f'{name}/joint_trajectory',
+                guarded(self, lambda msg, n=name: self._on_trajectory(n, msg)), 10)
+            self.create_service(
+                SetBool, f'{name}/gripper',
+                guarded(self, lambda req, res, n=name: self._on_gripper(n, req, res), True))
+        self.create_subscription(Bool, 'emergency_stop', guarded(self, self._on_estop), LATCHED)
         window = float(self.get_parameter('lockstep_window').value)
         if 0 < window < self._periods['clock'] - 1e-9:
             raise ValueError(f'lockstep_window {window} s is shorter than the clock period '
@@ -182,9 +191,12 @@ class PyBulletBridge(Node):
                                                      self.cell.item_size, self.sim.time))
             self._next['markers'] += self._periods['markers']
         for ev in self.sim.pop_events():
-            self.events_pub.publish(conv.status(
-                ev.kind, 'OK', f'item {ev.item} ({ev.cls}) {ev.kind}',
-                {'item': ev.item, 'class': ev.cls, 'robot': ev.robot, 'time': f'{ev.time:.3f}'}))
+            self.events_pub.publish(proto.ItemEvent(ev.kind, ev.item, ev.cls, ev.time, ev.robot,
+                                                    ev.cause).to_msg())
+        for robot, (move, end) in list(self.running.items()):
+            if self.sim.time >= end - 1e-9:
+                del self.running[robot]
+                self._report(robot, 'finished', move)
 
     def _publish_all(self) -> None:
         for k in self._next:
@@ -192,30 +204,32 @@ class PyBulletBridge(Node):
         self._publish_due()
 
     # --- callbacks ------------------------------------------------------------------------
-    def _report(self, robot: str, level: str, message: str, **values) -> None:
-        if level != 'OK':
-            self.get_logger().warning(f'{robot}: {message}')
-        self.status_pub[robot].publish(conv.status(
-            f'{robot}/execution', level, message, {'time': f'{self.sim.time:.3f}', **values}))
+    def _report(self, robot: str, state: str, move: str, reason: str = '',
+                **times) -> None:
+        st = proto.ExecutionStatus(robot, state, move, round(self.sim.time, 6), reason, **times)
+        if st.level() != 'OK':
+            self.get_logger().warning(f'{robot}: {st.text()}')
+        self.status_pub[robot].publish(st.to_msg())
 
     _keeps = 'not executed: the arm keeps its current command'
 
     def _on_trajectory(self, robot: str, msg: JointTrajectory) -> None:
         arm = self.cell.arm(robot)
+        move = msg.header.frame_id
         try:
             stamp, t, q, qd, qdd = conv.trajectory_arrays(msg, arm.joint_names)
         except conv.MessageError as exc:
-            self._report(robot, 'ERROR', f'trajectory refused: {exc}; {self._keeps}')
+            self._report(robot, 'refused', move, f'{exc}; {self._keeps}')
             return
         now = self.sim.time
         start = now if stamp == 0.0 else stamp
         if start + t[-1] < now:
-            self._report(robot, 'ERROR', f'trajectory refused: it ended {now - start - t[-1]:.3f}'
-                         f' s ago; {self._keeps}')
+            self._report(robot, 'refused', move, f'it ended {now - start - t[-1]:.3f} s ago; '
+                         f'{self._keeps}')
             return
         if start < now - self.dt:
-            self._report(robot, 'WARN', f'start {start:.3f} s is {now - start:.3f} s late; '
-                         'starting now')
+            self.get_logger().warning(f'{robot}: move {move or "(no id)"} start {start:.3f} s '
+                                      f'is {now - start:.3f} s late; starting now')
             start = now
         if t[0] > 0.0:  # like ros2_control: move from the current state to the first point
             q_now, qd_now = self.sim.arm_state(robot)
@@ -226,25 +240,39 @@ class PyBulletBridge(Node):
         try:
             self.sim.execute(robot, start + t, q, qd, qdd)
         except ValueError as exc:
-            self._report(robot, 'ERROR', f'trajectory refused: {exc}; {self._keeps}')
+            self._report(robot, 'refused', move, f'{exc}; {self._keeps}')
             return
-        self._report(robot, 'OK', f'executing {len(t)} points from t={start:.3f} s '
-                     f'for {t[-1]:.3f} s', start=f'{start:.4f}', end=f'{start + t[-1]:.4f}',
-                     stamp=f'{stamp:.4f}')
+        old = self.running.get(robot)
+        if old is not None and old[0] != move:
+            self._report(robot, 'preempted', old[0], f'replaced by move {move or "(no id)"}')
+        self.running[robot] = (move, start + t[-1])
+        self._report(robot, 'accepted', move, start=start, end=start + t[-1],
+                     stamp=stamp if stamp > 0 else None)
 
     def _on_gripper(self, robot: str, req: SetBool.Request, res: SetBool.Response):
-        ok, message = self.sim.grasp(robot) if req.data else self.sim.release(robot)
-        res.success, res.message = bool(ok), message
-        if not ok:
-            self.get_logger().warning(f'{robot} gripper: {message}')
+        held = self.sim.held_item(robot)
+        if req.data and held is not None:  # idempotent: a repeated grasp is not an error
+            res.success, res.message = True, f'{robot} already holds item {held}'
+        elif not req.data and held is None:
+            res.success, res.message = True, f'{robot} holds nothing (already released)'
+        else:
+            ok, message = self.sim.grasp(robot) if req.data else self.sim.release(robot)
+            res.success, res.message = bool(ok), message
+            if not ok:
+                self.get_logger().warning(f'{robot} gripper: {message}')
         return res
 
     def _on_estop(self, msg: Bool) -> None:
-        self.sim.set_estop(bool(msg.data))
-        level = 'WARN' if msg.data else 'OK'
+        on = bool(msg.data)
+        if on == self.sim.estop:
+            return
+        self.sim.set_estop(on)
         for arm in self.cell.arms:
-            self._report(arm.name, level, 'emergency stop: holding' if msg.data
-                         else 'emergency stop cleared')
+            if on:
+                move = self.running.pop(arm.name, ('', 0.0))[0]
+                self._report(arm.name, 'held', move, 'emergency stop: holding')
+            else:
+                self._report(arm.name, 'cleared', '', 'emergency stop cleared')
 
     def destroy_node(self) -> bool:
         """Close the simulator with the node."""

@@ -1,19 +1,27 @@
-"""Replication manager: leader-follower mirroring across the belt.
+"""Replication manager: leader-follower mirroring across the belt, and the mirror error's source.
 
 On ``/collab/target`` (PointStamped, frame ``world`` or ``<leader>_base``) it sends the leader's
 target to ``/<leader>/target`` and the mirrored target ``P_R = B_R + diag(1, -1, 1)(P_L - B_L)``
-to ``/<follower>/target`` with one common future start stamp, so both arms start at the same
-sim instant (unless the follower's planner must delay it for safety, which its status says).
-``/replication_manager/enable`` (SetBool) turns mirroring on and off; off, only the leader
-moves. From ``/joint_states`` it measures the mirror error (follower tool vs the mirror of the
-leader's tool) and publishes it on ``/replication_manager/mirror_error`` while mirroring is on;
-``/replication_manager/status`` reports each replicated target.
+to ``/<follower>/target`` with the *same* stamp: the stamp is the requested start and the
+move's identity (:mod:`scara_collab.nodes.protocol`), so both planners plan the same request
+and both arms start at the same sim instant (unless the follower's planner must delay it for
+safety, which its status says). A target stamped zero gets ``now + collab_lead``.
+``~/enable`` (SetBool, idempotent) turns mirroring on and off; off, only the leader moves.
+
+The mirror error (follower tool vs the mirror image of the leader tool, from ``/joint_states``)
+is measured here and only here. A replicated request is *in step* when the bridge accepted
+both arms' moves for it with the same start (``/<robot>/execution_status``); while both run
+such a pair, every state's error counts towards ``error_max``. Requests whose moves did not
+start together are counted (``not_in_step``) with the reason. ``~/mirror_error`` (Float64)
+carries the live error while mirroring is on, ``~/status``
+(:class:`~scara_collab.nodes.protocol.MirrorStatus`, 1 Hz sim time) the figures.
 """
+from typing import Dict, Optional, Tuple
+
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 import numpy as np
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool
@@ -22,81 +30,148 @@ from scara_collab.core.kinematics import base_to_world, fk
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv, lockstep
-from scara_collab.nodes.runner import run_node
+from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.qos import EVENTS, LATEST
+from scara_collab.nodes.runner import guarded, run_node
+
+SAME_START = 1e-6  # s: two starts closer than this are the same physics instant
+MIRRORED_START = 0.005  # m: a pair that starts with a larger error did not start mirrored
 
 
 class ReplicationManager(Node):
-    """Mirror the leader's targets onto the follower."""
+    """Mirror the leader's targets onto the follower; measure the in-step mirror error."""
 
     def __init__(self, **kwargs):
         super().__init__('replication_manager', **kwargs)
         self.declare_parameter('profile', '')
-        self.declare_parameter('start_lead', 0.5)
+        self.declare_parameter('collab_lead', 0.5)
         self.declare_parameter('enabled', True)
         self.cell = load_cell(self.get_parameter('profile').value or None)
-        self.lead = float(self.get_parameter('start_lead').value)
+        self.lead = float(self.get_parameter('collab_lead').value)
         if not self.lead > 0:
-            raise ValueError(f'start_lead must be > 0 s, got {self.lead}')
+            raise ValueError(f'collab_lead must be > 0 s, got {self.lead}')
         self.enabled = bool(self.get_parameter('enabled').value)
         lead, foll = self.cell.leader, self.cell.follower
+        # request -> {robot: (start, end)} as the bridge accepted them
+        self.accepted: Dict[int, Dict[str, Tuple[float, float]]] = {}
+        # (start, end, started mirrored?) of the pair both arms run in step
+        self.in_step: Optional[Tuple[float, float, Optional[bool]]] = None
+        self.current: Dict[str, Optional[str]] = {}  # robot -> move id the bridge runs
+        self.error: Optional[float] = None
+        self.error_max: Optional[float] = None
+        self.error_max_time: Optional[float] = None
+        self.in_step_moves = 0
+        self.not_in_step = 0
+        self.last_reason = ''
         self.lead_pub = self.create_publisher(PointStamped, f'/{lead.name}/target', 10)
         self.foll_pub = self.create_publisher(PointStamped, f'/{foll.name}/target', 10)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
         self.error_pub = self.create_publisher(Float64, '~/mirror_error', 10)
-        self.create_subscription(PointStamped, '/collab/target', self._on_target, 10)
-        self.create_subscription(JointState, '/joint_states', self._on_state,
-                                 QoSProfile(depth=1))
-        self.create_service(SetBool, '~/enable', self._on_enable)
+        self.create_subscription(PointStamped, '/collab/target', guarded(self, self._on_target),
+                                 10)
+        self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
+                                 LATEST)
+        for arm in self.cell.arms:
+            self.create_subscription(DiagnosticStatus, f'/{arm.name}/execution_status',
+                                     guarded(self, self._on_execution), EVENTS)
+        self.create_service(SetBool, '~/enable', guarded(self, self._on_enable, True))
+        self.create_timer(1.0, guarded(self, self._publish_status))
         lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'replicating {lead.name} -> {foll.name} '
                                f'({"on" if self.enabled else "off"})')
 
-    def _status(self, level: str, message: str, **values) -> None:
-        if level != 'OK':
-            self.get_logger().warning(message)
-        self.status_pub.publish(conv.status('replication_manager', level, message, values))
+    def _now(self) -> float:
+        return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_enable(self, req: SetBool.Request, res: SetBool.Response) -> SetBool.Response:
         self.enabled = bool(req.data)
         res.success, res.message = True, f'mirroring {"on" if self.enabled else "off"}'
-        self._status('OK', res.message)
+        self.get_logger().info(res.message)
         return res
 
     def _on_target(self, msg: PointStamped) -> None:
-        frame, xyz, stamp = conv.point_stamped(msg)
+        frame, xyz, _ = conv.point_stamped(msg)
         lead, foll = self.cell.leader, self.cell.follower
         if not conv.finite(xyz):
-            self._status('ERROR', f'refused: non-finite target {xyz.tolist()}')
-            return
+            raise ValueError(f'non-finite target {xyz.tolist()}')
         if frame in (f'{lead.name}_base', f'{lead.name}_base_link'):
             xyz = base_to_world(lead, xyz)
         elif frame != 'world':
-            self._status('ERROR', f'refused: unknown frame {frame!r}; use world or '
-                         f'{lead.name}_base')
-            return
-        now = self.get_clock().now().nanoseconds * 1e-9
-        start = stamp if stamp > now else now + self.lead
-        self.lead_pub.publish(conv.make_point_stamped(xyz, 'world', start))
+            raise ValueError(f'unknown frame {frame!r}; use world or {lead.name}_base')
+        stamp = msg.header.stamp
+        if proto.stamp_ns(stamp) == 0:  # "now": one common start for both arms
+            stamp = conv.to_time(self._now() + self.lead)
+        out = conv.make_point_stamped(xyz, 'world')
+        out.header.stamp = stamp  # passed through exactly: it is the move's id
+        self.lead_pub.publish(out)
         if not self.enabled:
-            self._status('OK', f'mirroring off: {lead.name} only', start=f'{start:.3f}')
             return
-        mirrored = mirror_point(lead, foll, xyz)
-        self.foll_pub.publish(conv.make_point_stamped(mirrored, 'world', start))
-        self._status('OK', f'{lead.name} -> {np.round(xyz, 4).tolist()}, {foll.name} -> '
-                     f'{np.round(mirrored, 4).tolist()} at t={start:.3f} s',
-                     start=f'{start:.3f}', leader=xyz.tolist(), follower=mirrored.tolist())
+        mirrored = conv.make_point_stamped(mirror_point(lead, foll, xyz), 'world')
+        mirrored.header.stamp = stamp
+        self.foll_pub.publish(mirrored)
+
+    def _on_execution(self, msg: DiagnosticStatus) -> None:
+        st = proto.ExecutionStatus.from_msg(msg)
+        if st.state in ('preempted', 'held', 'refused', 'finished'):
+            if self.current.get(st.robot) == st.move or st.state == 'held':
+                self.current[st.robot] = None  # that arm no longer runs the pair's move
+                self.in_step = None if st.state != 'finished' else self.in_step
+            return
+        if st.state != 'accepted':
+            return
+        self.current[st.robot] = st.move
+        if not st.move:  # a trajectory without a request: not a replicated move
+            self.in_step = None
+            return
+        robot, request = proto.parse_move_id(st.move)
+        pair = self.accepted.setdefault(request, {})
+        pair[robot] = (st.start, st.end)
+        while len(self.accepted) > 32:
+            self.accepted.pop(next(iter(self.accepted)))
+        if len(pair) < len(self.cell.arms):
+            self.in_step = None  # one arm runs a move the other does not (yet)
+            return
+        (s1, e1), (s2, e2) = pair.values()
+        if abs(s1 - s2) < SAME_START and abs(e1 - e2) < 1e-3:  # same start, same motion
+            self.in_step = (s1, max(e1, e2), None)
+            self.in_step_moves += 1
+        else:
+            self.in_step = None
+            self.not_in_step += 1
+            self.last_reason = (f'request {request}: the moves run {s1:.3f}..{e1:.3f} and '
+                                f'{s2:.3f}..{e2:.3f} s (the follower yielded or came late)')
 
     def _on_state(self, msg: JointState) -> None:
         if not self.enabled:
             return
         lead, foll = self.cell.leader, self.cell.follower
-        try:
-            ql, _ = conv.joint_state_arrays(msg, lead.joint_names)
-            qf, _ = conv.joint_state_arrays(msg, foll.joint_names)
-        except conv.MessageError:
-            return
-        err = np.linalg.norm(fk(foll, qf) - mirror_point(lead, foll, fk(lead, ql)))
-        self.error_pub.publish(Float64(data=float(err)))
+        ql, _ = conv.joint_state_arrays(msg, lead.joint_names)
+        qf, _ = conv.joint_state_arrays(msg, foll.joint_names)
+        err = float(np.linalg.norm(fk(foll, qf) - mirror_point(lead, foll, fk(lead, ql))))
+        self.error = err
+        self.error_pub.publish(Float64(data=err))
+        t = conv.to_sec(msg.header.stamp)
+        if self.in_step is not None and self.in_step[0] <= t:
+            if self.in_step[2] is None:  # the pair's first state: did it start mirrored?
+                self.in_step = (*self.in_step[:2], err <= MIRRORED_START)
+                if not self.in_step[2]:
+                    self.in_step_moves -= 1
+                    self.not_in_step += 1
+                    self.last_reason = (f'a pair started {err * 1e3:.1f} mm from mirrored at '
+                                        f't={t:.3f} s (the arms came from unmirrored poses)')
+            if t > self.in_step[1] or not self.in_step[2]:
+                self.in_step = None
+            elif self.error_max is None or err > self.error_max:
+                self.error_max, self.error_max_time = err, t
+
+    def status(self) -> proto.MirrorStatus:
+        """Return the mirror figures so far."""
+        return proto.MirrorStatus(self.enabled, round(self._now(), 3), self.error,
+                                  self.error_max, self.error_max_time, self.in_step_moves,
+                                  self.not_in_step, self.last_reason)
+
+    def _publish_status(self) -> None:
+        self.status_pub.publish(self.status().to_msg())
 
 
 def main(args=None) -> None:

@@ -68,6 +68,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from scara_collab.core.config import load_config
 from scara_collab.core.paths import config_dir
+from scara_collab.nodes.faults import call_with_faults, FaultPlan, parse_faults
 from scara_collab.run.recorder import RunRecorder
 from scara_collab.run.report import format_progress, format_report
 
@@ -186,6 +187,14 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument('--profile', choices=profiles, default=None,
                    help='link profile (default: config/cell.yaml)')
     p.add_argument('--seed', type=int, default=None, help='item feed seed (bridge item_seed)')
+    p.add_argument('--feed-interval', type=float, default=None, metavar='S',
+                   help='sim seconds between items once the job runs (default: '
+                   'config/simulation.yaml feed_interval); below ~1.5 s the feed is faster '
+                   'than the arms can take (capacity runs)')
+    p.add_argument('--fault', action='append', default=[], metavar='SPEC',
+                   help='inject a fault, e.g. drop:/scara_left/gripper:2 (lose the first 2 '
+                   'gripper responses), delay:/scara_right/planner_status:3:0.5, '
+                   'drop:/automation_manager/start:1; repeatable (scara_collab.nodes.faults)')
     p.add_argument('--quiet', action='store_true',
                    help='no stage or progress lines; errors and the report only')
     p.add_argument('--ready-timeout', type=float, default=60.0, metavar='S',
@@ -207,6 +216,12 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error('--rtf must be >= 0')
     if args.launch_rtf < 0:
         p.error('--launch-rtf must be >= 0')
+    if args.feed_interval is not None and not args.feed_interval > 0:
+        p.error('--feed-interval must be > 0')
+    try:
+        parse_faults(args.fault)
+    except ValueError as exc:
+        p.error(f'--fault: {exc}')
     if args.step_chunk is not None and not args.step_chunk > 0:
         p.error('--step-chunk must be > 0')
     if args.viewer is not None and not 0 < args.viewer < 65536:
@@ -255,6 +270,10 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
             auto['mode'] = args.mode
         out.append(Stage('automation_manager', f'{AUTOMATION_MODULE}:main', ('automation',),
                          'service /automation_manager/start', auto))
+    faults = getattr(args, 'fault', [])
+    if faults:  # every node applies the entries naming its own publishers and clients
+        for stage in out:
+            stage.params['faults'] = '[' + ','.join(f"'{f}'" for f in faults) + ']'
     port = getattr(args, 'viewer', None)
     if port is not None:
         out.append(Stage('cell_viewer', 'scara_collab.nodes.cell_viewer:main', (),
@@ -342,6 +361,7 @@ class Launcher:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.recorder)
         self._clients: Dict[str, object] = {}
+        self.faults = FaultPlan(getattr(args, 'fault', []))
         self._bridge_params: Optional[AsyncParameterClient] = None
         self._next_poll = 0.0
         self._next_checkpoint = 0.0
@@ -399,16 +419,34 @@ class Launcher:
         return self._clients[name]
 
     def call(self, srv_type, name: str, request, timeout: float, what: str,
-             supervise: bool = True):
-        """Call a service and return the response (waits for the service first)."""
+             supervise: bool = True, attempts: int = 4, attempt_timeout: float = 5.0):
+        """Call a service and return the response, repeating a request whose answer is lost.
+
+        Waits for the service first, then sends the request up to ``attempts`` times,
+        ``attempt_timeout`` wall seconds apart.
+
+        A response can be lost (Fast DDS drops one whose client reader is not matched yet),
+        so the request is repeated; the servers are idempotent, so a repeat is safe.
+        """
         cli = self.client(srv_type, name)
         self.wait_until(cli.service_is_ready, timeout,
                         lambda: f'{what}: service {name} not available after {timeout:g} s',
                         supervise)
-        future = cli.call_async(request)
-        self.wait_until(future.done, timeout,
-                        lambda: f'{what}: {name} did not answer within {timeout:g} s', supervise)
-        return future.result()
+        for attempt in range(1, attempts + 1):
+            answer: list = []
+            call_with_faults(self.node, self.faults, cli, request, answer.append)
+            try:
+                self.wait_until(lambda: bool(answer), attempt_timeout, lambda: '', supervise)
+            except RunEnd as exc:
+                if exc.reason or attempt == attempts:
+                    if not exc.reason:
+                        raise RunEnd(f'{what}: {name} did not answer {attempts} requests, '
+                                     f'{attempt_timeout:g} s apart') from None
+                    raise
+                self.console.say(f'[launch] {name}: no answer in {attempt_timeout:g} s; '
+                                 f'asking again ({attempt + 1}/{attempts})')
+                continue
+            return answer[0]
 
     # --- readiness -------------------------------------------------------------------------
     def _subscribed(self, node_name: str, topic: str) -> bool:
@@ -546,7 +584,9 @@ class Launcher:
         t0 = self.recorder.start_job()
         release = {}
         if self.args.mode != 'idle':  # the belt starts feeding now
-            release['feed_interval'] = float(load_config('simulation')['feed_interval'])
+            feed = getattr(self.args, 'feed_interval', None)
+            release['feed_interval'] = float(load_config('simulation')['feed_interval']
+                                             if feed is None else feed)
         if self.launch_rtf != self.rtf:
             release['real_time_factor'] = self.rtf
         if release:
@@ -605,7 +645,8 @@ class Launcher:
             return
         try:
             res = self.call(Trigger, '/automation_manager/stop', Trigger.Request(), 5.0,
-                            'automation_manager', supervise=False)
+                            'automation_manager', supervise=False, attempts=2,
+                            attempt_timeout=2.0)
         except RunEnd as exc:
             self.recorder.extra['job_stop'] = f'not stopped: {exc.reason}'
             return

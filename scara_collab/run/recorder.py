@@ -1,8 +1,20 @@
 """``run_recorder``: the node inside the launcher that records a run (sim time).
 
 Subscribes ``/joint_states`` (every message becomes a row of ``timeseries.csv``),
-``/conveyor/events`` (``events.csv``), ``/automation_manager/stats`` (the last key-values go
-into the summary) and the latched ``/emergency_stop``. The numbers are computed by
+``/conveyor/events`` (``events.csv``), the latched ``/emergency_stop``, and the statuses that
+own the run's figures (:mod:`scara_collab.nodes.protocol`), one source per figure:
+
+================================  =====================================================
+summary field                     source
+================================  =====================================================
+sorted, missed, dropped, ...      the bridge's ``/conveyor/events`` inside the job window
+items_per_minute                  those counts over the window
+                                  (:func:`scara_collab.core.job.items_per_minute`)
+min_separation_m                  ``/collision_monitor/status`` (its minimum)
+mirror_error_max_m                ``/replication_manager/status`` (in-step moves)
+job (give-ups, retries, phases)   ``/automation_manager/stats``
+================================  =====================================================
+ The numbers are computed by
 :mod:`scara_collab.run.telemetry`; the summary and the plots are written by
 :mod:`scara_collab.run.report` when the run ends (:meth:`RunRecorder.finish`), or with
 ``interrupted: true`` when the recorder is closed before that (:meth:`RunRecorder.close`).
@@ -25,18 +37,19 @@ from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
 from scara_collab.core.config import load_config
+from scara_collab.core.job import items_per_minute
 from scara_collab.core.model import CellModel, load_cell
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.qos import LATCHED
 from scara_collab.run import report
-from scara_collab.run.telemetry import parse_value, RunLog
+from scara_collab.run.telemetry import RunLog
 
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                     reliability=ReliabilityPolicy.RELIABLE)
 STATE_QOS = QoSProfile(depth=200)   # a burst of joint states while the launcher is busy
 EVENTS_QOS = QoSProfile(depth=100)
 MODES = ('idle', 'single', 'collaborative', 'mirrored')
@@ -69,6 +82,8 @@ class RunRecorder(Node):
         self.directory = self.log.directory
         self.stats: Dict[str, object] = {}
         self.stats_time: Optional[float] = None
+        self.monitor: Optional[proto.MonitorStatus] = None
+        self.mirror: Optional[proto.MirrorStatus] = None
         self.estops: List[float] = []
         self.estop_active = False
         self.extra: Dict[str, object] = {}
@@ -87,6 +102,10 @@ class RunRecorder(Node):
         self.create_subscription(JointState, '/joint_states', self.on_joint_state, STATE_QOS)
         self.create_subscription(DiagnosticStatus, '/conveyor/events', self.on_event, EVENTS_QOS)
         self.create_subscription(DiagnosticStatus, '/automation_manager/stats', self.on_stats, 10)
+        self.create_subscription(DiagnosticStatus, '/collision_monitor/status', self.on_monitor,
+                                 10)
+        self.create_subscription(DiagnosticStatus, '/replication_manager/status',
+                                 self.on_mirror, 10)
         self.create_subscription(Bool, '/emergency_stop', self.on_estop, LATCHED)
 
     # --- time ------------------------------------------------------------------------------
@@ -124,25 +143,46 @@ class RunRecorder(Node):
         self.log.add_state(conv.to_sec(msg.header.stamp), q[:3], q[3:])
 
     def on_event(self, msg: DiagnosticStatus) -> None:
-        """Record a conveyor event (``name`` = kind; values item, class, robot, time)."""
+        """Record a conveyor event (:class:`~scara_collab.nodes.protocol.ItemEvent`)."""
         if not self.recording:
             return
-        v = conv.status_values(msg)
         try:
-            t = float(v.get('time', 'nan'))
-        except ValueError:
-            t = math.nan
-        if not math.isfinite(t):
-            t = self.sim_time
-        self.log.add_event(t, msg.name, v.get('item', ''), v.get('class', ''),
-                           v.get('robot', ''))
+            ev = proto.ItemEvent.from_msg(msg)
+        except proto.ProtocolError as exc:
+            self.get_logger().warning(f'ignoring an item event: {exc}', throttle_duration_sec=5.0)
+            return
+        t = ev.time if math.isfinite(ev.time) else self.sim_time
+        self.log.add_event(t, ev.kind, ev.item, ev.cls, ev.robot, ev.cause)
 
     def on_stats(self, msg: DiagnosticStatus) -> None:
-        """Keep the last ``/automation_manager/stats`` key-values (typed)."""
+        """Keep the job's own figures (:class:`~scara_collab.nodes.protocol.JobStats`)."""
         if not self.recording:
             return
-        self.stats = {k: parse_value(v) for k, v in conv.status_values(msg).items()}
+        try:
+            st = proto.JobStats.from_msg(msg)
+        except proto.ProtocolError as exc:
+            self.get_logger().warning(f'ignoring job stats: {exc}', throttle_duration_sec=5.0)
+            return
+        self.stats = {'give_ups': st.give_ups, 'retries': st.retries,
+                      'last_give_up': st.last_give_up, 'phases': st.phases,
+                      'running': st.running, 'time': st.time}
         self.stats_time = self.sim_time
+
+    def on_monitor(self, msg: DiagnosticStatus) -> None:
+        """Keep the collision monitor's figures (the minimum separation's source)."""
+        try:
+            self.monitor = proto.MonitorStatus.from_msg(msg)
+        except proto.ProtocolError as exc:
+            self.get_logger().warning(f'ignoring monitor status: {exc}',
+                                      throttle_duration_sec=5.0)
+
+    def on_mirror(self, msg: DiagnosticStatus) -> None:
+        """Keep the replication manager's figures (the mirror error's source)."""
+        try:
+            self.mirror = proto.MirrorStatus.from_msg(msg)
+        except proto.ProtocolError as exc:
+            self.get_logger().warning(f'ignoring mirror status: {exc}',
+                                      throttle_duration_sec=5.0)
 
     def on_estop(self, msg: Bool) -> None:
         """Count emergency stops (rising edges of ``/emergency_stop``)."""
@@ -183,25 +223,36 @@ class RunRecorder(Node):
         """Numbers for the live progress line (job sim s, counts, separation, RTF)."""
         self.log.flush()
         t_start, t_end, wall_start, wall_end = self.window()
-        counts, _ = self.log.counts(t_start, t_end, self.stats)
+        counts = self.log.event_counts(t_start, t_end)
         wall = (wall_end - wall_start) if wall_start is not None else 0.0
         return {'sim': t_end - t_start, 'sorted': counts['sorted'], 'missed': counts['missed'],
-                'items_per_minute': counts['items_per_minute'],
-                'min_separation_m': self.log.min_distance if self.log.rows else None,
+                'items_per_minute': items_per_minute(counts['sorted'], t_end - t_start),
+                'min_separation_m': self.separation()[0],
                 'rtf': (t_end - t_start) / wall if wall > 0.5 else None}
+
+    def separation(self):
+        """Return ``(minimum m, time s, source)`` of the arm separation.
+
+        The collision monitor's, or (no monitor heard) the recorded states' own, labelled so.
+        """
+        if self.monitor is not None and self.monitor.minimum is not None:
+            return self.monitor.minimum, self.monitor.minimum_time, 'collision_monitor'
+        if self.log.rows:
+            return self.log.min_distance, self.log.min_distance_time, \
+                'recorded joint states (no collision monitor status heard)'
+        return None, None, None
 
     def build_summary(self, exit_reason: str, interrupted: bool) -> Dict[str, object]:
         """Return the summary of the run so far (the fields of ``summary.json``)."""
         self.log.flush()
         t_start, t_end, wall_start, wall_end = self.window()
-        counts, source = self.log.counts(t_start, t_end, self.stats)
+        counts = self.log.event_counts(t_start, t_end)
         sim_seconds = t_end - t_start
         wall = (wall_end - wall_start) if wall_start is not None else 0.0
         log = self.log
         mirrored = self.mode == 'mirrored' and log.rows > 0
-        whole = log.max_mirror_error if mirrored else None
-        in_step = self.stats.get('mirror_error_max_m') if mirrored else None
-        in_step = in_step if isinstance(in_step, float) else None
+        sep, sep_time, sep_source = self.separation()
+        mirror = self.mirror if mirrored else None
         summary: Dict[str, object] = {
             'mode': self.mode,
             'profile': self.profile or self.cell.profile,
@@ -209,21 +260,27 @@ class RunRecorder(Node):
             'wall_seconds': wall,
             'real_time_factor': sim_seconds / wall if wall > 0 else None,
             **counts,
-            'counts_source': source,
-            'min_separation_m': log.min_distance if log.rows else None,
-            'min_separation_time': log.min_distance_time,
+            'in_progress': counts['spawned'] - sum(counts[k] for k in proto.COUNTED
+                                                   if k != 'spawned'),
+            'items_per_minute': items_per_minute(counts['sorted'], sim_seconds),
+            'counts_source': 'pybullet_bridge /conveyor/events in the job window',
+            'min_separation_m': sep,
+            'min_separation_time': sep_time,
+            'min_separation_source': sep_source,
             'safety_margin_m': self.cell.safety_margin,
-            'margin_ok': bool(log.min_distance >= self.cell.safety_margin) if log.rows else None,
-            # the job's figure (moves both arms run in step) when it reports one; the whole
-            # series also holds the moments the arms are not meant to mirror (one parks)
-            'mirror_error_max_m': in_step if in_step is not None else whole,
-            'mirror_error_source': None if whole is None else (
-                'automation_manager, in-step moves' if in_step is not None else 'whole run'),
-            'mirror_error_whole_run_max_m': whole,
-            'mirror_error_whole_run_time': log.max_mirror_error_time if whole is not None
-            else None,
+            'margin_ok': None if sep is None else bool(sep >= self.cell.safety_margin),
+            'mirror_error_max_m': None if mirror is None else mirror.error_max,
+            'mirror_error_source': None if mirror is None else
+            'replication_manager, in-step moves',
+            'mirror_in_step_moves': None if mirror is None else mirror.in_step_moves,
+            'mirror_not_in_step': None if mirror is None else mirror.not_in_step,
+            'mirror_not_in_step_reason': None if mirror is None else mirror.last_reason,
+            'mirror_error_whole_run_max_m': log.max_mirror_error if mirrored else None,
+            'mirror_error_whole_run_time': log.max_mirror_error_time if mirrored else None,
             'emergency_stops': len(self.estops),
             'emergency_stop_times': list(self.estops),
+            'emergency_stop_reason': None if self.monitor is None or not self.monitor.stopped
+            else self.monitor.reason,
             'interrupted': bool(interrupted),
             'exit_reason': exit_reason,
             'job_start_sim_time': self.job_start,
@@ -231,9 +288,9 @@ class RunRecorder(Node):
             'joint_state_rows': log.rows,
             'joint_states_missing': log.missing,
             'largest_gap_s': log.largest_gap,
-            'events': log.event_counts(t_start, t_end),
-            'stats': dict(self.stats),
-            'stats_time': self.stats_time,
+            'events': counts,
+            'job': dict(self.stats),
+            'job_time': self.stats_time,
             'output': str(self.directory),
         }
         summary.update(self.extra)

@@ -267,9 +267,11 @@ def format_progress(p: Dict, duration: float) -> str:
 
 def _mirror_note(s: Dict) -> str:
     whole = s.get('mirror_error_whole_run_max_m')
-    if s.get('mirror_error_source') != 'automation_manager, in-step moves' or whole is None:
+    if not s.get('mirror_error_source') or whole is None:
         return ''
-    return (f' over the moves the arms ran in step; {whole * 1e3:.2f} mm over the whole run '
+    return (f' over {s.get("mirror_in_step_moves")} moves the arms ran in step '
+            f'({s.get("mirror_not_in_step")} not in step); {whole * 1e3:.2f} mm over the whole '
+            'run '
             f'(t={_num(s.get("mirror_error_whole_run_time"), ".1f")} s, arms not in step)')
 
 
@@ -289,7 +291,9 @@ def format_report(s: Dict) -> str:
         f'  items          sorted {s.get("sorted")}   missed {s.get("missed")}   wrong bin '
         f'{s.get("wrong_bin")}   dropped {s.get("dropped")}   (spawned {s.get("spawned")}; '
         f'counts from {s.get("counts_source")})',
-        f'  throughput     {_num(s.get("items_per_minute"), ".1f")} items/min',
+        f'  throughput     {_num(s.get("items_per_minute"), ".1f")} items/min   (job: '
+        f'{(s.get("job") or {}).get("give_ups", "n/a")} give-ups, '
+        f'{(s.get("job") or {}).get("retries", "n/a")} retries)',
         f'  min arm sep.   {_num(sep, ".3f", "n/a (no joint states)")}'
         + ('' if sep is None else ' m') + verdict,
         '  mirror error   ' + ('n/a (mirrored mode only)' if mirror is None

@@ -33,20 +33,21 @@ from scara_collab.core.model import CellModel
 
 TIMESERIES = 'timeseries.csv'
 EVENTS = 'events.csv'
-EVENT_COLUMNS = ('time', 'kind', 'item', 'class', 'robot')
+EVENT_COLUMNS = ('time', 'kind', 'item', 'class', 'robot', 'cause')
 COUNTED = ('spawned', 'sorted', 'missed', 'wrong_bin', 'dropped')
 MIRROR_ERROR = 'mirror_error_m'
 ARM_DISTANCE = 'arm_distance_m'
 
 
 class Event(NamedTuple):
-    """One conveyor event: sim time (s), kind, item id, item class, robot ('' if none)."""
+    """One conveyor event: sim time (s), kind, item id, item class, robot ('' if none), cause."""
 
     time: float
     kind: str
     item: str
     cls: str
     robot: str
+    cause: str = ''
 
 
 def state_columns(cell: CellModel) -> List[str]:
@@ -168,13 +169,14 @@ class RunLog:
         if len(self._t) >= self.batch:
             self.flush()
 
-    def add_event(self, t: float, kind: str, item='', cls: str = '', robot: str = '') -> None:
+    def add_event(self, t: float, kind: str, item='', cls: str = '', robot: str = '',
+                  cause: str = '') -> None:
         """Record one conveyor event and flush it to ``events.csv``."""
         if self.closed:
             return
-        ev = Event(float(t), str(kind), str(item), str(cls), str(robot))
+        ev = Event(float(t), str(kind), str(item), str(cls), str(robot), str(cause))
         self.events.append(ev)
-        self._ev_csv.writerow([f'{ev.time:.3f}', ev.kind, ev.item, ev.cls, ev.robot])
+        self._ev_csv.writerow([f'{ev.time:.3f}', ev.kind, ev.item, ev.cls, ev.robot, ev.cause])
         self._ev.flush()
 
     def flush(self) -> None:
@@ -222,30 +224,3 @@ class RunLog:
             if t_start <= ev.time <= t_end:
                 counts[ev.kind] = counts.get(ev.kind, 0) + 1
         return counts
-
-    def counts(self, t_start: float, t_end: float, stats: Optional[Dict[str, object]] = None
-               ) -> Tuple[Dict[str, object], str]:
-        """Item counts and throughput of the window, the automation manager's when it has them.
-
-        :param t_start: window start, sim s.
-        :param t_end: window end, sim s.
-        :param stats: the last ``/automation_manager/stats`` values, parsed (or None).
-        :return: ``({spawned, sorted, missed, wrong_bin, dropped, items_per_minute}, source)``
-            where ``source`` is ``'automation_manager'`` if the stats gave the sorted count,
-            else ``'conveyor events'`` (counted from ``events.csv`` inside the window).
-        """
-        stats = stats or {}
-        from_events = self.event_counts(t_start, t_end)
-        out: Dict[str, object] = {}
-        for key in COUNTED:
-            value = stats.get(key)
-            out[key] = value if isinstance(value, (int, float)) and not isinstance(
-                value, bool) else from_events[key]
-        source = 'automation_manager' if isinstance(stats.get('sorted'), (int, float)) \
-            else 'conveyor events'
-        ipm = stats.get('items_per_minute')
-        if not isinstance(ipm, (int, float)) or isinstance(ipm, bool):
-            span = t_end - t_start
-            ipm = 60.0 * float(out['sorted']) / span if span > 0 else 0.0
-        out['items_per_minute'] = float(ipm)
-        return out, source

@@ -52,6 +52,7 @@ from pybullet_utils.bullet_client import BulletClient
 
 from scara_collab.core.config import ConfigError, load_config
 from scara_collab.core.model import CellModel, load_cell
+from scara_collab.core.sorting import at_belt_height
 from scara_collab.sim.controllers import (
     ComputedTorqueController, joint_gains, PidController, smooth_friction)
 from scara_collab.sim.reference import HermiteReference, TrajectoryError, validate_trajectory
@@ -66,7 +67,6 @@ _COLOURS = {'red': (0.85, 0.15, 0.15, 1.0), 'blue': (0.15, 0.35, 0.9, 1.0),
             'green': (0.15, 0.7, 0.25, 1.0), 'yellow': (0.95, 0.8, 0.1, 1.0),
             PAYLOAD_CLASS: (0.5, 0.5, 0.5, 1.0)}
 _PALETTE = ((0.85, 0.15, 0.15, 1.0), (0.15, 0.35, 0.9, 1.0), (0.15, 0.7, 0.25, 1.0))
-_BELT_Z_TOL = 0.01      # m, an item whose centre is this close to resting height is on the belt
 _LOST_Z = -1.0          # m, an item below this fell through something: dropped
 _CONSTRAINT_FORCE = 1e5  # N, the gripper's fixed constraint never slips
 
@@ -108,7 +108,8 @@ class SimEvent:
 
     :ivar time: sim time, s; :ivar kind: one of :data:`EVENT_KINDS`; :ivar item: item id;
     :ivar cls: item class; :ivar robot: the arm involved (gripper, bin, last holder of a
-        dropped item) or ``''``.
+        dropped item) or ``''``; :ivar cause: for an item that left the belt without a
+        grasp (``dropped``, ``missed`` after a push), what touched it last, else ``''``.
     """
 
     time: float
@@ -116,6 +117,7 @@ class SimEvent:
     item: int
     cls: str
     robot: str = ''
+    cause: str = ''
 
 
 class _ItemRec:
@@ -582,7 +584,6 @@ class CellSim:
             self._next_feed += self.feed_period
             self._feed()
         belt = self.cell.belt
-        rest_z = belt.top_z + self.cell.item_size / 2.0
         half_w = belt.width / 2.0
         carry = [belt.speed, 0.0, 0.0]
         zero = [0.0, 0.0, 0.0]
@@ -594,7 +595,7 @@ class CellSim:
             if x > belt.x_end and rec.state == 'belt':  # carried off the end (maybe tipping)
                 self._remove(rec, 'missed')
                 continue
-            if (abs(z - rest_z) < _BELT_Z_TOL and abs(y - belt.centre_y) <= half_w
+            if (at_belt_height(self.cell, z) and abs(y - belt.centre_y) <= half_w
                     and belt.x_start <= x <= belt.x_end):
                 rec.state = 'belt'
                 self._set_vel(rec.body, carry, zero)

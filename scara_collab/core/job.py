@@ -1,0 +1,569 @@
+"""The sorting job as a state machine, without ROS: observations in, commands out.
+
+:class:`SortingJob` decides everything the automation manager does; the node only turns
+messages into the ``on_*`` observations, calls :meth:`SortingJob.tick` on a timer and turns
+the returned :class:`MoveCommand` / :class:`GripCommand` into messages and service calls.
+
+A *lane* is one arm's work (``single``: the leader; ``collaborative``: one lane per arm;
+``mirrored``: one lane that moves both arms, the follower to the mirror image). Its phases:
+
+=============  =================================================  ===========================
+phase          leaves when                                        deadline (then)
+=============  =================================================  ===========================
+``idle``       an item can be met: a pick move is asked           none
+``to_item``    every arm's move has arrived (bridge ``finished``  no planner answer:
+               or the end time passed with the tool at the        ``answer_timeout``, re-sent
+               target): grasp if the item is under the tool,      ``answer_retries`` times;
+               else chase it or give up                           not planned by
+                                                                  ``move_timeout``; not
+                                                                  arrived ``arrive_timeout``
+                                                                  after its end (give up,
+                                                                  park)
+``grasping``   every gripper answered (or the bridge's            ``grip_timeout``, asked
+               ``grasped`` event confirmed it)                    again ``grip_retries`` times
+                                                                  (give up)
+``lift``       as ``to_item``; only when ``carry_height`` lifts   as ``to_item``
+               the item above those on the belt
+``to_bin``     as ``to_item``                                     as ``to_item`` with
+                                                                  ``carry_timeout``; a given
+                                                                  up bin move is asked again
+``releasing``  every gripper answered (or ``released`` seen)      as ``grasping``
+``to_park``    as ``to_item``                                     as ``to_item`` (then idle)
+=============  =================================================  ===========================
+
+Every observation names what it is about (a move by its request, a grip by its token), so a
+late, duplicated or unknown one is ignored, and every waiting phase has a deadline, so a lost
+one costs a retry, never the run. The servers are idempotent (a planner re-publishes the status
+of a request it already has; a grasp while holding and a release while empty succeed), so a
+re-sent request is always safe.
+
+Move requests are identified by their requested start in integer nanoseconds
+(:mod:`scara_collab.nodes.protocol` carries that id through planner and bridge); the job keeps
+them unique per arm.
+"""
+from dataclasses import dataclass, field
+import math
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from scara_collab.core import sorting
+from scara_collab.core.kinematics import fk
+from scara_collab.core.mirror import mirror_point
+from scara_collab.core.model import CellModel
+from scara_collab.core.trajectory import Trajectory
+
+MODES = ('single', 'collaborative', 'mirrored')
+PHASES = ('idle', 'to_item', 'grasping', 'lift', 'to_bin', 'releasing', 'to_park')
+MOVING = ('to_item', 'lift', 'to_bin', 'to_park')
+#: planner / bridge answers about a move, in the order a move goes through them
+MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
+FAILED_MOVE = ('refused', 'superseded', 'held')
+
+PlanFn = Callable[[str, np.ndarray, np.ndarray], Trajectory]
+
+
+def items_per_minute(sorted_count: int, seconds: float) -> float:
+    """Items sorted per minute over a window of ``seconds`` (0 for an empty window).
+
+    The one definition used by the job's stats, the run summary and the benchmarks: the
+    window starts when the feed starts (the job's start) and ends at the run's end.
+
+    >>> items_per_minute(30, 60.0)
+    30.0
+    """
+    return 60.0 * sorted_count / seconds if seconds > 0 else 0.0
+
+
+@dataclass(frozen=True)
+class JobSettings:
+    """The job's tuning, from ``config/automation.yaml`` (see that file for the meanings)."""
+
+    mode: str
+    pick_z: float
+    carry_z: float
+    drop_clearance: float
+    grasp_reach: float
+    decision_lead: float
+    answer_timeout: float
+    answer_retries: int
+    move_timeout: float
+    carry_timeout: float
+    arrive_timeout: float
+    arrive_tolerance: float
+    grip_timeout: float
+    grip_retries: int
+    pair_offset: float = 0.0
+    bin_retries: int = 3
+
+    @staticmethod
+    def from_config(cell: CellModel, cfg: dict, mode: Optional[str] = None) -> 'JobSettings':
+        """Build the settings from the ``automation`` config tree (``mode`` overrides)."""
+        mode = mode or cfg['mode']
+        if mode not in MODES:
+            raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
+        pick_z = sorting.pick_height(cell, cfg['pick_clearance'])
+        # a held item hangs item_size + pick_clearance below the tool: lifted to carry_z, its
+        # bottom clears the tops of the items on the belt by carry_clearance
+        carry_z = (pick_z + cell.item_size + float(cfg['carry_clearance'])
+                   if cfg['lift_after_grasp'] else pick_z)
+        return JobSettings(
+            mode=mode, pick_z=pick_z, carry_z=carry_z,
+            drop_clearance=float(cfg['drop_clearance']), grasp_reach=float(cfg['grasp_reach']),
+            decision_lead=float(cfg['decision_lead']),
+            answer_timeout=float(cfg['answer_timeout']), answer_retries=int(cfg['answer_retries']),
+            move_timeout=float(cfg['move_timeout']), carry_timeout=float(cfg['carry_timeout']),
+            arrive_timeout=float(cfg['arrive_timeout']),
+            arrive_tolerance=float(cfg['arrive_tolerance']),
+            grip_timeout=float(cfg['grip_timeout']), grip_retries=int(cfg['grip_retries']),
+            pair_offset=float(cfg['mirror_pair_offset']))
+
+
+@dataclass(frozen=True)
+class MoveCommand:
+    """Ask the planner(s) for a move: ``robot``'s tool to ``target`` (world), from ``start``.
+
+    ``mirrored``: send it to the replication manager (``/collab/target``), which moves the
+    follower to the mirror image with the same request. ``request`` (ns) is the target's
+    stamp and the move's identity; a re-sent request has the same one.
+    """
+
+    robot: str
+    target: np.ndarray
+    request: int
+    mirrored: bool
+    purpose: str
+
+    @property
+    def start(self) -> float:
+        """The requested start, s."""
+        return self.request * 1e-9
+
+
+@dataclass(frozen=True)
+class GripCommand:
+    """Call ``robot``'s gripper: ``grasp`` true = grasp, false = release; answer with ``token``."""
+
+    robot: str
+    grasp: bool
+    token: int
+
+
+@dataclass
+class MoveTrack:
+    """What is known of one arm's move of the current request."""
+
+    state: str = 'asked'
+    start: Optional[float] = None
+    end: Optional[float] = None
+    reason: str = ''
+    arrived: bool = False
+
+
+@dataclass
+class GripTrack:
+    """One gripper request: its token, when it was sent, how often, its outcome."""
+
+    token: int
+    sent: float
+    attempts: int = 1
+    ok: Optional[bool] = None
+    message: str = ''
+
+
+@dataclass
+class Lane:
+    """One arm's work (both arms' in mirrored mode); see the module docstring."""
+
+    robot: str
+    robots: Tuple[str, ...]
+    phase: str = 'idle'
+    item: Optional[sorting.SeenItem] = None
+    target: Optional[np.ndarray] = None
+    request: int = 0
+    purpose: str = ''
+    since: float = 0.0
+    sent: float = 0.0
+    sends: int = 0
+    moves: Dict[str, MoveTrack] = field(default_factory=dict)
+    grips: Dict[str, GripTrack] = field(default_factory=dict)
+    bin_tries: int = 0
+    failures: Dict[int, int] = field(default_factory=dict)
+
+
+class SortingJob:
+    """The sorting job's decisions (see the module docstring).
+
+    :param cell: the cell model.
+    :param settings: the tuning (:meth:`JobSettings.from_config`).
+    :param plan: ``plan(robot, q_start, target) -> Trajectory`` with the planners' settings
+        (raises ``ValueError`` if refused): the job times intercepts with the planners' own
+        trajectories.
+    :param log: ``log(level, text)`` for decisions worth a log line (``'info'``, ``'warn'``).
+    """
+
+    def __init__(self, cell: CellModel, settings: JobSettings, plan: PlanFn,
+                 log: Callable[[str, str], None] = lambda level, text: None):
+        self.cell, self.s, self.plan, self.log = cell, settings, plan, log
+        lead, foll = cell.leader, cell.follower
+        robots = {'single': [(lead.name, (lead.name,))],
+                  'collaborative': [(lead.name, (lead.name,)), (foll.name, (foll.name,))],
+                  'mirrored': [(lead.name, (lead.name, foll.name))]}[settings.mode]
+        self.lanes = [Lane(r, rs) for r, rs in robots]
+        self.running = False
+        self.estop = False
+        self.start_time: Optional[float] = None
+        self.q: Dict[str, np.ndarray] = {}
+        self.items: Dict[int, sorting.SeenItem] = {}
+        self.claimed: Dict[int, str] = {}
+        self.counts: Dict[str, int] = {}
+        self.sorted_by: Dict[str, int] = {a.name: 0 for a in cell.arms}
+        self.give_ups = 0
+        self.retries = 0
+        self.last_give_up = ''
+        self._last_request: Dict[str, int] = {a.name: 0 for a in cell.arms}
+        self._token = 0
+        self._parked_unused = False
+        self._out: List[object] = []
+
+    # --- observations ---------------------------------------------------------------------
+    def start(self, now: float) -> bool:
+        """Run the job (idempotent); return False if it was already running."""
+        if self.running:
+            return False
+        self.running = True
+        if self.start_time is None:
+            self.start_time = now
+        return True
+
+    def stop(self) -> bool:
+        """Stop taking new items (idempotent); arms holding an item still bring it to its bin."""
+        was, self.running = self.running, False
+        return was
+
+    def on_arm_state(self, robot: str, q: np.ndarray) -> None:
+        """Take the measured joints of ``robot`` ``(3,)`` (finite, checked by the caller)."""
+        self.q[robot] = np.asarray(q, dtype=float)
+
+    def on_items(self, items: Sequence[sorting.SeenItem]) -> None:
+        """Take the items resting on the belt now (not held, not falling, not in a bin)."""
+        self.items = {it.id: it for it in items}
+
+    def on_estop(self, on: bool) -> None:
+        """Take the emergency stop: while set, nothing new is commanded."""
+        self.estop = bool(on)
+
+    def on_item_event(self, kind: str, item: int, robot: str) -> None:
+        """Count a bridge item event; it also and it confirms grasps and releases."""
+        self.counts[kind] = self.counts.get(kind, 0) + 1
+        if kind == 'sorted' and robot in self.sorted_by:
+            self.sorted_by[robot] += 1
+        if kind in ('sorted', 'wrong_bin', 'missed', 'dropped'):
+            self.claimed.pop(item, None)
+        phase = {'grasped': 'grasping', 'released': 'releasing'}.get(kind)
+        for lane in self.lanes:  # the bridge saw it happen: the response may be lost
+            track = lane.grips.get(robot)
+            if lane.phase == phase and track is not None and track.ok is None:
+                track.ok, track.message = True, f'{kind} event'
+
+    def on_planner(self, robot: str, request: int, state: str, start: Optional[float],
+                   end: Optional[float], reason: str = '') -> None:
+        """Take a planner status about ``robot``'s move for ``request`` (others are ignored)."""
+        track = self._track(robot, request)
+        if track is None or track.state in ('finished',) + FAILED_MOVE:
+            return
+        if state == 'planned':
+            if track.state == 'accepted' and abs(start - track.start) < 1e-6:
+                return  # the bridge already runs it (its start is the one that counts)
+            track.state, track.start, track.end = 'planned', start, end
+        elif state in ('queued', 'waiting'):  # not (or no longer) committed
+            track.state, track.start, track.end = state, None, None
+        elif state in ('refused', 'superseded'):
+            track.state, track.reason = state, reason
+
+    def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
+                     end: Optional[float], reason: str = '') -> None:
+        """Take a bridge execution status about ``robot``'s move for ``request``."""
+        track = self._track(robot, request)
+        if track is None or track.state in ('finished',) + FAILED_MOVE:
+            return
+        if state == 'accepted':
+            track.state, track.start, track.end = 'accepted', start, end
+        elif state == 'finished':
+            track.state = 'finished'
+        elif state == 'preempted':  # the planner took it back (it says what comes next)
+            track.state, track.start, track.end = 'waiting', None, None
+        elif state in ('refused', 'held'):
+            track.state, track.reason = state, reason or state
+
+    def on_grip(self, token: int, ok: bool, message: str = '') -> None:
+        """Take a gripper response for request ``token`` (late or unknown tokens: ignored)."""
+        for lane in self.lanes:
+            for track in lane.grips.values():
+                if track.token == token and track.ok is None:
+                    track.ok, track.message = bool(ok), message
+
+    def _track(self, robot: str, request: int) -> Optional[MoveTrack]:
+        for lane in self.lanes:
+            if lane.phase in MOVING and lane.request == request and robot in lane.moves:
+                return lane.moves[robot]
+        return None
+
+    # --- the clock ------------------------------------------------------------------------
+    def tick(self, now: float) -> List[object]:
+        """Advance every lane to ``now`` (sim s); return the commands to send, in order."""
+        self._out = []
+        if self.estop or len(self.q) < len(self.cell.arms):
+            return self._out
+        if self.running and not self._parked_unused:
+            self._park_unused(now)
+        for lane in self.lanes:
+            if lane.phase == 'idle':
+                if self.running:
+                    self._pick_next(lane, now)
+            elif lane.phase in MOVING:
+                self._tick_move(lane, now)
+            else:
+                self._tick_grip(lane, now)
+        return self._out
+
+    def phases(self) -> Dict[str, str]:
+        """Each lane's phase, by its robot."""
+        return {lane.robot: lane.phase for lane in self.lanes}
+
+    # --- moves ----------------------------------------------------------------------------
+    def _request(self, robots: Sequence[str], start: float) -> int:
+        req = max([int(round(start * 1e9))] + [self._last_request[r] + 1 for r in robots])
+        for r in robots:
+            self._last_request[r] = req
+        return req
+
+    def _move(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
+        lane.phase, lane.target = phase, np.asarray(target, dtype=float)
+        lane.request = self._request(lane.robots, max(start, now + 1e-3))
+        lane.moves = {r: MoveTrack() for r in lane.robots}
+        lane.since = lane.sent = now
+        lane.sends = 1
+        self._send(lane)
+
+    def _send(self, lane: Lane) -> None:
+        self._out.append(MoveCommand(lane.robot, lane.target, lane.request,
+                                     len(lane.robots) > 1, lane.phase))
+
+    def _target_of(self, lane: Lane, robot: str) -> np.ndarray:
+        if robot == lane.robot:
+            return lane.target
+        return mirror_point(self.cell.arm(lane.robot), self.cell.arm(robot), lane.target)
+
+    def _at_target(self, lane: Lane, robot: str) -> bool:
+        q = self.q.get(robot)
+        if q is None:
+            return False
+        tip = fk(self.cell.arm(robot), q)
+        return float(np.linalg.norm(tip - self._target_of(lane, robot))) <= \
+            self.s.arrive_tolerance
+
+    def _tick_move(self, lane: Lane, now: float) -> None:
+        limit = self.s.carry_timeout if lane.phase in ('lift', 'to_bin') else \
+            self.s.move_timeout
+        for robot, track in lane.moves.items():
+            if track.arrived:
+                continue
+            if track.state in FAILED_MOVE:
+                return self._give_up(lane, now, f'{robot} move {track.state}: {track.reason}')
+            if track.state == 'finished':
+                track.arrived = True
+                continue
+            if track.state == 'asked' and now - lane.sent > self.s.answer_timeout:
+                if lane.sends > self.s.answer_retries:
+                    return self._give_up(lane, now, f'no answer from the {robot} planner '
+                                         f'after {lane.sends} requests')
+                lane.sends += 1
+                lane.sent = now
+                self.retries += 1
+                self.log('info', f'{robot}: no planner answer for request {lane.request} in '
+                         f'{self.s.answer_timeout:g} s; asking again ({lane.sends})')
+                self._send(lane)
+                continue
+            if track.end is None:  # asked, queued or waiting
+                if now - lane.since > limit:
+                    return self._give_up(lane, now, f'no plan from the {robot} planner in '
+                                         f'{limit:g} s ({track.state})')
+                continue
+            if now >= track.end and self._at_target(lane, robot):
+                track.arrived = True
+            elif now > track.end + self.s.arrive_timeout:
+                return self._give_up(lane, now, f'{robot} did not arrive within '
+                                     f'{self.s.arrive_timeout:g} s of its end ({track.state})')
+        if all(t.arrived for t in lane.moves.values()):
+            self._arrived(lane, now)
+
+    def _arrived(self, lane: Lane, now: float) -> None:
+        if lane.phase == 'to_park':
+            self._idle(lane)
+        elif lane.phase == 'to_bin':
+            self._grip(lane, False, now)
+        elif lane.phase == 'lift':
+            self._to_bin(lane, now)
+        else:  # at the item? a late start (the arm yielded) leaves it short of the item
+            seen = self.items.get(lane.item.id)
+            if seen is None:
+                return self._give_up(lane, now, f'item {lane.item.id} is no longer on the belt')
+            off = sorting.predict(self.cell, seen, now)[:2] - lane.target[:2]
+            if math.hypot(*off) <= self.s.grasp_reach:
+                self._grip(lane, True, now)
+            elif not self._chase(lane, seen, now):
+                self._give_up(lane, now, f'item {seen.id} got away ({math.hypot(*off):.3f} m)')
+
+    def _aim(self, item: sorting.SeenItem) -> sorting.SeenItem:
+        """Return where the tool meets ``item``.
+
+        In mirrored mode that is at least ``pair_offset`` from the belt centre line (within
+        grasp reach), so the two mirrored tools keep the planners' margin and the follower
+        never has to yield: both start together.
+        """
+        if len(self.lanes[0].robots) < 2:
+            return item
+        centre = self.cell.belt.centre_y
+        dy = item.position[1] - centre
+        if abs(dy) >= self.s.pair_offset:
+            return item
+        side = np.sign(self.cell.leader.base_position[1] - centre)
+        aim = item.position.copy()
+        aim[1] = centre + side * self.s.pair_offset
+        return sorting.SeenItem(item.id, item.cls, aim, item.stamp)
+
+    def _chase(self, lane: Lane, item: sorting.SeenItem, now: float) -> bool:
+        start = now + self.s.decision_lead
+        arm = self.cell.arm(lane.robot)
+        hit = sorting.intercept(self.cell, arm, self.q[lane.robot], self._aim(item), start,
+                                self.s.pick_z, lambda q0, p: self.plan(lane.robot, q0, p))
+        if hit is None:
+            return False
+        lane.item = item
+        self._move(lane, 'to_item', hit.target, hit.start, now)
+        return True
+
+    def _to_bin(self, lane: Lane, now: float) -> None:
+        drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, self.s.drop_clearance)
+        self._move(lane, 'to_bin', drop, now + self.s.decision_lead, now)
+
+    # --- picking --------------------------------------------------------------------------
+    def _pick_next(self, lane: Lane, now: float) -> None:
+        arm = self.cell.arm(lane.robot)
+        others_busy = any(o.phase != 'idle' for o in self.lanes if o is not lane)
+        free = [it for i, it in self.items.items()
+                if i not in self.claimed and lane.failures.get(i, 0) < 2]
+        if self.s.mode == 'mirrored':  # the leader takes its half; the partner is mirrored
+            side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
+            free = [it for it in free if np.sign(it.position[1]) == side]
+        own = None if self.s.mode == 'single' else True
+        for item in sorting.order_candidates(self.cell, arm, free, now + self.s.decision_lead,
+                                             self.s.pick_z, own, steal=others_busy)[:2]:
+            if not self._chase(lane, item, now):
+                continue
+            self.claimed[item.id] = lane.robot
+            if self.s.mode == 'mirrored':
+                partner = sorting.mirror_partner(self.cell, item, list(self.items.values()))
+                if partner is not None:
+                    self.claimed[partner.id] = self.cell.follower.name
+            return
+
+    def _park_unused(self, now: float) -> None:
+        """Arms no lane uses wait above their first bin, off the belt (once)."""
+        self._parked_unused = True
+        used = {r for lane in self.lanes for r in lane.robots}
+        for arm in self.cell.arms:
+            if arm.name not in used:
+                park = sorting.drop_point(self.cell, arm.name, self.cell.item_classes[0],
+                                          self.s.drop_clearance)
+                req = self._request([arm.name], now + self.s.decision_lead)
+                self._out.append(MoveCommand(arm.name, park, req, False, 'park'))
+
+    # --- gripper --------------------------------------------------------------------------
+    def _grip(self, lane: Lane, grasp: bool, now: float) -> None:
+        lane.phase = 'grasping' if grasp else 'releasing'
+        lane.since = now
+        lane.grips = {}
+        for robot in lane.robots:
+            self._token += 1
+            lane.grips[robot] = GripTrack(self._token, now)
+            self._out.append(GripCommand(robot, grasp, self._token))
+
+    def _tick_grip(self, lane: Lane, now: float) -> None:
+        grasp = lane.phase == 'grasping'
+        for robot, track in lane.grips.items():
+            if track.ok is None and now - track.sent > self.s.grip_timeout:
+                if track.attempts > self.s.grip_retries:
+                    track.ok, track.message = False, f'no answer after {track.attempts} calls'
+                    continue
+                self._token += 1
+                track.token, track.sent = self._token, now
+                track.attempts += 1
+                self.retries += 1
+                self.log('info', f'{robot}: no gripper answer in {self.s.grip_timeout:g} s; '
+                         f'asking again ({track.attempts})')
+                self._out.append(GripCommand(robot, grasp, track.token))
+        if any(t.ok is None for t in lane.grips.values()):
+            return
+        main = lane.grips[lane.robot]
+        for robot, track in lane.grips.items():
+            if robot != lane.robot and not track.ok:
+                self.log('warn', f'{robot} gripper: {track.message}')
+        if not grasp:
+            if lane.item is not None:
+                self.claimed.pop(lane.item.id, None)
+            if not main.ok:
+                self.log('warn', f'{lane.robot}: release failed ({main.message})')
+            self._idle(lane)
+        elif not main.ok:
+            item = lane.item
+            lane.failures[item.id] = lane.failures.get(item.id, 0) + 1
+            self.claimed.pop(item.id, None)
+            self.log('info', f'{lane.robot}: grasp of item {item.id} failed ({main.message})')
+            self._idle(lane)
+        elif self.s.carry_z > self.s.pick_z + 1e-6:
+            up = np.array([lane.target[0], lane.target[1], self.s.carry_z])
+            lane.bin_tries = 0
+            self._move(lane, 'lift', up, now + 1e-3, now)
+        else:
+            lane.bin_tries = 0
+            self._to_bin(lane, now)
+
+    # --- endings --------------------------------------------------------------------------
+    def _idle(self, lane: Lane) -> None:
+        lane.phase, lane.item, lane.moves, lane.grips = 'idle', None, {}, {}
+
+    def _give_up(self, lane: Lane, now: float, why: str) -> None:
+        self.log('warn', f'{lane.robot}: {why}')
+        self.give_ups += 1
+        self.last_give_up = f't={now:.2f} s {lane.robot} {lane.phase}: {why}'
+        phase = lane.phase
+        if phase in ('lift', 'to_bin'):  # holding an item: never put it down off the bin
+            lane.bin_tries += 1
+            if lane.bin_tries <= self.s.bin_retries:
+                self._to_bin(lane, now)
+                return
+            self.log('warn', f'{lane.robot}: releasing item {lane.item.id} where it is after '
+                     f'{lane.bin_tries} bin moves')
+            self._grip(lane, False, now)
+            return
+        if lane.item is not None:
+            self.claimed.pop(lane.item.id, None)
+            lane.failures[lane.item.id] = lane.failures.get(lane.item.id, 0) + 1
+        self._idle(lane)
+        if phase == 'to_park':  # the park move itself failed: stay idle, do not loop
+            return
+        # wait clear of the shared zone, above the first bin, so the other arm is not blocked
+        park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
+                                  self.s.drop_clearance)
+        self._move(lane, 'to_park', park, now + self.s.decision_lead, now)
+
+    # --- figures --------------------------------------------------------------------------
+    def minutes(self, now: float) -> float:
+        """Minutes since the job started (0 before)."""
+        return 0.0 if self.start_time is None else max(0.0, now - self.start_time) / 60.0
+
+    def rate(self, now: float) -> float:
+        """Items sorted per minute since the job started (:func:`items_per_minute`)."""
+        return items_per_minute(self.counts.get('sorted', 0), self.minutes(now) * 60.0)

@@ -1,0 +1,382 @@
+"""The job protocol: every status the nodes exchange, typed, in one module.
+
+Each status is a frozen dataclass with ``to_msg()`` and ``from_msg()`` on the standard
+``diagnostic_msgs/DiagnosticStatus`` (``name``, ``level``, a readable ``message`` and one
+key-value per field). No other module formats or parses these key-values: a node builds the
+dataclass and publishes ``to_msg()``; a subscriber calls ``from_msg()`` and reads typed fields
+(a malformed message raises :class:`ProtocolError`, which the subscriber logs and drops).
+
+================================  ==================  =======================================
+topic                             type                publisher
+================================  ==================  =======================================
+``/<robot>/planner_status``       :class:`PlannerStatus`   planner
+``/<robot>/execution_status``     :class:`ExecutionStatus` bridge
+``/conveyor/events``              :class:`ItemEvent`       bridge
+``/automation_manager/stats``     :class:`JobStats`        automation manager
+``/replication_manager/status``   :class:`MirrorStatus`    replication manager
+``/collision_monitor/status``     :class:`MonitorStatus`   collision monitor
+================================  ==================  =======================================
+
+**Move identity.** A move is named by the request that asked for it: its id is
+``<robot>/<request>`` where ``request`` is the target's ``header.stamp`` in integer
+nanoseconds (the requested start time; a requester that needs to follow its moves, like the
+automation manager, sends each request with its own stamp). A target stamped zero ("start
+now") gets the planner's receipt time instead. The planner puts the id in the
+``header.frame_id`` of the ``JointTrajectory`` it publishes, the bridge reports on that id, so
+a status always says which move it is about, from the request to the end of the motion.
+"""
+from dataclasses import dataclass, field, fields, MISSING
+import json
+import math
+import numbers
+from typing import ClassVar, Dict, get_type_hints, Optional, Tuple
+
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
+          'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
+
+
+class ProtocolError(ValueError):
+    """A status message does not follow the protocol; the text says why."""
+
+
+def stamp_ns(stamp) -> int:
+    """``builtin_interfaces/Time`` -> integer nanoseconds (a move request's identity)."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def move_id(robot: str, request: int) -> str:
+    """Return the id of the move ``robot`` makes for ``request`` (ns): ``'<robot>/<request>'``.
+
+    >>> move_id('scara_left', 1500000000)
+    'scara_left/1500000000'
+    """
+    return f'{robot}/{int(request)}'
+
+
+def parse_move_id(move: str) -> Tuple[str, int]:
+    """Inverse of :func:`move_id`: ``'scara_left/15'`` -> ``('scara_left', 15)``.
+
+    :raises ProtocolError: if ``move`` is not ``<robot>/<integer>``.
+    """
+    robot, _, request = move.rpartition('/')
+    try:
+        return robot, int(request)
+    except ValueError:
+        raise ProtocolError(f'move id {move!r} is not <robot>/<request ns>') from None
+
+
+def _encode(value) -> str:
+    if value is None:
+        return ''
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    if isinstance(value, numbers.Real):
+        return repr(float(value))  # round-trips exactly (numpy floats too)
+    if isinstance(value, (dict, list, tuple)):
+        return json.dumps(value, separators=(',', ':'))
+    return str(value)
+
+
+def _decode(text: str, kind, key: str):
+    optional = getattr(kind, '__args__', None)
+    if optional is not None and type(None) in optional:  # Optional[X]
+        if text == '':
+            return None
+        kind = next(k for k in optional if k is not type(None))
+    origin = getattr(kind, '__origin__', kind)
+    try:
+        if origin is bool:
+            if text not in ('true', 'false'):
+                raise ValueError(text)
+            return text == 'true'
+        if origin is int:
+            return int(text)
+        if origin is float:
+            v = float(text)
+            if math.isnan(v):
+                raise ValueError('NaN')
+            return v
+        if origin in (dict, list, tuple):
+            v = json.loads(text)
+            return tuple(v) if origin is tuple else v
+        return text
+    except (ValueError, TypeError, json.JSONDecodeError) as exc:
+        raise ProtocolError(f'{key}={text!r} is not a valid {getattr(kind, "__name__", kind)}'
+                            f' ({exc})') from None
+
+
+class _Status:
+    """Fields <-> ``DiagnosticStatus`` key-values (one per field, typed by the annotations)."""
+
+    #: the ``DiagnosticStatus.name`` suffix or fixed name of this status
+    KIND: ClassVar[str] = ''
+
+    def level(self) -> str:
+        """``'OK'``, ``'WARN'`` or ``'ERROR'`` for the message's ``level``."""
+        return 'OK'
+
+    def text(self) -> str:
+        """Return the readable one-line ``message``."""
+        return ''
+
+    def name(self) -> str:
+        """Return the ``DiagnosticStatus.name``."""
+        return self.KIND
+
+    def to_msg(self) -> DiagnosticStatus:
+        """Return the status as a ``DiagnosticStatus``."""
+        msg = DiagnosticStatus(level=LEVELS[self.level()], name=self.name(),
+                               message=self.text())
+        msg.values = [KeyValue(key=f.name, value=_encode(getattr(self, f.name)))
+                      for f in fields(self)]
+        return msg
+
+    @classmethod
+    def from_msg(cls, msg: DiagnosticStatus):
+        """Parse a ``DiagnosticStatus`` built by :meth:`to_msg`.
+
+        :raises ProtocolError: a missing or malformed field.
+        """
+        values = {kv.key: kv.value for kv in msg.values}
+        hints = get_type_hints(cls)
+        kwargs = {}
+        for f in fields(cls):
+            if f.name not in values:
+                if f.default is not MISSING or f.default_factory is not MISSING:
+                    continue  # an optional field
+                raise ProtocolError(f'{cls.__name__}: no {f.name!r} in {sorted(values)}')
+            kwargs[f.name] = _decode(values[f.name], hints[f.name], f.name)
+        try:
+            return cls(**kwargs)
+        except (TypeError, ValueError) as exc:
+            raise ProtocolError(f'{cls.__name__}: {exc}') from None
+
+    def values(self) -> Dict[str, object]:
+        """Return the fields as a plain dict (for JSON summaries)."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+# --- planner ---------------------------------------------------------------------------------
+PLANNER_STATES = ('planned', 'queued', 'waiting', 'refused', 'superseded')
+
+
+@dataclass(frozen=True)
+class PlannerStatus(_Status):
+    """What a planner did with one request (``/<robot>/planner_status``).
+
+    ``planned``: the move is committed and published, starting at ``start`` (``delay``
+    seconds after it was asked, because of the other arm) and ending at ``end``; ``queued``:
+    held until the arm's running move ends; ``waiting``: the other arm blocks it, retried
+    when that arm moves; ``refused``: not executed, ``reason`` says why; ``superseded``: a
+    newer request replaced it before it was planned.
+    """
+
+    robot: str
+    state: str
+    move: str
+    request: int
+    reason: str = ''
+    start: Optional[float] = None
+    end: Optional[float] = None
+    delay: float = 0.0
+    kind: str = ''            # 'line' or 'joint' for planned moves
+
+    KIND: ClassVar[str] = 'planner'
+
+    def __post_init__(self):
+        if self.state not in PLANNER_STATES:
+            raise ValueError(f'state {self.state!r} is not one of {PLANNER_STATES}')
+
+    def name(self) -> str:
+        return f'{self.robot}/planner'
+
+    def level(self) -> str:
+        if self.state == 'refused':
+            return 'ERROR'
+        if self.state in ('waiting', 'superseded') or self.delay > 0:
+            return 'WARN'
+        return 'OK'
+
+    def text(self) -> str:
+        if self.state == 'planned':
+            late = (f'; delayed by {self.delay:.2f} s for the other arm' if self.delay > 0
+                    else '')
+            return (f'move {self.move}: {self.kind or "move"} from t={self.start:.3f} s to '
+                    f't={self.end:.3f} s{late}{"; " + self.reason if self.reason else ""}')
+        return f'move {self.move} {self.state}' + (f': {self.reason}' if self.reason else '')
+
+
+# --- bridge ----------------------------------------------------------------------------------
+EXECUTION_STATES = ('accepted', 'refused', 'finished', 'preempted', 'held', 'cleared')
+
+
+@dataclass(frozen=True)
+class ExecutionStatus(_Status):
+    """What the bridge does with one trajectory (``/<robot>/execution_status``).
+
+    ``accepted``: it runs from ``start`` to ``end`` (sim s; ``stamp`` is the start it asked
+    for, ``start`` later means it came late); ``refused``: not executed (``reason``), the arm
+    keeps its command; ``finished``: it ran to its end; ``preempted``: a newer trajectory
+    replaced it; ``held``: the emergency stop holds the arm (the move is aborted);
+    ``cleared``: the emergency stop was released.
+    """
+
+    robot: str
+    state: str
+    move: str
+    time: float
+    reason: str = ''
+    start: Optional[float] = None
+    end: Optional[float] = None
+    stamp: Optional[float] = None
+
+    KIND: ClassVar[str] = 'execution'
+
+    def __post_init__(self):
+        if self.state not in EXECUTION_STATES:
+            raise ValueError(f'state {self.state!r} is not one of {EXECUTION_STATES}')
+
+    def name(self) -> str:
+        return f'{self.robot}/execution'
+
+    def level(self) -> str:
+        return {'refused': 'ERROR', 'held': 'WARN'}.get(self.state, 'OK')
+
+    def text(self) -> str:
+        what = f'move {self.move or "(no id)"} {self.state} at t={self.time:.3f} s'
+        if self.state == 'accepted':
+            what += f': runs t={self.start:.3f}..{self.end:.3f} s'
+        return what + (f': {self.reason}' if self.reason else '')
+
+    @property
+    def late(self) -> float:
+        """Seconds the bridge started after the requested stamp (0 if on time or unstamped)."""
+        if self.state != 'accepted' or not self.stamp or self.start is None:
+            return 0.0
+        return max(0.0, self.start - self.stamp)
+
+
+# --- items -----------------------------------------------------------------------------------
+ITEM_EVENTS = ('spawned', 'grasped', 'released', 'sorted', 'wrong_bin', 'missed', 'dropped')
+COUNTED = ('spawned', 'sorted', 'wrong_bin', 'missed', 'dropped')
+
+
+@dataclass(frozen=True)
+class ItemEvent(_Status):
+    """Something that happened to an item (``/conveyor/events``): the one source of counts.
+
+    ``robot``: the arm involved (gripper, bin, last holder); ``cause``: for ``dropped`` and
+    ``missed``, what made the item leave the belt (e.g. ``knocked by scara_left link 2``).
+    """
+
+    kind: str
+    item: int
+    cls: str
+    time: float
+    robot: str = ''
+    cause: str = ''
+
+    def __post_init__(self):
+        if self.kind not in ITEM_EVENTS:
+            raise ValueError(f'kind {self.kind!r} is not one of {ITEM_EVENTS}')
+
+    def name(self) -> str:
+        return self.kind
+
+    def level(self) -> str:
+        return 'WARN' if self.kind in ('missed', 'dropped', 'wrong_bin') else 'OK'
+
+    def text(self) -> str:
+        by = f' by {self.robot}' if self.robot else ''
+        return f'item {self.item} ({self.cls}) {self.kind}{by}' + (
+            f': {self.cause}' if self.cause else '')
+
+
+# --- job, mirror, monitor --------------------------------------------------------------------
+@dataclass(frozen=True)
+class JobStats(_Status):
+    """The sorting job's own figures (``/automation_manager/stats``, 1 Hz sim time).
+
+    Item counts are the bridge's events as the manager heard them (the run summary counts
+    ``/conveyor/events`` itself); ``give_ups`` and ``retries`` are the job's decisions.
+    """
+
+    mode: str
+    running: bool
+    time: float
+    start_time: Optional[float]
+    counts: Dict[str, int] = field(default_factory=dict)
+    sorted_by: Dict[str, int] = field(default_factory=dict)
+    items_per_minute: float = 0.0
+    give_ups: int = 0
+    retries: int = 0
+    phases: Dict[str, str] = field(default_factory=dict)
+    last_give_up: str = ''
+
+    KIND: ClassVar[str] = 'automation_manager'
+
+    def text(self) -> str:
+        c = self.counts
+        return (f'{c.get("sorted", 0)} sorted, {c.get("missed", 0)} missed, '
+                f'{c.get("dropped", 0)} dropped, {self.items_per_minute:.1f}/min, '
+                f'{self.give_ups} give-ups')
+
+
+@dataclass(frozen=True)
+class MirrorStatus(_Status):
+    """The replication manager's mirror figures (``/replication_manager/status``).
+
+    ``error_max`` is the largest mirror error (m) measured while both arms ran moves of the
+    same request that the bridge started at the same instant (``in_step_moves`` of them);
+    ``not_in_step`` counts replicated requests whose two moves did not start together
+    (``last_reason`` says why).
+    """
+
+    enabled: bool
+    time: float
+    error: Optional[float] = None
+    error_max: Optional[float] = None
+    error_max_time: Optional[float] = None
+    in_step_moves: int = 0
+    not_in_step: int = 0
+    last_reason: str = ''
+
+    KIND: ClassVar[str] = 'replication_manager'
+
+    def text(self) -> str:
+        mx = 'n/a' if self.error_max is None else f'{self.error_max * 1e3:.3f} mm'
+        return (f'mirroring {"on" if self.enabled else "off"}: in-step error max {mx} over '
+                f'{self.in_step_moves} moves, {self.not_in_step} not in step')
+
+
+@dataclass(frozen=True)
+class MonitorStatus(_Status):
+    """The collision monitor's figures (``/collision_monitor/status``): the separation source.
+
+    ``distance``: the latest arm-to-arm capsule surface distance (m); ``minimum`` and
+    ``minimum_time``: the smallest so far and when; ``stopped``: the emergency stop is
+    latched, ``reason`` says why.
+    """
+
+    time: float
+    distance: Optional[float]
+    minimum: Optional[float]
+    minimum_time: Optional[float]
+    margin: float
+    stopped: bool
+    reason: str = ''
+
+    KIND: ClassVar[str] = 'collision_monitor'
+
+    def level(self) -> str:
+        return 'ERROR' if self.stopped else 'OK'
+
+    def text(self) -> str:
+        if self.stopped:
+            return f'emergency stop: {self.reason}'
+        d = 'n/a' if self.distance is None else f'{self.distance:.3f} m'
+        return f'arms {d} apart (margin {self.margin} m)'

@@ -1,0 +1,216 @@
+"""The sorting job's state machine alone (no ROS): deadlines, lost, late and duplicated answers."""
+import numpy as np
+import pytest
+
+from scara_collab.core.config import load_config
+from scara_collab.core.job import (GripCommand, items_per_minute, JobSettings, MoveCommand,
+                                   SortingJob)
+from scara_collab.core.kinematics import ik
+from scara_collab.core.mirror import mirror_joints
+from scara_collab.core.planning import plan_path
+from scara_collab.core.sorting import SeenItem
+
+HOME = np.array([0.0, 1.5708, 0.0])
+
+
+def make_job(cell, mode='collaborative', **overrides):
+    cfg = dict(load_config('automation'), **overrides)
+    settings = JobSettings.from_config(cell, cfg, mode)
+
+    def plan(robot, q0, target):
+        return plan_path(cell.arm(robot), q0, target, mode='line_or_joint')
+
+    logs = []
+    job = SortingJob(cell, settings, plan, lambda level, text: logs.append((level, text)))
+    job.logs = logs
+    for arm, q in zip(cell.arms, (HOME, mirror_joints(HOME))):
+        job.on_arm_state(arm.name, q)
+    job.start(0.0)
+    return job
+
+
+def item_on_belt(cell, item_id=1, x=1.2, y=-0.2, stamp=0.0, cls=None):
+    z = cell.belt.top_z + cell.item_size / 2
+    return SeenItem(item_id, cls or cell.item_classes[0], np.array([x, y, z]), stamp)
+
+
+def moves(cmds):
+    return [c for c in cmds if isinstance(c, MoveCommand)]
+
+
+def grips(cmds):
+    return [c for c in cmds if isinstance(c, GripCommand)]
+
+
+def first_pick(cell, job, t=0.0):
+    """Offer one item to the leader; return the pick MoveCommand."""
+    job.on_items([item_on_belt(cell)])
+    out = moves(job.tick(t))
+    pick = [m for m in out if m.purpose == 'to_item']
+    assert pick, out
+    return pick[0]
+
+
+def arrive(cell, job, cmd, t_end, robot=None):
+    """Tell the job the move ``cmd`` ran and ended at ``t_end`` with the tool at the target."""
+    robot = robot or cmd.robot
+    job.on_planner(robot, cmd.request, 'planned', cmd.start, t_end)
+    job.on_execution(robot, cmd.request, 'accepted', cmd.start, t_end)
+    job.on_arm_state(robot, ik(cell.arm(robot), cmd.target, q_current=job.q[robot]).q)
+    job.on_execution(robot, cmd.request, 'finished', None, None)
+
+
+def test_items_per_minute_has_one_definition():
+    assert items_per_minute(30, 60.0) == 30.0
+    assert items_per_minute(5, 0.0) == 0.0
+
+
+def test_a_lost_planner_answer_is_asked_again_with_the_same_request(cell):
+    job = make_job(cell)
+    pick = first_pick(cell, job)
+    s = job.s
+    assert not moves(job.tick(s.answer_timeout * 0.5))  # not yet
+    again = moves(job.tick(s.answer_timeout + 0.01))
+    assert [m.request for m in again] == [pick.request]  # same id: the planner is idempotent
+    t = s.answer_timeout + 0.01
+    for _ in range(s.answer_retries):
+        t += s.answer_timeout + 0.01
+        job.tick(t)
+    assert job.give_ups == 1 and 'no answer' in job.last_give_up
+    assert job.phases()[pick.robot] == 'to_park'  # it parks clear of the belt
+    assert job.retries == s.answer_retries
+
+
+def test_duplicated_and_stale_answers_change_nothing(cell):
+    job = make_job(cell)
+    pick = first_pick(cell, job)
+    job.on_planner(pick.robot, pick.request, 'planned', pick.start, pick.start + 1.0)
+    job.on_planner(pick.robot, pick.request, 'planned', pick.start, pick.start + 1.0)
+    job.on_planner(pick.robot, pick.request - 5, 'refused', None, None, 'old request')
+    job.on_execution(pick.robot, pick.request - 5, 'refused', None, None, 'old')
+    job.on_grip(999, False, 'a token nobody asked for')
+    assert job.phases()[pick.robot] == 'to_item'
+    assert not moves(job.tick(pick.start + 0.5))  # waiting for the end, nothing re-sent
+    assert job.give_ups == 0
+
+
+def test_every_waiting_phase_has_a_deadline(cell):
+    # planned but never arrives (trajectory lost, tool not at the target): arrive_timeout
+    job = make_job(cell)
+    pick = first_pick(cell, job)
+    job.on_planner(pick.robot, pick.request, 'planned', pick.start, pick.start + 1.0)
+    job.tick(pick.start + 1.0 + job.s.arrive_timeout * 0.5)
+    assert job.give_ups == 0
+    job.tick(pick.start + 1.0 + job.s.arrive_timeout + 0.01)
+    assert job.give_ups == 1 and 'did not arrive' in job.last_give_up
+
+    # queued / waiting in the planner for longer than move_timeout
+    job = make_job(cell)
+    pick = first_pick(cell, job)
+    job.on_planner(pick.robot, pick.request, 'waiting', None, None, 'blocked')
+    job.tick(job.s.move_timeout - 0.1)
+    assert job.give_ups == 0
+    job.tick(job.s.move_timeout + 0.1)
+    assert job.give_ups == 1 and 'no plan' in job.last_give_up
+
+
+def test_lost_gripper_answers_are_asked_again_then_fail(cell):
+    job = make_job(cell)
+    pick = first_pick(cell, job)
+    t = pick.start + 1.0
+    # keep the item under the tool at arrival
+    job.on_items([SeenItem(1, cell.item_classes[0], np.r_[pick.target[:2],
+                                                          cell.belt.top_z + 0.05], t)])
+    arrive(cell, job, pick, t)
+    out = grips(job.tick(t))
+    assert len(out) == 1 and out[0].grasp
+    first = out[0].token
+    out = grips(job.tick(t + job.s.grip_timeout + 0.01))  # no answer: ask again, new token
+    assert len(out) == 1 and out[0].token != first and out[0].grasp
+    job.on_grip(first, True, 'late answer to the first call')  # stale token: ignored
+    assert job.phases()[pick.robot] == 'grasping'
+    job.on_grip(out[0].token, True, 'already holds item 1')  # idempotent server: success
+    nxt = moves(job.tick(t + 0.5))
+    assert job.phases()[pick.robot] == 'lift' and nxt[0].purpose == 'lift'
+    assert nxt[0].target[2] == pytest.approx(job.s.carry_z)
+
+    # no answer at all: bounded retries, then the grasp failed and the arm is free again
+    job = make_job(cell)
+    pick = first_pick(cell, job)
+    t = pick.start + 1.0
+    job.on_items([SeenItem(1, cell.item_classes[0], np.r_[pick.target[:2],
+                                                          cell.belt.top_z + 0.05], t)])
+    arrive(cell, job, pick, t)
+    job.tick(t)
+    for k in range(job.s.grip_retries + 1):
+        t += job.s.grip_timeout + 0.01
+        job.tick(t)
+    assert job.phases()[pick.robot] == 'idle' and job.lanes[0].failures == {1: 1}
+
+
+def test_a_grasped_event_confirms_a_grasp_whose_answer_was_lost(cell):
+    job = make_job(cell)
+    pick = first_pick(cell, job)
+    t = pick.start + 1.0
+    job.on_items([SeenItem(1, cell.item_classes[0], np.r_[pick.target[:2],
+                                                          cell.belt.top_z + 0.05], t)])
+    arrive(cell, job, pick, t)
+    job.tick(t)
+    job.on_item_event('grasped', 1, pick.robot)
+    assert moves(job.tick(t + 0.02))[0].purpose == 'lift'
+
+
+def test_an_arm_holding_an_item_retries_its_bin_instead_of_dropping_it(cell):
+    job = make_job(cell, lift_after_grasp=False)
+    pick = first_pick(cell, job)
+    t = pick.start + 1.0
+    job.on_items([SeenItem(1, cell.item_classes[0], np.r_[pick.target[:2],
+                                                          cell.belt.top_z + 0.05], t)])
+    arrive(cell, job, pick, t)
+    g = grips(job.tick(t))[0]
+    job.on_grip(g.token, True, 'grasped')
+    to_bin = moves(job.tick(t + 0.02))[0]
+    assert to_bin.purpose == 'to_bin'
+    job.on_planner(to_bin.robot, to_bin.request, 'refused', None, None, 'blocked too long')
+    again = job.tick(t + 0.04)
+    assert [m.purpose for m in moves(again)] == ['to_bin'] and not grips(again)
+    assert moves(again)[0].request > to_bin.request
+
+
+def test_mirrored_moves_are_one_request_for_both_arms(cell):
+    job = make_job(cell, 'mirrored')
+    lead, foll = cell.leader.name, cell.follower.name
+    job.on_items([item_on_belt(cell, 1, y=-0.2), item_on_belt(cell, 2, y=0.2)])
+    pick = moves(job.tick(0.0))[0]
+    assert pick.mirrored and pick.robot == lead
+    assert job.claimed == {1: lead, 2: foll}
+    t = pick.start + 1.0
+    arrive(cell, job, pick, t)  # only the leader arrived: the lane waits for the follower
+    job.tick(t)
+    assert job.phases()[lead] == 'to_item'
+    from scara_collab.core.mirror import mirror_point
+    mirrored = MoveCommand(foll, mirror_point(cell.leader, cell.follower, pick.target),
+                           pick.request, True, 'to_item')
+    arrive(cell, job, mirrored, t, foll)
+    job.on_items([SeenItem(1, cell.item_classes[0], np.r_[pick.target[:2],
+                                                          cell.belt.top_z + 0.05], t)])
+    out = grips(job.tick(t))
+    assert sorted(g.robot for g in out) == sorted([lead, foll])
+
+
+def test_mirrored_picks_keep_the_pair_apart(cell):
+    job = make_job(cell, 'mirrored')
+    job.on_items([item_on_belt(cell, 1, y=-0.06), item_on_belt(cell, 2, y=0.06)])
+    pick = moves(job.tick(0.0))[0]
+    assert pick.target[1] == pytest.approx(-job.s.pair_offset)  # aimed off the centre line
+
+
+def test_estop_pauses_and_stop_is_idempotent(cell):
+    job = make_job(cell)
+    job.on_estop(True)
+    job.on_items([item_on_belt(cell)])
+    assert job.tick(0.0) == []
+    job.on_estop(False)
+    assert moves(job.tick(0.1))
+    assert job.stop() is True and job.stop() is False
+    assert job.start(1.0) is True and job.start(1.0) is False
