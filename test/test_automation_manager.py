@@ -46,7 +46,8 @@ def test_the_job_survives_lost_and_late_answers():
               'delay:/scara_right/planner_status:4:0.6', 'drop:/scara_left/planner_status:2',
               'drop:/scara_left/execution_status:3']
     s = run_job('collaborative', 40.0, 1.8, faults=faults)
-    assert s['retries'] >= 5  # the lost answers were noticed and asked again
+    # lost answers were asked again (others were confirmed by the bridge's grasped event)
+    assert s['retries'] >= 2
     assert s['sorted'] >= 8 and s['missed'] == 0 and s['dropped'] == 0
     assert s['sorted_by_scara_left'] > 0 and s['sorted_by_scara_right'] > 0
     assert s['min_separation_m'] >= 0.10 and not s['estop']
