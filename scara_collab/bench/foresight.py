@@ -30,7 +30,7 @@ from scara_collab.core.planning import plan_path, schedule, Timeline
 from scara_collab.core.trajectory import Trajectory
 from scara_collab.sim.cell_sim import CellSim
 
-PLANNING_BUFFER = 0.03
+PLANNING_BUFFER = float(load_config('controllers')['planning_buffer'])
 """m added to the safety margin when planning: the planner nodes' ``planning_buffer``
 default."""
 GRID = 0.005  # s: time grid on which the predicted separation is evaluated

@@ -130,6 +130,7 @@ SCHEMAS = {
         *[Rule(f'pid.{g}.{k}', 'nonneg') for g in ('planar', 'quill') for k in _GAINS],
         *[Rule(f'computed_torque.{g}.{k}', 'positive')
           for g in ('planar', 'quill') for k in ('kp', 'kd')],
+        Rule('planning_buffer', 'nonneg'),
         Rule('trajectory.sample_period', 'positive', lambda v: v <= 0.1, 'must be <= 0.1 s'),
         Rule('trajectory.dls_threshold', 'positive'),
         Rule('trajectory.dls_max_damping', 'nonneg'),

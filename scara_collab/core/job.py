@@ -47,15 +47,17 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from scara_collab.core import sorting
+from scara_collab.core import collision, sorting
 from scara_collab.core.kinematics import fk
-from scara_collab.core.mirror import mirror_point
+from scara_collab.core.mirror import mirror_joints, mirror_point
 from scara_collab.core.model import CellModel
 from scara_collab.core.trajectory import Trajectory
 
 MODES = ('single', 'collaborative', 'mirrored')
-PHASES = ('idle', 'to_item', 'grasping', 'lift', 'to_bin', 'releasing', 'to_park')
-MOVING = ('to_item', 'lift', 'to_bin', 'to_park')
+PHASES = ('idle', 'to_item', 'grasping', 'lift', 'via', 'to_bin', 'releasing', 'to_park')
+MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
+#: m: waypoints a mirrored pair may take to stay apart: this far out from the belt centre line
+VIA_OFFSETS = (0.6, 0.9, 1.2)
 #: planner / bridge answers about a move, in the order a move goes through them
 MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
 FAILED_MOVE = ('refused', 'superseded', 'held')
@@ -94,11 +96,17 @@ class JobSettings:
     grip_timeout: float
     grip_retries: int
     pair_offset: float = 0.0
+    pair_margin: float = 0.13
     bin_retries: int = 3
 
     @staticmethod
-    def from_config(cell: CellModel, cfg: dict, mode: Optional[str] = None) -> 'JobSettings':
-        """Build the settings from the ``automation`` config tree (``mode`` overrides)."""
+    def from_config(cell: CellModel, cfg: dict, mode: Optional[str] = None,
+                    planning_buffer: float = 0.03) -> 'JobSettings':
+        """Build the settings from the ``automation`` config tree (``mode`` overrides).
+
+        :param planning_buffer: ``controllers.yaml`` ``planning_buffer``: mirrored pairs are
+            checked against the planners' margin (safety margin + this).
+        """
         mode = mode or cfg['mode']
         if mode not in MODES:
             raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
@@ -116,7 +124,8 @@ class JobSettings:
             arrive_timeout=float(cfg['arrive_timeout']),
             arrive_tolerance=float(cfg['arrive_tolerance']),
             grip_timeout=float(cfg['grip_timeout']), grip_retries=int(cfg['grip_retries']),
-            pair_offset=float(cfg['mirror_pair_offset']))
+            pair_offset=float(cfg['mirror_pair_offset']),
+            pair_margin=cell.safety_margin + float(planning_buffer))
 
 
 @dataclass(frozen=True)
@@ -188,6 +197,8 @@ class Lane:
     moves: Dict[str, MoveTrack] = field(default_factory=dict)
     grips: Dict[str, GripTrack] = field(default_factory=dict)
     bin_tries: int = 0
+    holding: bool = False
+    route: List[Tuple[str, np.ndarray]] = field(default_factory=list)
     failures: Dict[int, int] = field(default_factory=dict)
 
 
@@ -364,8 +375,7 @@ class SortingJob:
             self.s.arrive_tolerance
 
     def _tick_move(self, lane: Lane, now: float) -> None:
-        limit = self.s.carry_timeout if lane.phase in ('lift', 'to_bin') else \
-            self.s.move_timeout
+        limit = self.s.carry_timeout if lane.holding else self.s.move_timeout
         for robot, track in lane.moves.items():
             if track.arrived:
                 continue
@@ -405,6 +415,14 @@ class SortingJob:
             self._grip(lane, False, now)
         elif lane.phase == 'lift':
             self._to_bin(lane, now)
+        elif lane.phase == 'via':
+            if lane.route:  # the next leg of a mirrored pair's detour
+                phase, target = lane.route.pop(0)
+                self._move(lane, phase, target, now + 1e-3, now)
+            elif lane.holding:
+                self._to_bin(lane, now)
+            elif not self._chase(lane, self.items.get(lane.item.id, lane.item), now):
+                self._give_up(lane, now, f'item {lane.item.id} got away (after a detour)')
         else:  # at the item? a late start (the arm yielded) leaves it short of the item
             seen = self.items.get(lane.item.id)
             if seen is None:
@@ -436,17 +454,74 @@ class SortingJob:
     def _chase(self, lane: Lane, item: sorting.SeenItem, now: float) -> bool:
         start = now + self.s.decision_lead
         arm = self.cell.arm(lane.robot)
-        hit = sorting.intercept(self.cell, arm, self.q[lane.robot], self._aim(item), start,
-                                self.s.pick_z, lambda q0, p: self.plan(lane.robot, q0, p))
+        q0 = self.q[lane.robot]
+        hit = sorting.intercept(self.cell, arm, q0, self._aim(item), start,
+                                self.s.pick_z, lambda q, p: self.plan(lane.robot, q, p))
         if hit is None:
             return False
         lane.item = item
+        if len(lane.robots) > 1 and not self._pair_clear(lane.robot, hit.traj):
+            route = self._detour(lane.robot, q0, hit.target)
+            if route:  # go round first, then meet the item from there
+                self._move(lane, 'via', route[0], start, now)
+                lane.route = [('via', p) for p in route[1:]]
+                return True
         self._move(lane, 'to_item', hit.target, hit.start, now)
         return True
 
     def _to_bin(self, lane: Lane, now: float) -> None:
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, self.s.drop_clearance)
-        self._move(lane, 'to_bin', drop, now + self.s.decision_lead, now)
+        self._move_safely(lane, 'to_bin', drop, now + self.s.decision_lead, now)
+
+    def _move_safely(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
+        """Ask for a move like :meth:`_move`; a mirrored pair may go round by a waypoint.
+
+        A pair that would come within the planners' margin goes round, so the follower need
+        not yield and both arms start together.
+        """
+        if len(lane.robots) > 1:
+            q0 = self.q[lane.robot]
+            try:
+                clear = self._pair_clear(lane.robot, self.plan(lane.robot, q0, target))
+            except ValueError:
+                clear = True  # the planner will refuse it with the reason
+            route = [] if clear else self._detour(lane.robot, q0, target)
+            if route:
+                lane.route = [('via', p) for p in route[1:]] + [(phase, np.asarray(target))]
+                self._move(lane, 'via', route[0], start, now)
+                return
+        self._move(lane, phase, target, start, now)
+
+    def _pair_clear(self, robot: str, traj: Trajectory) -> bool:
+        """Return True if ``traj`` and its mirror image (the follower's copy) keep the margin."""
+        me, other = self.cell.arm(robot), next(a for a in self.cell.arms if a.name != robot)
+        d, _ = collision.trajectory_min_distance(me, traj.t, traj.q, other, traj.t,
+                                                 mirror_joints(traj.q))
+        return d >= self.s.pair_margin
+
+    def _detour(self, robot: str, q0: np.ndarray, target) -> List[np.ndarray]:
+        """Return waypoints (world) whose legs and their mirror images keep the margin.
+
+        Candidates lie out from the belt centre line on the arm's side, at ``VIA_OFFSETS``,
+        above the start, the target or half way, at carry height; the first that works wins,
+        ``[]`` if none does.
+        """
+        arm = self.cell.arm(robot)
+        start = fk(arm, q0)
+        target = np.asarray(target, dtype=float)
+        side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
+        z = max(start[2], target[2], self.s.carry_z)
+        for off in VIA_OFFSETS:
+            for x in (start[0], 0.5 * (start[0] + target[0]), target[0]):
+                via = np.array([x, self.cell.belt.centre_y + side * off, z])
+                try:
+                    leg1 = self.plan(robot, q0, via)
+                    leg2 = self.plan(robot, leg1.q[-1], target)
+                except ValueError:
+                    continue
+                if self._pair_clear(robot, leg1) and self._pair_clear(robot, leg2):
+                    return [via]
+        return []
 
     # --- picking --------------------------------------------------------------------------
     def _pick_next(self, lane: Lane, now: float) -> None:
@@ -524,22 +599,24 @@ class SortingJob:
             self._idle(lane)
         elif self.s.carry_z > self.s.pick_z + 1e-6:
             up = np.array([lane.target[0], lane.target[1], self.s.carry_z])
-            lane.bin_tries = 0
+            lane.bin_tries, lane.holding = 0, True
             self._move(lane, 'lift', up, now + 1e-3, now)
         else:
-            lane.bin_tries = 0
+            lane.bin_tries, lane.holding = 0, True
             self._to_bin(lane, now)
 
     # --- endings --------------------------------------------------------------------------
     def _idle(self, lane: Lane) -> None:
         lane.phase, lane.item, lane.moves, lane.grips = 'idle', None, {}, {}
+        lane.holding, lane.route = False, []
 
     def _give_up(self, lane: Lane, now: float, why: str) -> None:
         self.log('warn', f'{lane.robot}: {why}')
         self.give_ups += 1
         self.last_give_up = f't={now:.2f} s {lane.robot} {lane.phase}: {why}'
         phase = lane.phase
-        if phase in ('lift', 'to_bin'):  # holding an item: never put it down off the bin
+        lane.route = []
+        if lane.holding and phase in MOVING:  # never put an item down off the bin
             lane.bin_tries += 1
             if lane.bin_tries <= self.s.bin_retries:
                 self._to_bin(lane, now)
@@ -557,7 +634,7 @@ class SortingJob:
         # wait clear of the shared zone, above the first bin, so the other arm is not blocked
         park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
                                   self.s.drop_clearance)
-        self._move(lane, 'to_park', park, now + self.s.decision_lead, now)
+        self._move_safely(lane, 'to_park', park, now + self.s.decision_lead, now)
 
     # --- figures --------------------------------------------------------------------------
     def minutes(self, now: float) -> float:

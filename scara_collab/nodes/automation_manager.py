@@ -51,7 +51,9 @@ class AutomationManager(Node):
         self.declare_parameter('auto_start', False)
         self.declare_parameter('tick', 0.02)
         self.cell = load_cell(self.get_parameter('profile').value or None)
-        self.settings = JobSettings.from_config(self.cell, cfg['automation'])
+        self.settings = JobSettings.from_config(self.cell, cfg['automation'],
+                                                planning_buffer=cfg['controllers']
+                                                ['planning_buffer'])
         self.mode = self.settings.mode
         traj = cfg['controllers']['trajectory']  # the planners' own settings: plan once
 

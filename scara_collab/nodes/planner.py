@@ -60,7 +60,6 @@ class Planner(Node):
         self.declare_parameter('profile', '')
         self.declare_parameter('mode', 'line_or_joint')
         self.declare_parameter('planning_lead', 0.05)
-        self.declare_parameter('planning_buffer', 0.03)
         self.declare_parameter('max_delay', 30.0)
         self.declare_parameter('max_wait', 60.0)
         self.cell = load_cell(self.get_parameter('profile').value or None)
@@ -76,7 +75,7 @@ class Planner(Node):
             raise ValueError(f'parameter mode must be one of {MODES}, got {self.mode!r}')
         self.traj_cfg = cfg['trajectory']
         self.lead = float(self.get_parameter('planning_lead').value)
-        self.margin = self.cell.safety_margin + float(self.get_parameter('planning_buffer').value)
+        self.margin = self.cell.safety_margin + float(cfg['planning_buffer'])
         self.max_delay = float(self.get_parameter('max_delay').value)
         self.max_wait = float(self.get_parameter('max_wait').value)
         for key, value in (('planning_lead', self.lead), ('max_delay', self.max_delay),
