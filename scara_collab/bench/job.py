@@ -125,12 +125,14 @@ def job_result(job: AutomationManager, monitor: CollisionMonitor,
 
 
 def run_launcher(mode: str, duration: float, output: Path, rtf: float = 0.0,
-                 seed: Optional[int] = None, timeout: float = 600.0) -> Dict[str, object]:
+                 seed: Optional[int] = None, timeout: float = 600.0,
+                 extra: Sequence[str] = ()) -> Dict[str, object]:
     """Run the launcher (one process per node) unthrottled; return its ``summary.json``.
 
     :param output: the run folder (created by the launcher).
     :param rtf: the bridge's real-time factor (0 = as fast as the machine allows).
     :param timeout: wall seconds before the launcher is stopped.
+    :param extra: more launcher flags (e.g. ``--feed-interval 1.0``, ``--fault ...``).
     :return: the summary plus ``exit_code`` and ``launcher_wall_seconds`` (start-up
         included); ``{'error': ...}`` if it did not produce a summary.
     """
@@ -140,6 +142,7 @@ def run_launcher(mode: str, duration: float, output: Path, rtf: float = 0.0,
            str(output), '--quiet', '--no-plots']
     if seed is not None:
         cmd += ['--seed', str(seed)]
+    cmd += list(extra)
     start = time.monotonic()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

@@ -677,12 +677,33 @@ def readme_block(results: dict) -> str:
 
 def update_readme(path, results: dict) -> bool:
     """Replace the block between the README markers; return False if there are none."""
+    block = readme_block(results)
+    inner = block[len(README_BEGIN):-len(README_END)].strip('\n')
+    return replace_block(path, 'benchmark:summary', inner + '\n')
+
+
+def block_markers(name: str):
+    """Return the ``<!-- name:begin -->`` / ``<!-- name:end -->`` markers of a block."""
+    return f'<!-- {name}:begin -->', f'<!-- {name}:end -->'
+
+
+def replace_block(path, name: str, text: str) -> bool:
+    """Replace the text between a generated block's markers; False if the file has none."""
     from pathlib import Path
     path = Path(path)
-    text = path.read_text()
-    if README_BEGIN not in text or README_END not in text:
+    begin, end = block_markers(name)
+    old = path.read_text()
+    if begin not in old or end not in old:
         return False
-    before, rest = text.split(README_BEGIN, 1)
-    _, after = rest.split(README_END, 1)
-    path.write_text(before + readme_block(results) + after)
+    before, rest = old.split(begin, 1)
+    _, after = rest.split(end, 1)
+    path.write_text(f'{before}{begin}\n{text.rstrip()}\n{end}{after}')
     return True
+
+
+def kept_block(text: str, name: str) -> str:
+    """Return a generated block of ``text`` with its markers ('' if none)."""
+    begin, end = block_markers(name)
+    if begin not in text or end not in text:
+        return ''
+    return begin + text.split(begin, 1)[1].split(end, 1)[0] + end

@@ -170,7 +170,11 @@ def run(out: Path, sizes: Sizes = FULL, only: Optional[Sequence[str]] = None,
         results['figures'] = figures.draw_all(results, out / 'figures')
         results['meta']['wall_s'] = progress.elapsed()
         results['meta']['cpu_s'] = cpu_seconds()
-        (out / 'RESULTS.md').write_text(report.render(results))
+        target = out / 'RESULTS.md'
+        # the job-protocol tables come from scripts/bench_job_protocol.py: keep them
+        kept = report.kept_block(target.read_text(), 'job-protocol') if target.is_file() else ''
+        target.write_text(report.render(results) + (
+            f'\n## The job protocol through the launcher\n\n{kept}\n' if kept else ''))
     if json_path:
         Path(json_path).write_text(json.dumps(jsonable(results), indent=1))
     return results

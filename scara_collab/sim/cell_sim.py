@@ -123,13 +123,15 @@ class SimEvent:
 class _ItemRec:
     """Mutable bookkeeping of one item (internal)."""
 
-    __slots__ = ('id', 'body', 'cls', 'mass', 'state', 'holder', 'constraint', 'last_robot')
+    __slots__ = ('id', 'body', 'cls', 'mass', 'state', 'holder', 'constraint', 'last_robot',
+                 'cause')
 
     def __init__(self, item_id: int, body: int, cls: str, mass: float, state: str):
         self.id, self.body, self.cls, self.mass, self.state = item_id, body, cls, mass, state
         self.holder: Optional[int] = None
         self.constraint: Optional[int] = None
         self.last_robot = ''
+        self.cause = ''  # what knocked it off the belt (it was never grasped)
 
 
 @contextmanager
@@ -244,6 +246,7 @@ class CellSim:
         if missing:
             raise ConfigError(f'the cell URDF has no joints {missing}')
         self._jidx = [joints[n] for n in self.joint_names]
+        self._link_names = {idx: name for name, idx in links.items()}
         self._quill = [links[f'{a.name}_quill'] for a in self.arms]
         pb.setJointMotorControlArray(body, self._jidx, pybullet.VELOCITY_CONTROL,
                                      forces=[0.0] * len(self._jidx))
@@ -576,7 +579,8 @@ class CellSim:
             self._pb.removeConstraint(rec.constraint)
         self._pb.removeBody(rec.body)
         del self._items[rec.id]
-        self._events.append(SimEvent(self.time, kind, rec.id, rec.cls, robot))
+        cause = rec.cause if kind in ('dropped', 'missed') else ''
+        self._events.append(SimEvent(self.time, kind, rec.id, rec.cls, robot, cause))
 
     def _update_items(self) -> None:
         """Feed, carry items on the belt, detect missed / sorted / wrong_bin / dropped."""
@@ -600,6 +604,8 @@ class CellSim:
                 rec.state = 'belt'
                 self._set_vel(rec.body, carry, zero)
                 continue
+            if rec.state == 'belt' and not rec.cause:  # it left the belt without a grasp
+                rec.cause = self._touching(rec)
             rec.state = 'free'
             if z < _LOST_Z:
                 self._remove(rec, 'dropped', rec.last_robot)
@@ -614,6 +620,20 @@ class CellSim:
             else:
                 if z < self.cell.item_size:
                     self._remove(rec, 'dropped', rec.last_robot)
+
+    def _touching(self, rec: _ItemRec) -> str:
+        """Name what touches an item now: an arm link, another item, or nothing."""
+        others = {r.body: r for r in self._items.values() if r is not rec}
+        found = ''
+        for c in self._pb.getContactPoints(bodyA=rec.body):
+            if c[2] == self._body:
+                return f'knocked by {self._link_names.get(c[4], "the cell")}'
+            if c[2] in others and not found:
+                other = others[c[2]]
+                found = f'pushed by item {other.id}' + (
+                    f' (held by {self.robots[other.holder]})' if other.holder is not None
+                    else '')
+        return found or 'left the belt with nothing touching it'
 
     def items(self) -> List[Item]:
         """Every item in the cell now (positions and velocities read from PyBullet)."""
