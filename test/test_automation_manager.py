@@ -51,3 +51,20 @@ def test_the_job_survives_lost_and_late_answers():
     assert s['sorted'] >= 8 and s['missed'] == 0 and s['dropped'] == 0
     assert s['sorted_by_scara_left'] > 0 and s['sorted_by_scara_right'] > 0
     assert s['min_separation_m'] >= 0.10 and not s['estop']
+
+
+def test_the_node_logs_the_jobs_decisions_at_both_levels():
+    """The node logs at both levels: rclpy refuses a call site whose severity changes."""
+    import rclpy
+
+    from scara_collab.nodes.automation_manager import AutomationManager
+    from scara_collab.nodes.params import ros_args
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        node = AutomationManager(context=ctx, cli_args=ros_args('automation', 'controllers'))
+        for level in ('info', 'warn', 'info', 'warn'):
+            node._log(level, f'a {level} decision')
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)

@@ -101,7 +101,11 @@ class AutomationManager(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _log(self, level: str, text: str) -> None:
-        (self.get_logger().warning if level == 'warn' else self.get_logger().info)(text)
+        # one call site per severity: rclpy refuses a call site whose severity changes
+        if level == 'warn':
+            self.get_logger().warning(text)
+        else:
+            self.get_logger().info(text)
 
     # --- inputs -----------------------------------------------------------------------------
     def _on_items(self, msg: MarkerArray) -> None:

@@ -93,7 +93,9 @@ class CollisionMonitor(Node):
         pairs = collision.arm_pair_distances(a, qa, b, qb)
         d = float(pairs.min())
         stamp = conv.to_sec(msg.header.stamp)
-        self.last, self.last_time = d, self._now()
+        now = self._now()
+        # the watchdog runs on sim time: a state heard before the first /clock has no time
+        self.last, self.last_time = d, (now if now > 0 else None)
         if self.minimum is None or d < self.minimum:
             self.minimum, self.minimum_time = d, stamp
             if self._published_min is None or d < self._published_min - 5e-4:

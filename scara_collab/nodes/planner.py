@@ -136,7 +136,16 @@ class Planner(Node):
                 self.history.popitem(last=False)
         self.status_pub.publish(st.to_msg())
 
-    def _other_timeline(self, now: float) -> Timeline:
+    def _other_timeline(self) -> Timeline:
+        """Return the other arm's motion as far as it is committed.
+
+        While its committed move has not ended *now*, that move (a timeline holds its last
+        pose after its end, which is where the arm will be); otherwise a hold where it is
+        measured. Judging "ended" at my planned start instead would hold the other arm at
+        its measured pose in the middle of its move: a stale pose (the margin breach at
+        saturation of issue 14 came from that).
+        """
+        now = self._now()
         if self.theirs is not None and self.theirs.end > now:
             return self.theirs
         return Timeline.hold(now, self.q_other)
@@ -226,7 +235,7 @@ class Planner(Node):
             self._status('refused', request, str(exc))
             return
         start = max(start, self._now() + self.lead)  # planning took (sim) time too
-        plan = schedule(self.arm, traj, start, self.other, self._other_timeline(start),
+        plan = schedule(self.arm, traj, start, self.other, self._other_timeline(),
                         self.margin, self.leader, self.max_delay)
         if plan is None:
             self._wait(xyz, frame, asked, request)
