@@ -8,7 +8,7 @@ from scara_collab.core.job import (GripCommand, items_per_minute, JobSettings, M
 from scara_collab.core.kinematics import ik
 from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.planning import plan_path
-from scara_collab.core.sorting import SeenItem
+from scara_collab.core.sorting import drop_point, SeenItem
 
 HOME = np.array([0.0, 1.5708, 0.0])
 
@@ -131,8 +131,7 @@ def test_lost_gripper_answers_are_asked_again_then_fail(cell):
     assert job.phases()[pick.robot] == 'grasping'
     job.on_grip(out[0].token, True, 'already holds item 1')  # idempotent server: success
     nxt = moves(job.tick(t + 0.5))
-    assert job.phases()[pick.robot] == 'lift' and nxt[0].purpose == 'lift'
-    assert nxt[0].target[2] == pytest.approx(job.s.carry_z)
+    assert nxt[0].purpose == 'to_bin'  # nothing else on the belt: straight to the bin
 
     # no answer at all: bounded retries, then the grasp failed and the arm is free again
     job = make_job(cell)
@@ -157,7 +156,34 @@ def test_a_grasped_event_confirms_a_grasp_whose_answer_was_lost(cell):
     arrive(cell, job, pick, t)
     job.tick(t)
     job.on_item_event('grasped', 1, pick.robot)
-    assert moves(job.tick(t + 0.02))[0].purpose == 'lift'
+    assert moves(job.tick(t + 0.02))[0].purpose == 'to_bin'
+
+
+def test_a_grasped_item_is_lifted_only_when_it_would_sweep_the_belt(cell):
+    for neighbours, expected in (([], 'to_bin'), ([(0.0, 0.0)], 'lift'),
+                                 ([(0.0, 0.35)], 'to_bin')):
+        job = make_job(cell)
+        pick = first_pick(cell, job)
+        t = pick.start + 1.0
+        z = cell.belt.top_z + cell.item_size / 2
+        here = np.r_[pick.target[:2], z]
+        # another item where the held item passes on its way to the bin (or well clear of it)
+        drop = drop_point(cell, pick.robot, cell.item_classes[0], job.s.drop_clearance)
+        path = job.plan(pick.robot, ik(cell.leader, pick.target, q_current=job.q[pick.robot]).q,
+                        drop)
+        k = len(path.t) // 8  # early in the move, while the held item is still low
+        seen = [SeenItem(1, cell.item_classes[0], here, t)]
+        for n, (dx, dy) in enumerate(neighbours):
+            x = path.p[k, 0] - cell.belt.speed * (job.s.decision_lead + path.t[k]) + dx
+            seen.append(SeenItem(10 + n, cell.item_classes[1],
+                                 np.r_[x, path.p[k, 1] + dy, z], t))
+        job.on_items(seen)
+        arrive(cell, job, pick, t)
+        job.on_grip(grips(job.tick(t))[0].token, True, 'grasped')
+        nxt = moves(job.tick(t + 0.02))[0]
+        assert nxt.purpose == expected, (neighbours, nxt.purpose)
+        if expected == 'lift':
+            assert nxt.target[2] == pytest.approx(job.s.carry_z)
 
 
 def test_an_arm_holding_an_item_retries_its_bin_instead_of_dropping_it(cell):

@@ -144,6 +144,7 @@ SCHEMAS = {
         Rule('carry_clearance', 'nonneg'),
         Rule('drop_clearance', 'nonneg'),
         Rule('mirror_pair_offset', 'nonneg'),
+        Rule('mirror_start_lead', 'positive'),
         Rule('decision_lead', 'positive'),
         Rule('answer_timeout', 'positive'),
         Rule('answer_retries', 'int', lambda v: v >= 0, 'must be >= 0'),

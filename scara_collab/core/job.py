@@ -97,6 +97,7 @@ class JobSettings:
     grip_retries: int
     pair_offset: float = 0.0
     pair_margin: float = 0.13
+    pair_lead: float = 0.1
     bin_retries: int = 3
 
     @staticmethod
@@ -125,6 +126,7 @@ class JobSettings:
             arrive_tolerance=float(cfg['arrive_tolerance']),
             grip_timeout=float(cfg['grip_timeout']), grip_retries=int(cfg['grip_retries']),
             pair_offset=float(cfg['mirror_pair_offset']),
+            pair_lead=float(cfg['mirror_start_lead']),
             pair_margin=cell.safety_margin + float(planning_buffer))
 
 
@@ -357,6 +359,14 @@ class SortingJob:
         lane.sends = 1
         self._send(lane)
 
+    def _soon(self, lane: Lane, now: float) -> float:
+        """Return the start to ask for a move that should start as soon as possible.
+
+        One arm: now (its planner adds its own planning lead). A mirrored pair: ``pair_lead``
+        ahead, so both planners get a start that is still in the future and plan the same.
+        """
+        return now + (self.s.pair_lead if len(lane.robots) > 1 else 1e-3)
+
     def _send(self, lane: Lane) -> None:
         self._out.append(MoveCommand(lane.robot, lane.target, lane.request,
                                      len(lane.robots) > 1, lane.phase))
@@ -418,7 +428,7 @@ class SortingJob:
         elif lane.phase == 'via':
             if lane.route:  # the next leg of a mirrored pair's detour
                 phase, target = lane.route.pop(0)
-                self._move(lane, phase, target, now + 1e-3, now)
+                self._move(lane, phase, target, self._soon(lane, now), now)
             elif lane.holding:
                 self._to_bin(lane, now)
             elif not self._chase(lane, self.items.get(lane.item.id, lane.item), now):
@@ -471,7 +481,7 @@ class SortingJob:
 
     def _to_bin(self, lane: Lane, now: float) -> None:
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, self.s.drop_clearance)
-        self._move_safely(lane, 'to_bin', drop, now + self.s.decision_lead, now)
+        self._move_safely(lane, 'to_bin', drop, self._soon(lane, now), now)
 
     def _move_safely(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
         """Ask for a move like :meth:`_move`; a mirrored pair may go round by a waypoint.
@@ -597,13 +607,47 @@ class SortingJob:
             self.claimed.pop(item.id, None)
             self.log('info', f'{lane.robot}: grasp of item {item.id} failed ({main.message})')
             self._idle(lane)
-        elif self.s.carry_z > self.s.pick_z + 1e-6:
+        elif self.s.carry_z > self.s.pick_z + 1e-6 and self._would_sweep(lane, now):
             up = np.array([lane.target[0], lane.target[1], self.s.carry_z])
             lane.bin_tries, lane.holding = 0, True
-            self._move(lane, 'lift', up, now + 1e-3, now)
+            self._move(lane, 'lift', up, self._soon(lane, now), now)
         else:
             lane.bin_tries, lane.holding = 0, True
             self._to_bin(lane, now)
+
+    def _would_sweep(self, lane: Lane, now: float) -> bool:
+        """Return True if the item just grasped would touch an item on the belt on its way.
+
+        Then it is lifted clear first. A held item hangs with its bottom ``pick_z - belt
+        top`` below the tool; the move to the bin (as the planner will plan it) is checked
+        against every other item's predicted position, with ``carry_clearance`` to spare
+        (in mirrored mode the follower's mirror
+        image too). Checking costs about a millisecond; lifting costs a move.
+        """
+        drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, self.s.drop_clearance)
+        try:
+            traj = self.plan(lane.robot, self.q[lane.robot], drop)
+        except ValueError:
+            return True
+        others = [it for it in self.items.values() if it.id != lane.item.id]
+        if not others:
+            return False
+        belt, size = self.cell.belt, self.cell.item_size
+        spare = self.s.carry_z - self.s.pick_z - size  # = carry_clearance
+        low = traj.p[:, 2] - self.s.pick_z < size + spare  # held bottom below item tops
+        if not np.any(low):
+            return False
+        t = self._soon(lane, now) + traj.t[low]
+        path = traj.p[low, :2]
+        paths = [path] + ([path * [1.0, -1.0] + [0.0, 2 * belt.centre_y]]
+                          if len(lane.robots) > 1 else [])
+        for it in others:
+            x = it.position[0] + belt.speed * (t - it.stamp)
+            for p in paths:
+                if np.any((np.abs(p[:, 0] - x) < size + spare)
+                          & (np.abs(p[:, 1] - it.position[1]) < size + spare)):
+                    return True
+        return False
 
     # --- endings --------------------------------------------------------------------------
     def _idle(self, lane: Lane) -> None:
@@ -634,7 +678,7 @@ class SortingJob:
         # wait clear of the shared zone, above the first bin, so the other arm is not blocked
         park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
                                   self.s.drop_clearance)
-        self._move_safely(lane, 'to_park', park, now + self.s.decision_lead, now)
+        self._move_safely(lane, 'to_park', park, self._soon(lane, now), now)
 
     # --- figures --------------------------------------------------------------------------
     def minutes(self, now: float) -> float:
