@@ -60,6 +60,17 @@ def arrive(cell, job, cmd, t_end, robot=None):
     job.on_execution(robot, cmd.request, 'finished', None, None)
 
 
+def at_the_item(cell, **overrides):
+    """Return ``(job, pick move, t)``: the leader arrived at t with item 1 under its tool."""
+    job = make_job(cell, **overrides)
+    pick = first_pick(cell, job)
+    t = pick.start + 1.0
+    job.on_items([SeenItem(1, cell.item_classes[0], np.r_[pick.target[:2],
+                                                          cell.belt.top_z + 0.05], t)])
+    arrive(cell, job, pick, t)
+    return job, pick, t
+
+
 def test_items_per_minute_has_one_definition():
     assert items_per_minute(30, 60.0) == 30.0
     assert items_per_minute(5, 0.0) == 0.0
@@ -115,13 +126,7 @@ def test_every_waiting_phase_has_a_deadline(cell):
 
 
 def test_lost_gripper_answers_are_asked_again_then_fail(cell):
-    job = make_job(cell)
-    pick = first_pick(cell, job)
-    t = pick.start + 1.0
-    # keep the item under the tool at arrival
-    job.on_items([SeenItem(1, cell.item_classes[0], np.r_[pick.target[:2],
-                                                          cell.belt.top_z + 0.05], t)])
-    arrive(cell, job, pick, t)
+    job, pick, t = at_the_item(cell)
     out = grips(job.tick(t))
     assert len(out) == 1 and out[0].grasp
     first = out[0].token
@@ -134,12 +139,7 @@ def test_lost_gripper_answers_are_asked_again_then_fail(cell):
     assert nxt[0].purpose == 'to_bin'  # nothing else on the belt: straight to the bin
 
     # no answer at all: bounded retries, then the grasp failed and the arm is free again
-    job = make_job(cell)
-    pick = first_pick(cell, job)
-    t = pick.start + 1.0
-    job.on_items([SeenItem(1, cell.item_classes[0], np.r_[pick.target[:2],
-                                                          cell.belt.top_z + 0.05], t)])
-    arrive(cell, job, pick, t)
+    job, pick, t = at_the_item(cell)
     job.tick(t)
     for k in range(job.s.grip_retries + 1):
         t += job.s.grip_timeout + 0.01
@@ -148,12 +148,7 @@ def test_lost_gripper_answers_are_asked_again_then_fail(cell):
 
 
 def test_a_grasped_event_confirms_a_grasp_whose_answer_was_lost(cell):
-    job = make_job(cell)
-    pick = first_pick(cell, job)
-    t = pick.start + 1.0
-    job.on_items([SeenItem(1, cell.item_classes[0], np.r_[pick.target[:2],
-                                                          cell.belt.top_z + 0.05], t)])
-    arrive(cell, job, pick, t)
+    job, pick, t = at_the_item(cell)
     job.tick(t)
     job.on_item_event('grasped', 1, pick.robot)
     assert moves(job.tick(t + 0.02))[0].purpose == 'to_bin'
@@ -187,12 +182,7 @@ def test_a_grasped_item_is_lifted_only_when_it_would_sweep_the_belt(cell):
 
 
 def test_an_arm_holding_an_item_retries_its_bin_instead_of_dropping_it(cell):
-    job = make_job(cell, lift_after_grasp=False)
-    pick = first_pick(cell, job)
-    t = pick.start + 1.0
-    job.on_items([SeenItem(1, cell.item_classes[0], np.r_[pick.target[:2],
-                                                          cell.belt.top_z + 0.05], t)])
-    arrive(cell, job, pick, t)
+    job, pick, t = at_the_item(cell, lift_after_grasp=False)
     g = grips(job.tick(t))[0]
     job.on_grip(g.token, True, 'grasped')
     to_bin = moves(job.tick(t + 0.02))[0]
