@@ -230,3 +230,28 @@ def test_estop_pauses_and_stop_is_idempotent(cell):
     assert moves(job.tick(0.1))
     assert job.stop() is True and job.stop() is False
     assert job.start(1.0) is True and job.start(1.0) is False
+
+
+def test_an_arm_in_the_way_parks_and_a_deadlock_is_broken_by_the_follower(cell):
+    lead, foll = cell.leader.name, cell.follower.name
+    # the leader waits for the right arm, which stands idle in the way: the right arm parks
+    job = make_job(cell)
+    pick = first_pick(cell, job)
+    assert job.phases() == {lead: 'to_item', foll: 'idle'}
+    job.items = {}  # nothing for the right arm to take meanwhile
+    job.on_planner(lead, pick.request, 'waiting', None, None, 'scara_right blocks it')
+    job.tick(0.1)
+    assert job.phases()[foll] == 'idle'  # not yet: unblock_after
+    out = moves(job.tick(0.1 + job.s.unblock_after + 0.01))
+    assert job.phases()[foll] == 'to_park' and [m.robot for m in out] == [foll]
+
+    # both wait for each other: the follower's lane gives way (it parks), the leader stays
+    job = make_job(cell)
+    job.on_items([item_on_belt(cell, 1, y=-0.2), item_on_belt(cell, 2, x=1.0, y=0.2)])
+    out = moves(job.tick(0.0))
+    assert sorted(m.robot for m in out) == sorted([lead, foll])
+    for m in out:
+        job.on_planner(m.robot, m.request, 'waiting', None, None, 'the other arm blocks it')
+    job.tick(job.s.unblock_after + 0.1)
+    assert job.phases() == {lead: 'to_item', foll: 'to_park'}
+    assert 'scara_right gives way' in job.last_give_up

@@ -150,6 +150,7 @@ SCHEMAS = {
         Rule('answer_retries', 'int', lambda v: v >= 0, 'must be >= 0'),
         Rule('move_timeout', 'positive'),
         Rule('carry_timeout', 'positive'),
+        Rule('unblock_after', 'positive'),
         Rule('arrive_timeout', 'positive'),
         Rule('arrive_tolerance', 'positive'),
         Rule('grip_timeout', 'positive'),

@@ -98,6 +98,7 @@ class JobSettings:
     pair_offset: float = 0.0
     pair_margin: float = 0.13
     pair_lead: float = 0.1
+    unblock_after: float = 0.5
     bin_retries: int = 3
 
     @staticmethod
@@ -127,6 +128,7 @@ class JobSettings:
             grip_timeout=float(cfg['grip_timeout']), grip_retries=int(cfg['grip_retries']),
             pair_offset=float(cfg['mirror_pair_offset']),
             pair_lead=float(cfg['mirror_start_lead']),
+            unblock_after=float(cfg['unblock_after']),
             pair_margin=cell.safety_margin + float(planning_buffer))
 
 
@@ -165,6 +167,7 @@ class MoveTrack:
     """What is known of one arm's move of the current request."""
 
     state: str = 'asked'
+    since: float = 0.0  # when it entered this state (for 'waiting')
     start: Optional[float] = None
     end: Optional[float] = None
     reason: str = ''
@@ -238,6 +241,7 @@ class SortingJob:
         self._token = 0
         self._parked_unused = False
         self._out: List[object] = []
+        self._now = 0.0
 
     # --- observations ---------------------------------------------------------------------
     def start(self, now: float) -> bool:
@@ -290,6 +294,8 @@ class SortingJob:
                 return  # the bridge already runs it (its start is the one that counts)
             track.state, track.start, track.end = 'planned', start, end
         elif state in ('queued', 'waiting'):  # not (or no longer) committed
+            if track.state != state:
+                track.since = self._now
             track.state, track.start, track.end = state, None, None
         elif state in ('refused', 'superseded'):
             track.state, track.reason = state, reason
@@ -326,6 +332,7 @@ class SortingJob:
     def tick(self, now: float) -> List[object]:
         """Advance every lane to ``now`` (sim s); return the commands to send, in order."""
         self._out = []
+        self._now = now
         if self.estop or len(self.q) < len(self.cell.arms):
             return self._out
         if self.running and not self._parked_unused:
@@ -338,7 +345,38 @@ class SortingJob:
                 self._tick_move(lane, now)
             else:
                 self._tick_grip(lane, now)
+        if len(self.lanes) > 1:
+            self._unblock(now)
         return self._out
+
+    def _blocked(self, lane: Lane, now: float) -> bool:
+        """Return True if the lane's planner has waited for the other arm ``unblock_after``."""
+        return lane.phase in MOVING and any(
+            t.state == 'waiting' and now - t.since > self.s.unblock_after
+            for t in lane.moves.values())
+
+    def _unblock(self, now: float) -> None:
+        """Clear the way for an arm that waits for the other one (collaborative mode).
+
+        An idle arm in the way parks; when both wait for each other, the follower's lane
+        gives way (unless it holds an item), as the priority rule has it.
+        """
+        for lane in self.lanes:
+            if not self._blocked(lane, now):
+                continue
+            other = next(o for o in self.lanes if o is not lane)
+            if other.phase == 'idle':
+                self.log('info', f'{other.robot}: parks to clear the way for {lane.robot}')
+                self._park(other, now)
+            elif self._blocked(other, now):
+                # the one not holding an item gives way; if neither holds one, the follower
+                free = [o for o in (lane, other) if not o.holding]
+                if free:
+                    yielder = next((o for o in free if o.robot != self.cell.leader.name),
+                                   free[0])
+                    self._give_up(yielder, now, 'both arms wait for each other: '
+                                  f'{yielder.robot} gives way')
+            return
 
     def phases(self) -> Dict[str, str]:
         """Each lane's phase, by its robot."""
@@ -407,8 +445,11 @@ class SortingJob:
                 continue
             if track.end is None:  # asked, queued or waiting
                 if now - lane.since > limit:
+                    others = ', '.join(f'{o.robot} {o.phase}' + (' holding' if o.holding else '')
+                                       for o in self.lanes if o is not lane)
                     return self._give_up(lane, now, f'no plan from the {robot} planner in '
-                                         f'{limit:g} s ({track.state})')
+                                         f'{limit:g} s ({track.state}'
+                                         + (f'; {others})' if others else ')'))
                 continue
             if now >= track.end and self._at_target(lane, robot):
                 track.arrived = True
@@ -675,7 +716,10 @@ class SortingJob:
         self._idle(lane)
         if phase == 'to_park':  # the park move itself failed: stay idle, do not loop
             return
-        # wait clear of the shared zone, above the first bin, so the other arm is not blocked
+        self._park(lane, now)
+
+    def _park(self, lane: Lane, now: float) -> None:
+        """Wait clear of the shared zone, above the first bin, so the other arm is free."""
         park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
                                   self.s.drop_clearance)
         self._move_safely(lane, 'to_park', park, self._soon(lane, now), now)
