@@ -37,6 +37,7 @@ from visualization_msgs.msg import MarkerArray
 
 from scara_collab.core import collision, kinematics as kin
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.cell_viewer import CellViewer, LATCHED, margin_colour, MARGIN_COLOURS
 
 CHROMIUM = shutil.which('chromium')
@@ -155,8 +156,8 @@ def test_items_paths_estop_and_stats_are_shown(graph):
     publish(graph, Bool, '/emergency_stop', Bool(data=True), LATCHED)
     publish(graph, Float64, '/collision_monitor/min_distance', Float64(data=0.0421))
     publish(graph, DiagnosticStatus, '/automation_manager/stats',
-            conv.status('automation_manager', 'OK', '3 sorted, 0 missed, 30.0/min',
-                        {'sorted': 3, 'missed': 0}))
+            proto.JobStats('collaborative', True, 3.0, 0.0, {'sorted': 3, 'missed': 0},
+                           items_per_minute=30.0).to_msg())
     assert graph.spin_until(lambda: 'E-stop: ACTIVE' in scene.status_md.content
                             and 'monitor 0.042 m' in scene.status_md.content
                             and '| sorted | 3 |' in scene.stats_md.content, 5)

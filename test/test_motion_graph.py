@@ -14,6 +14,7 @@ from scara_collab.core.kinematics import fk
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.trajectory import segment_deviation
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.collision_monitor import CollisionMonitor
 from scara_collab.nodes.planner import Planner
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
@@ -73,8 +74,9 @@ def tool_paths(g, t0=0.0):
 
 
 def last_end(g, robot):
-    ok = [s for s in g.status[robot] if 'end' in conv.status_values(s)]
-    return float(conv.status_values(ok[-1])['end'])
+    planned = [st for st in map(proto.PlannerStatus.from_msg, g.status[robot])
+               if st.state == 'planned']
+    return planned[-1].end
 
 
 def test_collab_target_moves_both_arms_mirrored_and_straight(cell):

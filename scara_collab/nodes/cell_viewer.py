@@ -42,6 +42,7 @@ import yourdfpy
 from scara_collab.core import collision
 from scara_collab.core.model import CellModel, load_cell
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.runner import run_node
 
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
@@ -407,7 +408,15 @@ class CellViewer(Node):
         self.estop = bool(msg.data)
 
     def _on_stats(self, msg: DiagnosticStatus) -> None:
-        self.stats = (msg.message, conv.status_values(msg))
+        try:
+            st = proto.JobStats.from_msg(msg)
+        except proto.ProtocolError as exc:
+            self.get_logger().warning(f'ignoring job stats: {exc}', throttle_duration_sec=5.0)
+            return
+        self.stats = (st.text(), {**st.counts, 'items/min': st.items_per_minute,
+                                  **{f'sorted by {r}': n for r, n in st.sorted_by.items()},
+                                  'give-ups': st.give_ups, 'retries': st.retries,
+                                  'running': st.running})
         self._dirty.add('stats')
 
     # --- output ----------------------------------------------------------------------------

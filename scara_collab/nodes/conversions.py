@@ -1,9 +1,12 @@
-"""Message <-> numpy conversions, in one place so no node repeats them."""
+"""Message <-> numpy conversions, in one place so no node repeats them.
+
+The statuses the nodes exchange (DiagnosticStatus key-values) are
+:mod:`scara_collab.nodes.protocol`'s, not this module's.
+"""
 import math
 from typing import Dict, List, Optional, Sequence, Tuple
 
 from builtin_interfaces.msg import Duration, Time
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, PointStamped, Pose, PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
@@ -11,9 +14,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
-
-LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
-          'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
 
 
 class MessageError(ValueError):
@@ -161,20 +161,6 @@ def path_msg(points: np.ndarray, stamp: float, frame_id: str = 'world') -> Path:
         pose.pose.orientation.w = 1.0
         msg.poses.append(pose)
     return msg
-
-
-def status(name: str, level: str, message: str, values: Optional[Dict] = None,
-           hardware_id: str = '') -> DiagnosticStatus:
-    """Build a ``DiagnosticStatus``; ``level`` is ``'OK'``, ``'WARN'``, ``'ERROR'``."""
-    msg = DiagnosticStatus(level=LEVELS[level], name=name, message=message,
-                           hardware_id=hardware_id)
-    msg.values = [KeyValue(key=str(k), value=str(v)) for k, v in (values or {}).items()]
-    return msg
-
-
-def status_values(msg: DiagnosticStatus) -> Dict[str, str]:
-    """``DiagnosticStatus.values`` -> dict."""
-    return {kv.key: kv.value for kv in msg.values}
 
 
 _COLOURS = [(0.85, 0.15, 0.15), (0.15, 0.35, 0.9), (0.2, 0.75, 0.2), (0.9, 0.8, 0.1)]

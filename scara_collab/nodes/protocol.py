@@ -26,6 +26,7 @@ now") gets the planner's receipt time instead. The planner puts the id in the
 a status always says which move it is about, from the request to the end of the motion.
 """
 from dataclasses import dataclass, field, fields, MISSING
+import functools
 import json
 import math
 import numbers
@@ -109,6 +110,12 @@ def _decode(text: str, kind, key: str):
                             f' ({exc})') from None
 
 
+@functools.lru_cache(maxsize=None)
+def _hints(cls) -> Dict[str, object]:
+    """Return the field types of a status class (resolved once: it is on every message's path)."""
+    return get_type_hints(cls)
+
+
 class _Status:
     """Fields <-> ``DiagnosticStatus`` key-values (one per field, typed by the annotations)."""
 
@@ -142,7 +149,7 @@ class _Status:
         :raises ProtocolError: a missing or malformed field.
         """
         values = {kv.key: kv.value for kv in msg.values}
-        hints = get_type_hints(cls)
+        hints = _hints(cls)
         kwargs = {}
         for f in fields(cls):
             if f.name not in values:
