@@ -95,13 +95,18 @@ def trajectory_msg(names: Sequence[str], t: np.ndarray, q: np.ndarray,
     return msg
 
 
-def trajectory_arrays(msg: JointTrajectory, names: Sequence[str]):
+#: the most points a trajectory may have: 100 s at the planners' 100 Hz
+MAX_TRAJECTORY_POINTS = 10_000
+
+
+def trajectory_arrays(msg: JointTrajectory, names: Sequence[str],
+                      max_points: int = MAX_TRAJECTORY_POINTS):
     """``JointTrajectory`` -> ``(stamp, t, q, qd or None, qdd or None)`` in ``names`` order.
 
     ``stamp`` is the header stamp in seconds (0 = start now); ``t`` the times from start.
 
-    :raises MessageError: unknown or missing joint names, mismatched lengths, no points,
-        non-monotonic times, non-finite numbers.
+    :raises MessageError: unknown or missing joint names, mismatched lengths, no points or
+        more than ``max_points``, non-monotonic times, non-finite numbers.
     """
     names = list(names)
     if sorted(msg.joint_names) != sorted(names):
@@ -111,6 +116,9 @@ def trajectory_arrays(msg: JointTrajectory, names: Sequence[str]):
         raise MessageError('duplicate joint names')
     if not msg.points:
         raise MessageError('trajectory has no points')
+    if len(msg.points) > max_points:
+        raise MessageError(f'trajectory has {len(msg.points)} points; at most {max_points} '
+                           'are accepted')
     order = [list(msg.joint_names).index(n) for n in names]
     n = len(names)
 

@@ -19,6 +19,16 @@ from scara_collab.nodes import lockstep
 
 
 EXECUTORS = ('events', 'single')
+DISCOVERY_ENV = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
+
+
+def localhost_by_default() -> None:
+    """Keep DDS discovery on this host unless the user's environment says otherwise.
+
+    Called before ``rclpy.init`` by every entry point (the executables, ``ros2 run``, the
+    launcher), so a cell started on a shared network never talks to another one by accident.
+    """
+    os.environ.setdefault(DISCOVERY_ENV, 'LOCALHOST')
 
 
 def guarded(node: Node, callback: Callable, service: bool = False) -> Callable:
@@ -77,6 +87,7 @@ def run_node(factory: Callable[[], Node], args: Optional[list] = None) -> None:
     :param factory: builds the node (called after ``rclpy.init``).
     :param args: command-line arguments for ``rclpy.init`` (``--ros-args ...``).
     """
+    localhost_by_default()
     rclpy.init(args=args)
     node = None
     try:

@@ -69,6 +69,7 @@ from std_srvs.srv import SetBool, Trigger
 from scara_collab.core.config import load_config
 from scara_collab.core.paths import config_dir
 from scara_collab.nodes.faults import call_with_faults, FaultPlan, parse_faults
+from scara_collab.nodes.runner import localhost_by_default
 from scara_collab.run.recorder import RunRecorder
 from scara_collab.run.report import format_progress, format_report
 
@@ -723,7 +724,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
               f'({AUTOMATION_MODULE}), which is not installed; --mode idle runs the graph '
               'without it', file=sys.stderr)
         return EXIT_USAGE
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # before rclpy.init
+    localhost_by_default()  # before rclpy.init, as every executable does
     output = (args.output or default_output(args.mode)).resolve()
     output.mkdir(parents=True, exist_ok=True)
     console = Console(output / 'launch.log', args.quiet)

@@ -1,0 +1,55 @@
+"""Message conversions refuse bad input at the door; entry points stay on localhost."""
+import numpy as np
+import pytest
+
+from scara_collab.core.mirror import mirror_joints
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
+from scara_collab.nodes import runner
+
+
+def test_non_finite_joint_states_are_refused(cell):
+    names = list(cell.leader.joint_names) + list(cell.follower.joint_names)
+    q = [0.0, 1.5708, 0.0] + list(mirror_joints(np.array([0.0, 1.5708, 0.0])))
+    ok = conv.joint_state(1.0, names, q, [0.0] * 6, [0.0] * 6)
+    pos, _ = conv.joint_state_arrays(ok, cell.leader.joint_names)
+    np.testing.assert_allclose(pos, q[:3])
+    for bad in (float('nan'), float('inf')):
+        msg = conv.joint_state(1.0, names, q[:1] + [bad] + q[2:], [0.0] * 6, [0.0] * 6)
+        with pytest.raises(conv.MessageError, match='non-finite'):
+            conv.joint_state_arrays(msg, cell.leader.joint_names)
+
+
+def test_absurdly_long_trajectories_are_refused(cell):
+    arm = cell.leader
+    n = conv.MAX_TRAJECTORY_POINTS + 1
+    t = np.arange(n) * 0.01
+    msg = conv.trajectory_msg(arm.joint_names, t, np.zeros((n, 3)))
+    with pytest.raises(conv.MessageError, match=f'{n} points; at most'):
+        conv.trajectory_arrays(msg, arm.joint_names)
+    short = conv.trajectory_msg(arm.joint_names, t[:5], np.zeros((5, 3)))
+    assert conv.trajectory_arrays(short, arm.joint_names)[1].shape == (5,)
+
+
+def test_a_move_id_is_its_request_stamp_exactly():
+    ns = 133_510_992_676
+    stamp = conv.time_from_ns(ns)
+    assert proto.stamp_ns(stamp) == ns
+    assert proto.parse_move_id(proto.move_id('scara_left', ns)) == ('scara_left', ns)
+    with pytest.raises(proto.ProtocolError):
+        proto.parse_move_id('scara_left/not-a-number')
+
+
+def test_every_entry_point_keeps_discovery_on_this_host(monkeypatch):
+    monkeypatch.delenv(runner.DISCOVERY_ENV, raising=False)
+    seen = {}
+
+    def factory():
+        import os
+        seen['range'] = os.environ.get(runner.DISCOVERY_ENV)
+        raise KeyboardInterrupt  # stop at once: run_node shuts down cleanly
+    runner.run_node(factory, args=[])
+    assert seen['range'] == 'LOCALHOST'
+    monkeypatch.setenv(runner.DISCOVERY_ENV, 'SUBNET')  # the user's choice wins
+    runner.run_node(factory, args=[])
+    assert seen['range'] == 'SUBNET'
