@@ -30,7 +30,7 @@ import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 import trimesh
@@ -43,10 +43,9 @@ from scara_collab.core import collision
 from scara_collab.core.model import CellModel, load_cell
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.qos import LATCHED
 from scara_collab.nodes.runner import run_node
 
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                     reliability=ReliabilityPolicy.RELIABLE)
 #: Item class colours, by the class's index in ``cell.item_classes`` (RGB 0-255).
 CLASS_COLOURS = ((217, 38, 38), (38, 89, 230), (51, 191, 51), (230, 204, 26))
 UNKNOWN_CLASS = (128, 128, 128)

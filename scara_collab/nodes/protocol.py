@@ -121,6 +121,14 @@ class _Status:
 
     #: the ``DiagnosticStatus.name`` suffix or fixed name of this status
     KIND: ClassVar[str] = ''
+    #: ``(field, allowed values)`` checked on construction, or None
+    CHOICES: ClassVar[Optional[Tuple[str, tuple]]] = None
+
+    def __post_init__(self):
+        if self.CHOICES is not None:
+            key, allowed = self.CHOICES
+            if getattr(self, key) not in allowed:
+                raise ValueError(f'{key} {getattr(self, key)!r} is not one of {allowed}')
 
     def level(self) -> str:
         """``'OK'``, ``'WARN'`` or ``'ERROR'`` for the message's ``level``."""
@@ -193,10 +201,7 @@ class PlannerStatus(_Status):
     kind: str = ''            # 'line' or 'joint' for planned moves
 
     KIND: ClassVar[str] = 'planner'
-
-    def __post_init__(self):
-        if self.state not in PLANNER_STATES:
-            raise ValueError(f'state {self.state!r} is not one of {PLANNER_STATES}')
+    CHOICES: ClassVar[Tuple[str, tuple]] = ('state', PLANNER_STATES)
 
     def name(self) -> str:
         return f'{self.robot}/planner'
@@ -242,10 +247,7 @@ class ExecutionStatus(_Status):
     stamp: Optional[float] = None
 
     KIND: ClassVar[str] = 'execution'
-
-    def __post_init__(self):
-        if self.state not in EXECUTION_STATES:
-            raise ValueError(f'state {self.state!r} is not one of {EXECUTION_STATES}')
+    CHOICES: ClassVar[Tuple[str, tuple]] = ('state', EXECUTION_STATES)
 
     def name(self) -> str:
         return f'{self.robot}/execution'
@@ -287,9 +289,7 @@ class ItemEvent(_Status):
     robot: str = ''
     cause: str = ''
 
-    def __post_init__(self):
-        if self.kind not in ITEM_EVENTS:
-            raise ValueError(f'kind {self.kind!r} is not one of {ITEM_EVENTS}')
+    CHOICES: ClassVar[Tuple[str, tuple]] = ('kind', ITEM_EVENTS)
 
     def name(self) -> str:
         return self.kind

@@ -51,7 +51,9 @@ from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import QoSProfile
+
+from scara_collab.nodes.qos import LATCHED
 
 MCAP_FILE = 'run.mcap'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
@@ -62,8 +64,6 @@ SEPARATOR = '=' * 80
 PRIMITIVES = frozenset((
     'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16', 'int32',
     'uint32', 'int64', 'uint64', 'string', 'wstring'))
-LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
-                     reliability=ReliabilityPolicy.RELIABLE)
 STREAM = QoSProfile(depth=200)  # a burst while the launcher is busy
 _TYPE = re.compile(r'^([A-Za-z][A-Za-z0-9_]*)/(?:msg/)?([A-Za-z][A-Za-z0-9_]*)$')
 _FIELD = re.compile(r'^([A-Za-z][A-Za-z0-9_/]*)')
