@@ -261,22 +261,82 @@ def _closest_to_axis(arm: ArmModel, a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.norm(a2 + s * ab))
 
 
+def _scalar_damping(w: float, threshold: float, max_damping: float) -> float:
+    """Return :func:`scara_collab.core.kinematics.dls_damping` for one float, without numpy."""
+    ratio = 1.0 - w / threshold
+    return max_damping * (0.0 if ratio < 0.0 else 1.0 if ratio > 1.0 else ratio)
+
+
+def _follow_line_base(arm: ArmModel, q0: np.ndarray, points: np.ndarray, threshold: float,
+                      max_damping: float, iterations: int) -> list:
+    """Run the Newton loop of :func:`follow_line` in the base frame with plain floats.
+
+    The same maths as :func:`scara_collab.core.kinematics.dls_solve` on one state: in the base
+    frame ``J`` is block diagonal, the planar 2x2 block ``[[a, b], [c, d]]`` (``a = -y``,
+    ``c = x`` of the tool, ``b = -L2 s12``, ``d = L2 c12``) and ``dz/dd3 = -1``, so
+    ``q_dot = J^T (J J^T + lambda^2 I)^-1 e`` is a closed-form 2x2 solve
+    (``det(J J^T) = w^2``, ``w = L1 L2 sin(theta2)``) plus ``q_dot3 = -e_z / (1 + lambda^2)``.
+    The result equals the world-frame step because ``J_world = R J_base`` with ``R``
+    orthogonal: ``J_w^T (J_w J_w^T + lambda^2 I)^-1 R e = J^T (J J^T + lambda^2 I)^-1 e``.
+
+    :return: ``M`` joint states as ``[theta1, theta2, d3]`` lists.
+    """
+    l1, l2, z0 = arm.l1, arm.l2, arm.tool_z0
+    l1l2 = l1 * l2
+    t1, t2, d3 = (float(v) for v in q0)
+    out = [[t1, t2, d3]]
+    for px, py, pz in world_to_base(arm, points[1:]).tolist():
+        for _ in range(iterations):
+            t12 = t1 + t2
+            c1, s1, c12, s12 = math.cos(t1), math.sin(t1), math.cos(t12), math.sin(t12)
+            b, d = -l2 * s12, l2 * c12
+            x, y = l1 * c1 + d, l1 * s1 - b  # tool position; the block's a = -y, c = x
+            ex, ey, ez = px - x, py - y, pz - (z0 - d3)
+            w = abs(l1l2 * math.sin(t2))
+            lam2 = _scalar_damping(w, threshold, max_damping) ** 2
+            m00, m01, m11 = y * y + b * b + lam2, -y * x + b * d, x * x + d * d + lam2
+            det = w * w + lam2 * (m00 + m11 - lam2)
+            y0, y1 = (m11 * ex - m01 * ey) / det, (m00 * ey - m01 * ex) / det
+            t1 += -y * y0 + x * y1
+            t2 += b * y0 + d * y1
+            d3 -= ez / (1.0 + lam2)
+        out.append([t1, t2, d3])
+    return out
+
+
 def follow_line(arm: ArmModel, q0: np.ndarray, points: np.ndarray, velocity_dir: np.ndarray,
                 threshold: float, max_damping: float, iterations: int = 3):
     """Track world points along a line with min-norm (DLS) steps and Newton correction.
+
+    Each point starts from the previous state and takes ``iterations`` steps
+    ``q += J^T (J J^T + lambda^2 I)^-1 (p - fk(q))``: the Lagrange-multiplier (minimum-norm)
+    solution of :func:`scara_collab.core.kinematics.dls_solve`. The loop runs in the arm's
+    base frame on plain floats (:func:`_follow_line_base`: the same maths, without numpy's
+    per-call overhead on one 3-vector, which dominated); the numpy loop remains for a base
+    rotation that is not orthogonal and for the arithmetic errors only floats raise (e.g. an
+    exactly singular, undamped ``J``, where numpy returns what its solver gives).
 
     :param q0: ``(3,)`` joint state at ``points[0]``.
     :param points: ``(M, 3)`` desired tool positions.
     :param velocity_dir: ``(3,)`` ``dp/ds`` (constant along a line).
     :return: ``(q (M, 3), dq_ds (M, 3))``.
     """
-    q = np.empty((len(points), 3))
-    q[0] = q0
-    for i in range(1, len(points)):
-        qi = q[i - 1]
-        for _ in range(iterations):
-            qi = qi + dls_solve(arm, qi, points[i] - fk(arm, qi), threshold, max_damping)
-        q[i] = qi
+    q = None
+    rot = arm.base[:3, :3]
+    if np.allclose(rot.T @ rot, np.eye(3), rtol=0.0, atol=1e-12):
+        try:
+            q = np.array(_follow_line_base(arm, q0, points, float(threshold), float(max_damping),
+                                           iterations))
+        except (ArithmeticError, ValueError):
+            q = None
+    if q is None:
+        q = np.empty((len(points), 3))
+        q[0] = q0
+        for i in range(1, len(points)):
+            qi = q[i - 1]
+            for _ in range(iterations):
+                qi = qi + dls_solve(arm, qi, points[i] - fk(arm, qi), threshold, max_damping)
+            q[i] = qi
     dq = dls_solve(arm, q, np.broadcast_to(velocity_dir, q.shape), threshold, max_damping)
     return q, dq
 
