@@ -58,6 +58,21 @@ class Timeline:
         """Joint positions at absolute time ``t``."""
         return np.array([np.interp(t, self.t, self.q[:, j]) for j in range(3)])
 
+    def since(self, t: float) -> 'Timeline':
+        """Return the motion from time ``t`` on: what is past cannot collide any more.
+
+        The state at ``t`` becomes the first stamp; a timeline that starts later is returned
+        as is, one that has ended by ``t`` is a hold at its last pose.
+        """
+        t = float(t)
+        if t <= self.t[0]:
+            return self
+        if t >= self.t[-1]:
+            return Timeline.hold(t, self.q[-1])
+        later = self.t > t
+        return Timeline(np.concatenate(([t], self.t[later])),
+                        np.vstack([self.at(t), self.q[later]]))
+
     def shifted(self, dt: float) -> 'Timeline':
         """Return the same motion ``dt`` seconds later."""
         return Timeline(self.t + dt, self.q)

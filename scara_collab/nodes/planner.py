@@ -55,6 +55,7 @@ class Planner(Node):
 
     def __init__(self, robot: str = 'scara_left', node_name: Optional[str] = None, **kwargs):
         super().__init__(node_name or f'{robot.split("_")[-1]}_planner', **kwargs)
+        self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         cfg = declare_config(self, ('controllers',))['controllers']
         self.declare_parameter('robot', robot)
         self.declare_parameter('profile', '')
@@ -143,11 +144,13 @@ class Planner(Node):
         pose after its end, which is where the arm will be); otherwise a hold where it is
         measured. Judging "ended" at my planned start instead would hold the other arm at
         its measured pose in the middle of its move: a stale pose (the margin breach at
-        saturation of issue 14 came from that).
+        saturation of issue 14 came from that). Only the part from *now* on counts: its past
+        motion may have passed close to where I stand, and checking that against my start
+        pose would block every start (both arms then wait for each other).
         """
         now = self._now()
         if self.theirs is not None and self.theirs.end > now:
-            return self.theirs
+            return self.theirs.since(now)
         return Timeline.hold(now, self.q_other)
 
     def _publish(self, plan: Plan, request: int, note: str = '') -> None:
@@ -168,6 +171,8 @@ class Planner(Node):
 
     # --- callbacks --------------------------------------------------------------------------
     def _on_state(self, msg: JointState) -> None:
+        if not conv.admit_state(self, self.stamps, msg):
+            return
         try:
             self.q, _ = conv.joint_state_arrays(msg, self.arm.joint_names)
             self.q_other, _ = conv.joint_state_arrays(msg, self.other.joint_names)
@@ -303,8 +308,9 @@ class Planner(Node):
         if self.leader or self.mine is None or self.mine.start <= now:
             return
         # follower: my committed move has not started; does the new leader move hit it?
-        replan = schedule(self.arm, self.mine.traj, self.mine.start, self.other, self.theirs,
-                          self.margin, leader=False, max_delay=self.max_delay)
+        replan = schedule(self.arm, self.mine.traj, self.mine.start, self.other,
+                          self.theirs.since(now), self.margin, leader=False,
+                          max_delay=self.max_delay)
         xyz, frame, asked, request = self.pending_target
         if replan is None:
             self.mine = None

@@ -1,0 +1,52 @@
+"""Planning decisions without ROS: committed timelines and the priority rule's schedule."""
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+
+from scara_collab.core.collision import arm_distance
+from scara_collab.core.kinematics import ik
+from scara_collab.core.model import load_cell
+from scara_collab.core.planning import plan_path, schedule, Timeline
+from scara_collab.core.sorting import drop_point
+
+
+@pytest.fixture(scope='module')
+def cell():
+    return load_cell()
+
+
+def test_timeline_since_keeps_only_what_is_left():
+    tl = Timeline(np.array([1.0, 2.0, 3.0]), np.array([[0.0, 0, 0], [1, 1, 1], [2, 2, 2]]))
+    assert tl.since(0.5) is tl  # not started yet: all of it is still to come
+    part = tl.since(1.5)
+    assert_allclose(part.t, [1.5, 2.0, 3.0])
+    assert_allclose(part.q, [[0.5, 0.5, 0.5], [1, 1, 1], [2, 2, 2]])
+    assert_allclose(part.at(2.5), tl.at(2.5))
+    done = tl.since(4.0)
+    assert done.start == done.end == 4.0
+    assert_allclose(done.q, [[2, 2, 2]])
+
+
+def test_past_motion_of_the_other_arm_does_not_block_a_start(cell):
+    """Both arms picked side by side; the right arm is leaving for its bin.
+
+    Its move started next to where the left arm holds an item, so its *past* came within the
+    margin of the left arm's pose. Checked whole, that past blocks every start of the left
+    arm's bin move (both arms then waited for each other); from now on the left arm can go.
+    """
+    left, right = cell.leader, cell.follower
+    margin = cell.safety_margin + 0.03
+    z = 0.34
+    q_left = ik(left, [1.24, -0.03, z]).q
+    q_right0 = ik(right, [1.38, 0.06, z]).q
+    assert arm_distance(left, q_left, right, q_right0) < margin  # they were that close
+    away = plan_path(right, q_right0, drop_point(cell, right.name, cell.item_classes[0], 0.1),
+                     mode='line_or_joint')
+    theirs = Timeline.of(away, 10.0)
+    now = 10.0 + 0.8 * away.duration
+    assert arm_distance(left, q_left, right, theirs.at(now)) > margin  # ... and are apart now
+    home = plan_path(left, q_left, drop_point(cell, left.name, cell.item_classes[0], 0.1),
+                     mode='line_or_joint')
+    assert schedule(left, home, now + 0.05, right, theirs, margin, leader=True) is None
+    plan = schedule(left, home, now + 0.05, right, theirs.since(now), margin, leader=True)
+    assert plan is not None and plan.start == pytest.approx(now + 0.05)
