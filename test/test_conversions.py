@@ -53,3 +53,16 @@ def test_every_entry_point_keeps_discovery_on_this_host(monkeypatch):
     monkeypatch.setenv(runner.DISCOVERY_ENV, 'SUBNET')  # the user's choice wins
     runner.run_node(factory, args=[])
     assert seen['range'] == 'SUBNET'
+
+
+def test_stamp_gate_lets_through_only_the_sim_clocks_states():
+    gate = conv.StampGate(tolerance=1.0)
+    assert gate.check(0.01, 0.0) is None                 # before /clock: early stamps only
+    assert 'before any /clock' in gate.check(5.0, 0.0)
+    assert gate.check(10.0, 10.0) is None
+    assert gate.check(10.5, 10.2) is None                # within the tolerance
+    assert 'from the sim clock' in gate.check(1.79e9, 10.2)
+    assert 'older than the last' in gate.check(10.1, 10.2)
+    assert 'non-finite' in gate.check(float('nan'), 10.2)
+    assert gate.check(10.5, None) is None                # off sim time: order only
+    assert gate.refused == 4 and gate.last == 10.5

@@ -223,6 +223,49 @@ def test_a_dead_node_ends_the_run_with_its_name(launch, tmp_path):
     assert_children_gone(out)
 
 
+def test_a_wall_clock_stamped_state_neither_ends_nor_enters_the_run(launch, tmp_path):
+    """A rogue /joint_states stamped with wall time (1.79e9 s) is refused by every consumer.
+
+    It once ended a run at once as 'duration reached' with a false sim time and 1.8e11
+    'missing' states; now the run's time is the bridge's /clock and the run goes its length.
+    """
+    import rclpy
+    from sensor_msgs.msg import JointState
+    from scara_collab.nodes import conversions as conv
+
+    out = tmp_path / 'rogue'
+    la = launch('--mode', 'idle', '--duration', '6', '--rtf', '1', '--output', str(out),
+                '--no-plots')
+    la.wait_for_line(r'\[launch\] graph idle at sim t=')
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node('rogue_state_publisher', context=ctx)
+    try:
+        pub = node.create_publisher(JointState, '/joint_states', 10)
+        names = [n for a in ('scara_left', 'scara_right')
+                 for n in (f'{a}_joint_1', f'{a}_joint_2', f'{a}_gripper_joint')]
+        rogue = conv.joint_state(1.79e9, names, [0.0] * 6, [0.0] * 6, [0.0] * 6)
+        end = time.monotonic() + 3.0
+        while time.monotonic() < end:
+            pub.publish(rogue)
+            time.sleep(0.05)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert la.wait() == 0, la.output
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['exit_reason'] == 'duration reached'
+    assert summary['sim_seconds'] == pytest.approx(6.0, abs=0.05)
+    assert summary['joint_states_refused'] >= 1
+    assert summary['joint_states_missing'] < 10
+    assert summary['emergency_stops'] == 0
+    rows = assert_complete_csv(out / 'timeseries.csv', min_rows=100)
+    assert max(float(r[0]) for r in rows[1:]) < 100.0  # no wall-clock row
+    for name in ('collision_monitor', 'left_planner'):
+        log = (out / 'logs' / f'{name}.log').read_text()
+        assert 'ignoring joint_states: stamp t=1790000000.000 s' in log, name
+
+
 def test_viewer_flag_adds_the_viewer_stage_last(monkeypatch):
     import socket
     from scara_collab.run import launcher

@@ -9,6 +9,7 @@ import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.time import Time as RclpyTime
 from sensor_msgs.msg import JointState
 
 from scara_collab.core.collision import arm_distance
@@ -63,6 +64,12 @@ def state_msg(cell, t, q_lead, q_foll, reverse=False):
     return conv.joint_state(t, names, pos, [0.0] * 6, [0.0] * 6)
 
 
+def feed(rec, msg):
+    """Hand ``rec`` a joint state as the graph would: /clock at its stamp first."""
+    rec.get_clock().set_ros_time_override(RclpyTime.from_msg(msg.header.stamp))
+    rec.on_joint_state(msg)
+
+
 def event_msg(kind, t, item, cls='red', robot=''):
     return proto.ItemEvent(kind, item, cls, t, robot).to_msg()
 
@@ -84,7 +91,7 @@ def test_state_rows_match_the_core(make_recorder, cell):
     ql = random_joints(cell, 25, seed=2)
     qf = random_joints(cell, 25, seed=3)
     for k in range(25):
-        rec.on_joint_state(state_msg(cell, 0.01 * k, ql[k], qf[k], reverse=k % 2 == 1))
+        feed(rec, state_msg(cell, 0.01 * k, ql[k], qf[k], reverse=k % 2 == 1))
     rec.log.flush()
     header, rows = read_csv(rec.directory / 'timeseries.csv')
     assert header == state_columns(cell)
@@ -111,7 +118,7 @@ def test_mirrored_states_have_zero_mirror_error(make_recorder, cell):
     rec = make_recorder('mirrored')
     q = random_joints(cell, 50, seed=4)
     for k in range(50):
-        rec.on_joint_state(state_msg(cell, 0.01 * k, q[k], mirror_joints(q[k])))
+        feed(rec, state_msg(cell, 0.01 * k, q[k], mirror_joints(q[k])))
     rec.log.flush()
     header, rows = read_csv(rec.directory / 'timeseries.csv')
     err = np.array([float(r[header.index('mirror_error_m')]) for r in rows])
@@ -128,7 +135,7 @@ def test_summary_plots_and_counts(make_recorder, cell):
     rec = make_recorder('collaborative')
     q = np.array([0.0, 1.5708, 0.0])
     for k in range(301):
-        rec.on_joint_state(state_msg(cell, 10.0 + 0.01 * k, q, mirror_joints(q)))
+        feed(rec, state_msg(cell, 10.0 + 0.01 * k, q, mirror_joints(q)))
         if k == 100:
             rec.start_job(11.0)
     for t, kind, item in ((10.5, 'spawned', 1), (11.5, 'spawned', 2), (12.0, 'sorted', 2),
@@ -163,12 +170,12 @@ def test_summary_plots_and_counts(make_recorder, cell):
 def test_each_figure_comes_from_its_one_source(make_recorder, cell):
     rec = make_recorder('single')
     q = np.array([0.3, 1.0, 0.1])
-    rec.on_joint_state(state_msg(cell, 1.0, q, mirror_joints(q)))
+    feed(rec, state_msg(cell, 1.0, q, mirror_joints(q)))
     rec.on_event(event_msg('sorted', 1.0, 1))
     rec.on_stats(proto.JobStats('single', True, 2.0, 0.0, {'sorted': 7, 'missed': 1},
                                 give_ups=2, retries=5).to_msg())
     rec.on_monitor(proto.MonitorStatus(2.0, 0.9, 0.42, 1.5, 0.1, False).to_msg())
-    rec.on_joint_state(state_msg(cell, 2.0, q, mirror_joints(q)))
+    feed(rec, state_msg(cell, 2.0, q, mirror_joints(q)))
     summary = rec.finish('duration reached', False, plots=False)
     assert (summary['sorted'], summary['missed']) == (1, 0)  # the events, not the job's view
     assert summary['job']['give_ups'] == 2 and summary['job']['retries'] == 5
@@ -180,8 +187,8 @@ def test_each_figure_comes_from_its_one_source(make_recorder, cell):
 def test_mirrored_summary_takes_the_replication_managers_in_step_error(make_recorder, cell):
     rec = make_recorder('mirrored')
     q = np.array([0.3, 1.0, 0.1])
-    rec.on_joint_state(state_msg(cell, 1.0, q, mirror_joints(q)))
-    rec.on_joint_state(state_msg(cell, 1.01, q, mirror_joints(q + 0.2)))  # one arm parks
+    feed(rec, state_msg(cell, 1.0, q, mirror_joints(q)))
+    feed(rec, state_msg(cell, 1.01, q, mirror_joints(q + 0.2)))  # one arm parks
     rec.on_mirror(proto.MirrorStatus(True, 1.0, 0.0, 0.0009, 0.5, 3, 1, 'yielded').to_msg())
     summary = rec.finish('duration reached', False, plots=False)
     assert summary['mirror_error_max_m'] == pytest.approx(0.0009)
@@ -197,7 +204,7 @@ def test_interrupted_recording_keeps_complete_files(make_recorder, cell):
     rec = make_recorder('collaborative', batch=10)
     q = random_joints(cell, 37, seed=5)
     for k in range(37):  # 3 full batches on disk, 7 rows still queued
-        rec.on_joint_state(state_msg(cell, 0.01 * k, q[k], mirror_joints(q[k])))
+        feed(rec, state_msg(cell, 0.01 * k, q[k], mirror_joints(q[k])))
     rec.on_event(event_msg('spawned', 0.2, 1))
     header, rows = read_csv(rec.directory / 'timeseries.csv')
     assert len(rows) == 30  # flushed as it goes, before any close
@@ -215,7 +222,7 @@ def test_interrupted_recording_keeps_complete_files(make_recorder, cell):
     assert summary['joint_state_rows'] == 37
     for key in SUMMARY_KEYS:
         assert key in summary, key
-    rec.on_joint_state(state_msg(cell, 1.0, q[0], q[0]))  # after close: ignored, no error
+    feed(rec, state_msg(cell, 1.0, q[0], q[0]))  # after close: ignored, no error
     assert len(read_csv(rec.directory / 'timeseries.csv')[1]) == 37
 
 
@@ -277,9 +284,26 @@ def test_lost_joint_states_are_counted(make_recorder, cell):
     q = np.zeros(3)
     stamps = [0.0, 0.01, 0.02, 0.06, 0.07, 0.08, 0.09, 0.10, 0.30]  # 3 + 19 missing
     for t in stamps:
-        rec.on_joint_state(state_msg(cell, t, q, q))
+        feed(rec, state_msg(cell, t, q, q))
     summary = rec.finish('duration reached', False, plots=False)
     assert summary['joint_state_rows'] == len(stamps)
     assert summary['joint_states_missing'] == 22
     assert summary['largest_gap_s'] == pytest.approx(0.2)
     assert '22 of 31 joint states not heard' in report.format_report(summary)
+
+
+def test_states_not_on_the_sim_clock_are_refused(make_recorder, cell):
+    """A wall-clock stamp, an out-of-order one or NaN positions change nothing in the run."""
+    rec = make_recorder('idle', batch=1)
+    q = np.zeros(3)
+    for k in range(5):
+        feed(rec, state_msg(cell, 1.0 + 0.01 * k, q, q))
+    rec.on_joint_state(state_msg(cell, 1.79e9, q, q))  # a rogue publisher's wall time
+    rec.on_joint_state(state_msg(cell, 0.5, q, q))       # older than the last state
+    rec.on_joint_state(state_msg(cell, 1.05, q + np.nan, q))
+    assert rec.sim_time == pytest.approx(1.04)
+    summary = rec.finish('duration reached', False, plots=False)
+    assert summary['joint_state_rows'] == 5
+    assert summary['joint_states_refused'] == 3
+    assert summary['sim_time_end'] == pytest.approx(1.04)
+    assert summary['joint_states_missing'] == 0

@@ -46,6 +46,7 @@ class AutomationManager(Node):
 
     def __init__(self, **kwargs):
         super().__init__('automation_manager', **kwargs)
+        self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         cfg = declare_config(self, ('automation', 'controllers'))
         self.declare_parameter('profile', '')
         self.declare_parameter('auto_start', False)
@@ -118,6 +119,8 @@ class AutomationManager(Node):
         self.job.on_item_event(ev.kind, ev.item, ev.robot)
 
     def _on_state(self, msg: JointState) -> None:
+        if not conv.admit_state(self, self.stamps, msg):
+            return
         for a in self.cell.arms:
             q, _ = conv.joint_state_arrays(msg, a.joint_names)  # refuses non-finite states
             self.job.on_arm_state(a.name, q)

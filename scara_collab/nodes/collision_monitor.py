@@ -37,6 +37,7 @@ class CollisionMonitor(Node):
 
     def __init__(self, **kwargs):
         super().__init__('collision_monitor', **kwargs)
+        self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         self.declare_parameter('profile', '')
         self.declare_parameter('safety_margin', -1.0)  # < 0: the cell's margin
         self.declare_parameter('marker_rate', 10.0)
@@ -83,6 +84,8 @@ class CollisionMonitor(Node):
         self._publish_status()
 
     def _on_state(self, msg: JointState) -> None:
+        if not conv.admit_state(self, self.stamps, msg):
+            return  # not the simulator's state: the watchdog stops the arms if no valid one comes
         a, b = self.cell.arms
         try:
             qa, _ = conv.joint_state_arrays(msg, a.joint_names)

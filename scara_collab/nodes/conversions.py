@@ -75,6 +75,65 @@ def joint_state_arrays(msg: JointState, names: Sequence[str]) -> Tuple[np.ndarra
     return pos, vel
 
 
+#: s: a joint state stamped further than this from the sim clock is refused (the bridge
+#: stamps its states with the step it publishes on /clock; a stamp elsewhere is not its)
+STAMP_TOLERANCE = 1.0
+
+
+def sim_now(node) -> Optional[float]:
+    """Return the node's sim time in s, 0.0 before the first ``/clock``; None off sim time."""
+    clock = node.get_clock()
+    if not getattr(clock, 'ros_time_is_active', False):
+        return None
+    return clock.now().nanoseconds * 1e-9
+
+
+class StampGate:
+    """Refuse joint states whose stamps cannot be the simulator's.
+
+    A state is refused when its stamp is not finite, older than the last one let through
+    (out of order), or further than ``tolerance`` from the sim clock (before the first
+    ``/clock``: later than ``tolerance``). One wall-clock-stamped state would otherwise end a
+    run or poison every later comparison. With no sim clock (``clock`` None) only order and
+    finiteness are checked.
+    """
+
+    def __init__(self, tolerance: float = STAMP_TOLERANCE):
+        self.tolerance = float(tolerance)
+        self.last: Optional[float] = None
+        self.refused = 0
+
+    def check(self, stamp: float, clock: Optional[float]) -> Optional[str]:
+        """Return why a state stamped ``stamp`` (s) is refused, or None and let it through."""
+        why = None
+        if not math.isfinite(stamp):
+            why = f'non-finite stamp {stamp}'
+        elif clock is not None and clock <= 0.0 and stamp > self.tolerance:
+            why = f'stamp t={stamp:.3f} s before any /clock was heard'
+        elif clock is not None and clock > 0.0 and abs(stamp - clock) > self.tolerance:
+            why = (f'stamp t={stamp:.3f} s is {stamp - clock:+.3f} s from the sim clock '
+                   f'(t={clock:.3f} s)')
+        elif self.last is not None and stamp < self.last:
+            why = f'stamp t={stamp:.3f} s is older than the last state (t={self.last:.3f} s)'
+        if why is None:
+            self.last = stamp
+        else:
+            self.refused += 1
+        return why
+
+
+def admit_state(node, gate: StampGate, msg: JointState) -> bool:
+    """Return True if ``msg``'s stamp passes ``gate`` on ``node``'s sim clock.
+
+    A refused state is named in a throttled warning and must be ignored by the caller.
+    """
+    why = gate.check(to_sec(msg.header.stamp), sim_now(node))
+    if why is None:
+        return True
+    node.get_logger().warning(f'ignoring joint_states: {why}', throttle_duration_sec=5.0)
+    return False
+
+
 def trajectory_msg(names: Sequence[str], t: np.ndarray, q: np.ndarray,
                    qd: Optional[np.ndarray] = None, qdd: Optional[np.ndarray] = None,
                    start: float = 0.0, frame_id: str = '') -> JointTrajectory:

@@ -43,6 +43,7 @@ class ReplicationManager(Node):
 
     def __init__(self, **kwargs):
         super().__init__('replication_manager', **kwargs)
+        self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         self.declare_parameter('profile', '')
         self.declare_parameter('collab_lead', 0.5)
         self.declare_parameter('enabled', True)
@@ -142,7 +143,7 @@ class ReplicationManager(Node):
                                 f'{s2:.3f}..{e2:.3f} s (the follower yielded or came late)')
 
     def _on_state(self, msg: JointState) -> None:
-        if not self.enabled:
+        if not self.enabled or not conv.admit_state(self, self.stamps, msg):
             return
         lead, foll = self.cell.leader, self.cell.follower
         ql, _ = conv.joint_state_arrays(msg, lead.joint_names)

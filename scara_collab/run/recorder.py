@@ -93,6 +93,7 @@ class RunRecorder(Node):
         self.end_wall: Optional[float] = None
         self.first_state_wall: Optional[float] = None
         self.summary: Optional[Dict] = None
+        self.stamps = conv.StampGate()  # states must carry the sim clock's time
         self.plots: List[Path] = []
         # more recordings on this node (e.g. mcap_log.McapLog): closed by finish(), first;
         # close() returns a dict merged into the summary
@@ -111,9 +112,12 @@ class RunRecorder(Node):
     # --- time ------------------------------------------------------------------------------
     @property
     def sim_time(self) -> float:
-        """Latest sim time heard (``/clock`` or a joint state stamp), s; 0 before any."""
-        now = self.get_clock().now().nanoseconds * 1e-9
-        return max(now, self.log.t_last or 0.0)
+        """Latest sim time heard on ``/clock``, s; 0 before any.
+
+        The run's time is the bridge's clock, never a joint state's stamp: states are let
+        through only when their stamps agree with it (:class:`conversions.StampGate`).
+        """
+        return self.get_clock().now().nanoseconds * 1e-9
 
     @property
     def recording(self) -> bool:
@@ -123,7 +127,7 @@ class RunRecorder(Node):
     # --- handlers --------------------------------------------------------------------------
     def on_joint_state(self, msg: JointState) -> None:
         """Queue a row for ``timeseries.csv``: the six joints of both arms at the stamp."""
-        if not self.recording:
+        if not self.recording or not conv.admit_state(self, self.stamps, msg):
             return
         key = tuple(msg.name)
         idx = self._index.get(key)
@@ -138,6 +142,11 @@ class RunRecorder(Node):
         if len(msg.position) != len(key):
             return
         q = np.asarray(msg.position, dtype=float)[idx]
+        if not np.all(np.isfinite(q)):
+            self.stamps.refused += 1
+            self.get_logger().warning('joint_states with non-finite positions; not recorded',
+                                      throttle_duration_sec=10.0)
+            return
         if self.first_state_wall is None:
             self.first_state_wall = time.monotonic()
         self.log.add_state(conv.to_sec(msg.header.stamp), q[:3], q[3:])
@@ -287,6 +296,7 @@ class RunRecorder(Node):
             'sim_time_end': t_end,
             'joint_state_rows': log.rows,
             'joint_states_missing': log.missing,
+            'joint_states_refused': self.stamps.refused,
             'largest_gap_s': log.largest_gap,
             'events': counts,
             'job': dict(self.stats),
