@@ -20,6 +20,13 @@ Conflict resolution gives the leader (arm a) priority: the follower (arm b) is s
 the smallest delay that keeps the arms at least ``margin`` apart over both trajectories
 (:func:`smallest_safe_delay`). The margin is always a parameter; the cell's default is
 ``CellModel.safety_margin``.
+
+Over trajectories, the 9 capsule pairs at every time of a fine grid (thousands of states) are
+prefiltered: the gap between the axis-aligned boxes around two capsule axes, less both radii
+and a rounding slack, is a cheap lower bound of their surface distance. A safety check
+computes the exact distance only of the pairs whose bound is below the margin; the minimum,
+only of those whose bound does not exceed the exact distance at the state with the smallest
+bound. Both give the full computation's results, bit for bit.
 """
 from typing import Optional, Tuple
 
@@ -36,6 +43,11 @@ _DEGENERATE_SQ = 1e-24
 _PARALLEL_SIN_SQ = 1e-30
 #: Default largest spacing of the common time grid of :func:`trajectory_min_distance`, s.
 MAX_TIME_STEP = 0.005
+#: Taken off the cheap capsule-pair lower bounds, m, so that rounding never lifts a bound
+#: above the exact distance (whose rounding error is ~1e-15 m at cell scale).
+_BOUND_SLACK = 1e-9
+#: Capsule indices (i of a, j of b) of the 3 x 3 pairs, in row-major order.
+_ALL_PAIRS = (np.repeat(np.arange(3), 3), np.tile(np.arange(3), 3))
 
 
 def _dot(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -130,24 +142,32 @@ def _capsule_segments(arm: ArmModel,
     if q.shape[-1:] != (3,):
         raise ValueError(f'joint states must have shape (..., 3), got {q.shape}')
     theta1, theta2, d3 = q[..., 0], q[..., 1], q[..., 2]
-    h1 = np.full_like(theta1, arm.shoulder_height)
+    h1 = float(arm.shoulder_height)
     h2 = h1 + arm.elbow_rise
-    zero = np.zeros_like(theta1)
     elbow_x = arm.l1 * np.cos(theta1)
     elbow_y = arm.l1 * np.sin(theta1)
     tool_x = elbow_x + arm.l2 * np.cos(theta1 + theta2)
     tool_y = elbow_y + arm.l2 * np.sin(theta1 + theta2)
     tip_z = h2 - d3
-    # Base frame, rows: link 1, link 2, quill.
-    start = np.stack([np.stack([zero, zero, h1], -1),
-                      np.stack([elbow_x, elbow_y, h2], -1),
-                      np.stack([tool_x, tool_y, tip_z], -1)], -2)
-    end = np.stack([np.stack([elbow_x, elbow_y, h1], -1),
-                    np.stack([tool_x, tool_y, h2], -1),
-                    np.stack([tool_x, tool_y, tip_z + arm.quill_length], -1)], -2)
-    rot, origin = arm.base[:3, :3], arm.base[:3, 3]
+    # Base frame, [..., capsule, coordinate]; capsules: link 1, link 2, quill.
+    start = np.empty(q.shape[:-1] + (3, 3))
+    end = np.empty_like(start)
+    start[..., 0, :2] = 0.0
+    start[..., 0, 2] = h1
+    start[..., 1, 0] = end[..., 0, 0] = elbow_x
+    start[..., 1, 1] = end[..., 0, 1] = elbow_y
+    end[..., 0, 2] = h1
+    start[..., 1, 2] = end[..., 1, 2] = h2
+    start[..., 2, 0] = end[..., 1, 0] = end[..., 2, 0] = tool_x
+    start[..., 2, 1] = end[..., 1, 1] = end[..., 2, 1] = tool_y
+    start[..., 2, 2] = tip_z
+    end[..., 2, 2] = tip_z + arm.quill_length
+    # One (N x 3) @ (3 x 3) product per array rather than N stacked 3 x 3 products.
+    rot_t, origin = arm.base[:3, :3].T, arm.base[:3, 3]
+    start = (start.reshape(-1, 3) @ rot_t).reshape(start.shape) + origin
+    end = (end.reshape(-1, 3) @ rot_t).reshape(end.shape) + origin
     radii = np.array([arm.link_radius, arm.link_radius, arm.quill_radius])
-    return start @ rot.T + origin, end @ rot.T + origin, radii
+    return start, end, radii
 
 
 def arm_capsules(arm: ArmModel, q: ArrayLike) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -239,6 +259,136 @@ def _sample(t: np.ndarray, q: np.ndarray, times: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(times, t, q[:, j]) for j in range(q.shape[1])], -1)
 
 
+def _grid_states(t_a: np.ndarray, q_a: np.ndarray, t_b: np.ndarray, q_b: np.ndarray,
+                 start_b: float, max_step: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the time grid of :func:`trajectory_min_distance` and both arms' states on it."""
+    if not max_step > 0.0:
+        raise ValueError(f'max_step must be > 0, got {max_step}')
+    t_b = t_b + float(start_b)
+    t0 = min(t_a[0], t_b[0])
+    t1 = max(t_a[-1], t_b[-1])
+    fine = np.linspace(t0, t1, int(np.ceil((t1 - t0) / max_step)) + 1)
+    times = np.unique(np.concatenate([t_a, t_b, fine]))
+    return times, _sample(t_a, q_a, times), _sample(t_b, q_b, times)
+
+
+def _axis_boxes(arm: ArmModel, q: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    """Axis-aligned boxes around the capsule axes of ``arm`` at N joint states, in ``world``.
+
+    :param q: (N, 3) joint states.
+    :return: ``(lo, hi)``: the boxes' low and high corners (3, 3, N), m, indexed by coordinate,
+        capsule (link 1, link 2, quill) and state.
+    """
+    theta1, theta2, d3 = q[:, 0], q[:, 1], q[:, 2]
+    elbow_x = arm.l1 * np.cos(theta1)
+    elbow_y = arm.l1 * np.sin(theta1)
+    tool_x = elbow_x + arm.l2 * np.cos(theta1 + theta2)
+    tool_y = elbow_y + arm.l2 * np.sin(theta1 + theta2)
+    h1 = arm.shoulder_height
+    h2 = h1 + arm.elbow_rise
+    tip_z = h2 - d3
+    lo = np.empty((3, 3, len(q)))
+    hi = np.empty_like(lo)
+    for c, ((rx, ry, rz), oc) in enumerate(zip(arm.base[:3, :3], arm.base[:3, 3])):
+        # World coordinate c of the elbow and quill axes at base height 0, then the ends.
+        elbow = rx * elbow_x + ry * elbow_y + oc
+        tool = rx * tool_x + ry * tool_y + oc
+        ends = ((oc + rz * h1, elbow + rz * h1),  # link 1: shoulder to elbow
+                (elbow + rz * h2, tool + rz * h2),  # link 2: elbow to the quill axis
+                (tool + rz * tip_z, None))  # quill: tip, then quill_length along base z
+        for k, (start, end) in enumerate(ends):
+            if end is None:
+                np.add(start, min(0.0, rz * arm.quill_length), out=lo[c, k])
+                np.add(start, max(0.0, rz * arm.quill_length), out=hi[c, k])
+            else:
+                np.minimum(start, end, out=lo[c, k])
+                np.maximum(start, end, out=hi[c, k])
+    return lo, hi
+
+
+def _pair_bounds(arm_a: ArmModel, q_a: np.ndarray, arm_b: ArmModel,
+                 q_b: np.ndarray) -> np.ndarray:
+    """Cheap lower bounds of the capsule surface distances of two arms at N state pairs.
+
+    Two segments are at least as far apart as their :func:`_axis_boxes` (the norm of the gaps
+    between the boxes' extents along x, y and z); that less both capsule radii and
+    :data:`_BOUND_SLACK` cannot exceed the exact :func:`arm_pair_distances` entry, rounding
+    included.
+
+    :return: (3, 3, N) bounds, m, indexed by capsule of a, capsule of b and state pair.
+    """
+    lo_a, hi_a = _axis_boxes(arm_a, q_a)
+    lo_b, hi_b = _axis_boxes(arm_b, q_b)
+    gap_sq = np.zeros((3, 3, len(q_a)))
+    gap = np.empty_like(gap_sq)
+    other = np.empty_like(gap_sq)
+    for c in range(3):  # gap along c: how far b's box starts above a's, or a's above b's
+        np.subtract(lo_b[c, None], hi_a[c, :, None], out=gap)
+        np.subtract(lo_a[c, :, None], hi_b[c, None], out=other)
+        np.maximum(gap, other, out=gap)
+        np.maximum(gap, 0.0, out=gap)
+        gap_sq += np.square(gap, out=gap)
+    radii_a = np.array([arm_a.link_radius, arm_a.link_radius, arm_a.quill_radius])
+    radii_b = np.array([arm_b.link_radius, arm_b.link_radius, arm_b.quill_radius])
+    lower = np.sqrt(gap_sq, out=gap_sq)
+    lower -= (radii_a[:, None] + radii_b[None, :] + _BOUND_SLACK)[:, :, None]
+    return lower
+
+
+def _exact_pairs(arm_a: ArmModel, q_a: np.ndarray, arm_b: ArmModel, q_b: np.ndarray,
+                 i: np.ndarray, j: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Return the :func:`arm_pair_distances` entries ``[n, i, j]`` (K,) of N state pairs.
+
+    Only the states in ``n`` are turned into capsules. Every step works per state (capsule
+    pair), so the values are those of the full (N, 3, 3) computation, bit for bit.
+    """
+    rows, n = np.unique(n, return_inverse=True)
+    start_a, end_a, radii_a = _capsule_segments(arm_a, q_a[rows])
+    start_b, end_b, radii_b = _capsule_segments(arm_b, q_b[rows])
+    dist, _, _ = segment_distance(start_a[n, i], end_a[n, i], start_b[n, j], end_b[n, j])
+    return dist - radii_a[i] - radii_b[j]
+
+
+def _grid_min_distance(arm_a: ArmModel, q_a: np.ndarray, arm_b: ArmModel,
+                       q_b: np.ndarray) -> Tuple[float, int]:
+    """Return the smallest :func:`arm_distance` over N state pairs and its first index.
+
+    Exact: the exact distance ``best`` of the state pair with the smallest lower bound bounds
+    the minimum from above, and only capsule pairs whose lower bound is at most ``best`` can
+    reach (or tie with) it, so only those are computed. Every other pair is farther than the
+    minimum: a state's minimum over its computed pairs is its true distance wherever that is
+    the minimum, and larger elsewhere.
+    """
+    lower = _pair_bounds(arm_a, q_a, arm_b, q_b)
+    n0 = int(np.argmin(lower)) % lower.shape[-1]
+    i, j = _ALL_PAIRS
+    best = _exact_pairs(arm_a, q_a, arm_b, q_b, i, j, np.full(9, n0)).min()
+    i, j, n = np.nonzero(lower <= best)
+    pairs = np.full(lower.shape, np.inf)
+    pairs[i, j, n] = _exact_pairs(arm_a, q_a, arm_b, q_b, i, j, n)
+    dist = pairs.min(axis=(0, 1))
+    k = int(np.argmin(dist))
+    return float(dist[k]), k
+
+
+def _grid_safe(arm_a: ArmModel, q_a: np.ndarray, arm_b: ArmModel, q_b: np.ndarray,
+               margin: float) -> bool:
+    """Return whether :func:`arm_distance` >= ``margin`` at all N state pairs.
+
+    Only the capsule pairs whose lower bound is below the margin are computed exactly, the one
+    with the smallest bound first (when unsafe, it usually is the culprit).
+    """
+    lower = _pair_bounds(arm_a, q_a, arm_b, q_b)
+    i, j, n = np.nonzero(~(lower >= margin))  # all pairs for a NaN margin, which none meets
+    if n.size == 0:
+        return True
+    f = int(np.argmin(lower[i, j, n]))
+    one = slice(f, f + 1)
+    if _exact_pairs(arm_a, q_a, arm_b, q_b, i[one], j[one], n[one])[0] < margin:
+        return False
+    return bool(np.all(_exact_pairs(arm_a, q_a, arm_b, q_b, i, j, n) >= margin))
+
+
 def trajectory_min_distance(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm_b: ArmModel,
                             t_b: ArrayLike, q_b: ArrayLike, start_b: float = 0.0,
                             max_step: float = MAX_TIME_STEP) -> Tuple[float, float]:
@@ -249,7 +399,8 @@ def trajectory_min_distance(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm
     states are interpolated linearly between stamps; before its first stamp an arm holds its
     first state, after its last stamp its last state. The result is exact at the grid times;
     between them the distance can dip below it by at most the arms' relative speed times
-    ``max_step / 2``.
+    ``max_step / 2``. Only the capsule pairs that the box prefilter (see the module docstring)
+    cannot rule out are computed exactly; the result is the full computation's.
 
     :param arm_a: the first arm (the leader).
     :param t_a: (N,) strictly increasing stamps of a, s.
@@ -265,16 +416,9 @@ def trajectory_min_distance(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm
     """
     t_a, q_a = _check_trajectory(t_a, q_a, 'a')
     t_b, q_b = _check_trajectory(t_b, q_b, 'b')
-    if not max_step > 0.0:
-        raise ValueError(f'max_step must be > 0, got {max_step}')
-    t_b = t_b + float(start_b)
-    t0 = min(t_a[0], t_b[0])
-    t1 = max(t_a[-1], t_b[-1])
-    fine = np.linspace(t0, t1, int(np.ceil((t1 - t0) / max_step)) + 1)
-    times = np.unique(np.concatenate([t_a, t_b, fine]))
-    dist = arm_distance(arm_a, _sample(t_a, q_a, times), arm_b, _sample(t_b, q_b, times))
-    k = int(np.argmin(dist))
-    return float(dist[k]), float(times[k])
+    times, s_a, s_b = _grid_states(t_a, q_a, t_b, q_b, start_b, max_step)
+    dist, k = _grid_min_distance(arm_a, s_a, arm_b, s_b)
+    return dist, float(times[k])
 
 
 def smallest_safe_delay(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm_b: ArmModel,
@@ -291,6 +435,10 @@ def smallest_safe_delay(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm_b: 
     was evaluated unsafe. A safe island narrower than ``scan_step`` before the first safe scan
     point can be missed (the delay returned is then larger than needed, never unsafe).
 
+    A delay is safe when ``trajectory_min_distance(..., start_b=delay)[0] >= margin``; the check
+    computes exactly only the capsule pairs whose box bound (module docstring) is below
+    ``margin``, and stops at the first pair found too close.
+
     :param arm_a: the leader.
     :param t_a: (N,) stamps of a, s.
     :param q_a: (N, 3) joint states of a.
@@ -301,7 +449,8 @@ def smallest_safe_delay(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm_b: 
     :param max_delay: largest delay considered, s.
     :param resolution: the delay's resolution, s.
     :param scan_step: coarse scan spacing, s (rounded to a multiple of ``resolution``).
-    :param max_step: time grid spacing passed to :func:`trajectory_min_distance`, s.
+    :param max_step: largest time grid spacing of each check, as in
+        :func:`trajectory_min_distance`, s.
     :return: the delay in s (>= 0), or None if no delay up to ``max_delay`` is safe: e.g. the
         final poses are too close (decided at once), or b's start pose, where it waits, is too
         close to where a works.
@@ -315,9 +464,8 @@ def smallest_safe_delay(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm_b: 
     t_b, q_b = _check_trajectory(t_b, q_b, 'b')
 
     def safe(k: int) -> bool:
-        dist, _ = trajectory_min_distance(arm_a, t_a, q_a, arm_b, t_b, q_b,
-                                          start_b=k * resolution, max_step=max_step)
-        return dist >= margin
+        _, s_a, s_b = _grid_states(t_a, q_a, t_b, q_b, k * resolution, max_step)
+        return _grid_safe(arm_a, s_a, arm_b, s_b, margin)
 
     # Whatever the delay, both arms end up holding their final states together.
     if arm_distance(arm_a, q_a[-1], arm_b, q_b[-1]) < margin:
