@@ -210,7 +210,7 @@ def test_unknown_robot_is_refused(cell):
         assert sim.grasp('scara_middle')[0] is False
 
 
-def test_estop_holds_both_arms_and_refuses_trajectories(cell):
+def test_estop_brakes_both_arms_within_limits_and_refuses_trajectories(cell):
     with _make(cell) as sim:
         trajs = {}
         for robot, y in ((LEFT, -0.6), (RIGHT, 0.6)):
@@ -219,11 +219,21 @@ def test_estop_holds_both_arms_and_refuses_trajectories(cell):
             trajs[robot] = line_move(arm, q0, [1.8, y, 0.4])
             sim.execute(robot, sim.time + trajs[robot].t, trajs[robot].q, trajs[robot].qd)
         sim.step(400)
+        fast = {r: sim.arm_state(r)[1] for r in trajs}
+        assert all(np.abs(v).max() > 0.3 for v in fast.values())  # stopped from speed
         sim.set_estop(True)
-        assert not sim.active(LEFT) and not sim.active(RIGHT)
         with pytest.raises(TrajectoryError, match='emergency stop'):
             sim.execute(LEFT, sim.time + trajs[LEFT].t, trajs[LEFT].q)
-        sim.step(1000)  # braking from speed
+        braking = {r: [] for r in trajs}
+        for _ in range(60):  # the reference brakes at the acceleration limits, no harder
+            sim.step(10)
+            for r in trajs:
+                braking[r].append(sim.reference(r)[2])
+        for r in trajs:
+            peak = np.abs(np.array(braking[r])).max(axis=0)
+            assert np.all(peak <= cell.arm(r).max_acceleration * (1 + 1e-9)), (r, peak)
+            assert not sim.active(r)  # at rest within |v| / a_max (< 0.6 s)
+        sim.step(400)
         stopped = sim.joint_state().position
         sim.step(500)
         state = sim.joint_state()
@@ -231,7 +241,7 @@ def test_estop_holds_both_arms_and_refuses_trajectories(cell):
         assert np.abs(state.velocity).max() < 1e-3
         for robot, traj in trajs.items():  # stopped well short of the goal
             assert np.linalg.norm(fk(cell.arm(robot), sim.arm_state(robot)[0])
-                                  - traj.p[-1]) > 0.3
+                                  - traj.p[-1]) > 0.2
         sim.set_estop(False)
         q = sim.arm_state(LEFT)[0]
         sim.execute(LEFT, sim.time + np.array([0.0, 0.5]), [q, q + [0.1, 0.0, 0.0]])

@@ -159,3 +159,56 @@ def test_base_frame_targets_and_mirroring_off(cell):
                                atol=1e-3)
     np.testing.assert_allclose(cell.right.q, q_right, atol=1e-4)
     assert not cell.status['scara_right']
+
+
+def test_a_raw_crossing_trajectory_is_stopped_before_the_margin_and_can_be_undone(cell):
+    """A right-arm trajectory straight through the left arm, bypassing the planners.
+
+    The monitor follows what the bridge runs and stops the arms while they are still apart
+    (the bridge brakes at the acceleration limits): the margin is never broken. Under the
+    latched stop only a move that parts the arms is run; then the stop clears.
+    """
+    from std_srvs.srv import Trigger
+    from scara_collab.core.kinematics import ik
+    from scara_collab.core.trajectory import joint_move
+
+    margin = cell.bridge.cell.safety_margin
+    left, right = cell.bridge.cell.arms
+    publish(cell, '/scara_left/target', [1.8, -0.2, 0.4])  # the left arm waits on the belt
+    assert cell.spin_until(lambda: cell.status['scara_left'])
+    run_until(cell, last_end(cell, 'scara_left') + 0.2)
+    executions = cell.collect(DiagnosticStatus, '/scara_right/execution_status')
+    raw = cell.probe.create_publisher(JointTrajectory, '/scara_right/joint_trajectory', 10)
+    q0 = cell.right.q.copy()
+    through = joint_move(right, q0, ik(right, [1.8, -0.2, 0.4], q_current=q0).unwrap())
+    raw.publish(conv.trajectory_msg(right.joint_names, through.t, through.q, through.qd,
+                                    through.qdd, frame_id='raw/1'))
+    assert cell.spin_until(lambda: cell.monitor.stopped, timeout=60)
+    assert cell.monitor.reason.startswith('predicted'), cell.monitor.reason
+    stop_time = cell.bridge.sim.time
+    run_until(cell, stop_time + 1.0)  # braked and held
+    low = min(m.data for m in cell.distance)
+    print(f'\nraw crossing move: {cell.monitor.reason}; min separation {low:.3f} m')
+    assert low >= margin
+    assert cell.monitor.status().minimum >= margin
+    assert np.abs(cell.bridge.sim.arm_state('scara_right')[1]).max() < 1e-2  # at rest
+
+    def execution(move):
+        assert cell.spin_until(lambda: any(proto.ExecutionStatus.from_msg(m).move == move
+                                           for m in executions))
+        return next(st for st in map(proto.ExecutionStatus.from_msg, executions)
+                    if st.move == move)
+
+    q = cell.right.q.copy()
+    closer = joint_move(right, q, q + 0.3 * (through.q[-1] - q))  # towards the left arm
+    raw.publish(conv.trajectory_msg(right.joint_names, closer.t, closer.q, frame_id='raw/2'))
+    refused = execution('raw/2')
+    assert refused.state == 'refused' and 'away from the other' in refused.reason
+    back = joint_move(right, q, q0)  # where it came from: away from the left arm
+    raw.publish(conv.trajectory_msg(right.joint_names, back.t, back.q, frame_id='raw/3'))
+    assert execution('raw/3').state == 'accepted'
+    run_until(cell, cell.bridge.sim.time + back.duration + 0.3)
+    res = cell.call(Trigger, '/collision_monitor/clear', Trigger.Request())
+    assert res.success, res.message
+    assert cell.spin_until(lambda: not cell.bridge.sim.estop)
+    assert min(m.data for m in cell.distance) >= margin

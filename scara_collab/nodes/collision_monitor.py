@@ -2,13 +2,18 @@
 
 On every ``/joint_states`` message it computes the arm-to-arm capsule surface distance,
 publishes it on ``/collision_monitor/min_distance``, and latches ``/emergency_stop`` true
-(transient local; the bridge holds both arms) when it falls below the safety margin. It fails
-closed: a joint state it cannot use (non-finite, missing joints) or no valid state for
-``stale_after`` sim seconds also latches the stop. ``/collision_monitor/clear``
-(std_srvs/Trigger, idempotent) releases the stop once the arms are apart again and the state is
-fresh. ``~/status`` (:class:`~scara_collab.nodes.protocol.MonitorStatus`, 1 Hz and on every
-change) carries the smallest distance seen and when: the run's one source of the minimum
-separation. Capsule markers coloured by distance go to ``~/capsules``.
+(transient local; the bridge brakes both arms at their acceleration limits and holds them)
+when it falls below the safety margin, or *before* that: it follows the trajectories the
+bridge runs (each ``/<robot>/joint_trajectory`` the bridge reports ``accepted``) and stops as
+soon as their predicted first breach of the margin is nearer than the arms' braking time plus
+``stop_latency`` (:mod:`scara_collab.core.safety`), so a command the bridge accepted cannot
+carry the arms into the margin. It fails closed: a joint state it cannot use (non-finite,
+missing joints) or no valid state for ``stale_after`` sim seconds also latches the stop.
+``/collision_monitor/clear`` (std_srvs/Trigger, idempotent) releases the stop once the arms
+are apart again and the state is fresh. ``~/status``
+(:class:`~scara_collab.nodes.protocol.MonitorStatus`, 1 Hz and on every change) carries the
+smallest distance seen and when: the run's one source of the minimum separation. Capsule
+markers coloured by distance go to ``~/capsules``.
 """
 import math
 from typing import Optional
@@ -20,10 +25,12 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, ColorRGBA, Float64, Header
 from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
-from scara_collab.core import collision
+from scara_collab.core import collision, safety
 from scara_collab.core.model import load_cell
+from scara_collab.core.planning import Timeline
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.qos import LATCHED, LATEST
@@ -42,6 +49,9 @@ class CollisionMonitor(Node):
         self.declare_parameter('safety_margin', -1.0)  # < 0: the cell's margin
         self.declare_parameter('marker_rate', 10.0)
         self.declare_parameter('stale_after', 0.2)     # sim s without a valid state: stop
+        # s from a state to the bridge braking on the stop it causes: a state period, the
+        # lockstep window and the monitor's own turn
+        self.declare_parameter('stop_latency', 0.04)
         self.cell = load_cell(self.get_parameter('profile').value or None)
         margin = float(self.get_parameter('safety_margin').value)
         self.margin = self.cell.safety_margin if margin < 0 else margin
@@ -50,6 +60,12 @@ class CollisionMonitor(Node):
         if not (rate > 0 and self.stale_after > 0 and math.isfinite(self.margin)):
             raise ValueError('marker_rate and stale_after must be > 0 and the margin finite')
         self.marker_period = 1.0 / rate
+        self.latency = float(self.get_parameter('stop_latency').value)
+        # what the bridge runs: trajectories heard, by (robot, move id), until it accepts one
+        self._heard = {arm.name: {} for arm in self.cell.arms}
+        self._running = {arm.name: None for arm in self.cell.arms}  # Timeline or None (holds)
+        self._breach: Optional[float] = None
+        self._predict_again = True
         self.stopped = False
         self.reason = ''
         self.last: Optional[float] = None
@@ -65,6 +81,13 @@ class CollisionMonitor(Node):
         self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
                                  LATEST)
         self.create_service(Trigger, '~/clear', guarded(self, self._on_clear, True))
+        for arm in self.cell.arms:
+            self.create_subscription(
+                JointTrajectory, f'/{arm.name}/joint_trajectory',
+                guarded(self, lambda msg, n=arm.name: self._on_trajectory(n, msg)), 10)
+            self.create_subscription(
+                DiagnosticStatus, f'/{arm.name}/execution_status',
+                guarded(self, self._on_execution), 50)
         self.create_timer(self.stale_after / 2, guarded(self, self._watch))
         self.create_timer(1.0, guarded(self, self._publish_status))
         self.estop_pub.publish(Bool(data=False))
@@ -83,13 +106,54 @@ class CollisionMonitor(Node):
         self.get_logger().error(text + '; emergency stop')
         self._publish_status()
 
+    # --- what the bridge runs --------------------------------------------------------------
+    def _on_trajectory(self, robot: str, msg: JointTrajectory) -> None:
+        try:
+            _, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
+        except conv.MessageError:
+            return  # the bridge refuses it too
+        heard = self._heard[robot]
+        heard[msg.header.frame_id] = (t, q)
+        while len(heard) > 8:  # the bridge answers each at once; keep only the latest few
+            heard.pop(next(iter(heard)))
+
+    def _on_execution(self, msg: DiagnosticStatus) -> None:
+        st = proto.ExecutionStatus.from_msg(msg)
+        if st.robot not in self._running:
+            return
+        if st.state == 'accepted' and st.start is not None:
+            move = self._heard[st.robot].pop(st.move, None)
+            self._running[st.robot] = None if move is None else Timeline(st.start + move[0],
+                                                                         move[1])
+        elif st.state in ('finished', 'held'):
+            self._running[st.robot] = None
+        else:
+            return
+        self._predict_again = True
+
+    def _predicted_stop(self, stamp: float, q, qd) -> Optional[str]:
+        """Return why the arms must stop now to stay out of the margin, or None."""
+        a, b = self.cell.arms
+        if self._predict_again:
+            self._predict_again = False
+            lines = [self._running[arm.name] or Timeline.hold(stamp, q[k])
+                     for k, arm in enumerate((a, b))]
+            self._breach = safety.first_breach(a, lines[0], b, lines[1], self.margin, stamp)
+        stopping = max(safety.stopping_time(a, qd[0]), safety.stopping_time(b, qd[1]))
+        if not safety.stop_due(stamp, self._breach, stopping, self.latency):
+            return None
+        return (f'predicted: the commanded moves bring {a.name} and {b.name} within '
+                f'{self.margin} m at t={self._breach:.3f} s, and braking takes '
+                f'{stopping:.3f} s (+{self.latency} s latency) from t={stamp:.3f} s')
+
+    # --- the watch ---------------------------------------------------------------------------
     def _on_state(self, msg: JointState) -> None:
         if not conv.admit_state(self, self.stamps, msg):
             return  # not the simulator's state: the watchdog stops the arms if no valid one comes
         a, b = self.cell.arms
         try:
-            qa, _ = conv.joint_state_arrays(msg, a.joint_names)
-            qb, _ = conv.joint_state_arrays(msg, b.joint_names)
+            qa, va = conv.joint_state_arrays(msg, a.joint_names)
+            qb, vb = conv.joint_state_arrays(msg, b.joint_names)
         except conv.MessageError as exc:  # fail closed: a state we cannot check stops the arms
             self._stop(f'unusable joint state: {exc}')
             return
@@ -109,6 +173,10 @@ class CollisionMonitor(Node):
             i, j = np.unravel_index(np.argmin(pairs), pairs.shape)
             self._stop(f'margin broken: {a.name} {PARTS[i]} to {b.name} {PARTS[j]} {d:.4f} m '
                        f'< {self.margin} m at t={stamp:.3f} s')
+        elif not self.stopped:
+            why = self._predicted_stop(stamp, (qa, qb), (va, vb))
+            if why is not None:
+                self._stop(why)
         if stamp >= self._next_marker:
             self._next_marker = stamp + self.marker_period
             self.marker_pub.publish(self._markers(qa, qb, d, msg.header))
@@ -130,6 +198,7 @@ class CollisionMonitor(Node):
                            'not cleared')
         else:
             self.stopped, self.reason = False, ''
+            self._predict_again = True
             self.estop_pub.publish(Bool(data=False))
             res.success, res.message = True, 'emergency stop cleared'
             self.get_logger().info(res.message)

@@ -50,6 +50,7 @@ from numpy.typing import ArrayLike
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
+from scara_collab.core import safety
 from scara_collab.core.config import ConfigError, load_config
 from scara_collab.core.model import CellModel, load_cell
 from scara_collab.core.sorting import at_belt_height
@@ -395,19 +396,23 @@ class CellSim:
         :param robot: arm name, e.g. ``scara_left``.
         :param t: ``(N,)`` absolute sim times, s, strictly increasing.
         :param q: ``(N, 3)`` joint positions; :param qd, qdd: ``(N, 3)`` or ``None``.
+        While the emergency stop is set, only a move that takes this arm away from the other
+        one, standing still, is run (:func:`scara_collab.core.safety.separating`): the way
+        to part arms that stopped too close.
+
         :raises TrajectoryError: (a ``ValueError``) with the reason: unknown robot, emergency
-            stop active, bad shape, non-finite value, non-increasing times, a position outside
-            the joint limits, a velocity above the limits (also between points), or a start
-            more than ``start_tolerance`` away from the measured position. The arm keeps
-            doing what it did.
+            stop active and the move not separating, bad shape, non-finite value,
+            non-increasing times, a position outside the joint limits, a velocity above the
+            limits (also between points), or a start more than ``start_tolerance`` away from
+            the measured position. The arm keeps doing what it did.
         """
         a = self._index(robot)
-        if self._estop:
-            raise TrajectoryError('emergency stop is active: trajectories are refused')
         arm = self.arms[a]
         t, q, qd, qdd = validate_trajectory(
             t, q, qd, arm.lower, arm.upper, arm.max_velocity,
             float(self.sim_cfg['velocity_tolerance']), qdd=qdd)
+        if self._estop:
+            self._check_recovery(a, q)
         ref = HermiteReference(t, q, qd, qdd)
         q_now = self._read()[0][a]
         start_q = ref.sample(max(self.time, ref.start))[0]
@@ -430,11 +435,33 @@ class CellSim:
         ref = self._traj[self._index(robot)]
         return ref is not None and self.time < ref.end
 
+    def _check_recovery(self, a: int, q: np.ndarray) -> None:
+        """Refuse a move under the emergency stop unless it only parts the arms."""
+        q_now, qd_now = self._read()
+        others = [b for b in range(len(self.arms)) if b != a]
+        if any(self.active(self.robots[b]) or np.any(np.abs(qd_now[b]) > 1e-3)
+               for b in others):
+            raise TrajectoryError('emergency stop is active and the other arm is moving: '
+                                  'refused (one separating move at a time)')
+        path = np.vstack([q_now[a], q])
+        if not all(safety.separating(self.arms[a], path, self.arms[b], q_now[b])
+                   for b in others):
+            raise TrajectoryError('emergency stop is active: only a move that takes the arm '
+                                  'away from the other one is run')
+
     def set_estop(self, on: bool) -> None:
-        """Emergency stop: both arms hold where they are; new trajectories are refused."""
+        """Emergency stop: both arms brake at their acceleration limits and then hold.
+
+        While it is set, new trajectories are refused unless they part the arms (see
+        :meth:`execute`).
+        """
         if on and not self._estop:
-            for a in range(len(self.arms)):
+            q, qd = self._read()
+            now = self.time
+            for a, arm in enumerate(self.arms):
+                t, pos, vel, acc = safety.braking(arm, q[a], qd[a], self._servo_dt)
                 self._hold_arm(a)
+                self._traj[a] = HermiteReference(now + t, pos, vel, acc)
         self._estop = bool(on)
 
     @property
