@@ -61,11 +61,15 @@ class CollisionMonitor(Node):
             raise ValueError('marker_rate and stale_after must be > 0 and the margin finite')
         self.marker_period = 1.0 / rate
         self.latency = float(self.get_parameter('stop_latency').value)
-        # what the bridge runs: trajectories heard, by (robot, move id), until it accepts one
+        # what the bridge runs: trajectories heard, by robot and move id, until it accepts one;
+        # the move it accepted and its start, until its trajectory is heard (the two come from
+        # different publishers, in either order); the running move (None: it holds)
         self._heard = {arm.name: {} for arm in self.cell.arms}
-        self._running = {arm.name: None for arm in self.cell.arms}  # Timeline or None (holds)
+        self._accepted = {arm.name: None for arm in self.cell.arms}
+        self._running = {arm.name: None for arm in self.cell.arms}  # (move, Timeline) or None
         self._breach: Optional[float] = None
         self._predict_again = True
+        self._started = ()
         self.stopped = False
         self.reason = ''
         self.last: Optional[float] = None
@@ -112,8 +116,14 @@ class CollisionMonitor(Node):
             _, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
         except conv.MessageError:
             return  # the bridge refuses it too
+        move = msg.header.frame_id
+        accepted = self._accepted[robot]
+        if accepted is not None and accepted[0] == move:  # its acceptance came first
+            self._accepted[robot] = None
+            self._run(robot, move, accepted[1], t, q)
+            return
         heard = self._heard[robot]
-        heard[msg.header.frame_id] = (t, q)
+        heard[move] = (t, q)
         while len(heard) > 8:  # the bridge answers each at once; keep only the latest few
             heard.pop(next(iter(heard)))
 
@@ -122,27 +132,43 @@ class CollisionMonitor(Node):
         if st.robot not in self._running:
             return
         if st.state == 'accepted' and st.start is not None:
-            move = self._heard[st.robot].pop(st.move, None)
-            self._running[st.robot] = None if move is None else Timeline(st.start + move[0],
-                                                                         move[1])
-        elif st.state in ('finished', 'held'):
-            self._running[st.robot] = None
-        else:
+            heard = self._heard[st.robot].pop(st.move, None)
+            if heard is None:  # its trajectory is still on its way: no prediction until then
+                self._accepted[st.robot] = (st.move, st.start)
+                self._running[st.robot] = (st.move, None)
+            else:
+                self._run(st.robot, st.move, st.start, *heard)
             return
+        if st.state in ('finished', 'held'):
+            self._accepted[st.robot] = None
+            self._running[st.robot] = None
+            self._predict_again = True
+
+    def _run(self, robot: str, move: str, start: float, t, q) -> None:
+        self._running[robot] = (move, Timeline(start + t, q))
         self._predict_again = True
 
     def _predicted_stop(self, stamp: float, q, qd) -> Optional[str]:
         """Return why the arms must stop now to stay out of the margin, or None."""
         a, b = self.cell.arms
-        if self._predict_again:
-            self._predict_again = False
-            lines = [self._running[arm.name] or Timeline.hold(stamp, q[k])
+        if any(r is not None and r[1] is None for r in self._running.values()):
+            return None  # a move the bridge runs is not known yet
+        # a move counts from its start: until then a follower may still re-time it for a new
+        # leader move (the priority rule); from then on the bridge runs it
+        started = tuple(r is not None and r[1].start <= stamp for r in self._running.values())
+        if self._predict_again or started != self._started:
+            self._predict_again, self._started = False, started
+            lines = [self._running[arm.name] if started[k] else ('', Timeline.hold(stamp, q[k]))
                      for k, arm in enumerate((a, b))]
-            self._breach = safety.first_breach(a, lines[0], b, lines[1], self.margin, stamp)
+            self._breach = safety.first_breach(a, lines[0][1], b, lines[1][1], self.margin,
+                                               stamp)
+            self._lines = lines
         stopping = max(safety.stopping_time(a, qd[0]), safety.stopping_time(b, qd[1]))
         if not safety.stop_due(stamp, self._breach, stopping, self.latency):
             return None
-        return (f'predicted: the commanded moves bring {a.name} and {b.name} within '
+        moves = ', '.join(f'{arm.name} {m or "holding"} t={tl.start:.3f}..{tl.end:.3f} s'
+                          for arm, (m, tl) in zip((a, b), self._lines))
+        return (f'predicted: the commanded moves ({moves}) bring {a.name} and {b.name} within '
                 f'{self.margin} m at t={self._breach:.3f} s, and braking takes '
                 f'{stopping:.3f} s (+{self.latency} s latency) from t={stamp:.3f} s')
 
