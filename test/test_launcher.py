@@ -16,6 +16,7 @@ import sys
 import threading
 import time
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -223,6 +224,68 @@ def test_a_dead_node_ends_the_run_with_its_name(launch, tmp_path):
     assert_children_gone(out)
 
 
+@pytest.mark.skipif(not HAVE_AUTOMATION, reason='needs the automation manager')
+def test_a_stopped_collision_monitor_holds_the_arms_and_ends_the_run(launch, tmp_path):
+    """SIGSTOP of the collision monitor mid-job: a node that hangs, rather than exits.
+
+    Sim time waits for it (lockstep) for the bridge's lockstep_timeout (5 s wall); then the
+    bridge holds both arms before it lets sim time go on without it, and no other node is
+    dropped. The launcher names it after --silent-timeout (10 s) and ends the run: exit 1,
+    the reason in summary.json, every node stopped cleanly (the monitor gets SIGCONT too).
+    """
+    out = tmp_path / 'stopped'
+    la = launch('--mode', 'collaborative', '--duration', '600', '--rtf', '1', '--no-plots',
+                '--output', str(out))
+    la.wait_for_line(r'\[launch\] collaborative job started at sim t=')
+    la.wait_for_line(r'^sim +[\d.]+/600 s', timeout=30)  # the first progress line: arms move
+    pid = json.loads((out / 'pids.json').read_text())['collision_monitor']
+    os.kill(pid, signal.SIGSTOP)
+    t0 = time.monotonic()
+    try:
+        code = la.wait(timeout=60)
+    finally:
+        try:
+            os.kill(pid, signal.SIGCONT)
+        except ProcessLookupError:
+            pass
+    assert code == 1, la.output
+    assert time.monotonic() - t0 < 40.0
+    assert re.search(r'ERROR: node collision_monitor stopped answering \(silent 1\d\.\d s, '
+                     r'last at sim t=[\d.]+ s\)', la.output), la.output
+    assert 'did not stop on SIGINT' not in la.output
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['exit_code'] == 1 and summary['interrupted'] is True
+    assert summary['exit_reason'].startswith('node collision_monitor stopped answering')
+    assert summary['silent_node']['node'] == 'collision_monitor'
+    assert {n: c['exit_code'] for n, c in summary['nodes'].items()} == {
+        n: 0 for n in summary['nodes']}, 'every node lived until the launcher stopped it'
+    assert 'job_stop' in summary
+    # the bridge held both arms because the monitor was silent, and dropped nobody else
+    bridge = (out / 'logs' / 'pybullet_bridge.log').read_text()
+    held = {m[0]: float(m[1]) for m in re.findall(
+        r'(scara_\w+): move \S+ held at t=([\d.]+) s: /collision_monitor silent for', bridge)}
+    assert set(held) == {'scara_left', 'scara_right'}, bridge
+    assert re.findall(r'lockstep: (\S+) kept sim time waiting', bridge) == ['/collision_monitor']
+    # after the hold no arm moved: braking settles within 0.5 s, then nothing moves
+    rows = assert_complete_csv(out / 'timeseries.csv', min_rows=summary['joint_state_rows'])
+    assert_complete_csv(out / 'events.csv', min_rows=0)
+    joints = [i for i, name in enumerate(rows[0]) if '_joint' in name]
+    assert len(joints) == 6, rows[0]
+    t_held = min(held.values())
+    data = np.array([[float(r[0])] + [float(r[i]) for i in joints] for r in rows[1:]])
+    after = data[data[:, 0] >= t_held + 0.5, 1:]
+    assert len(after) >= 100, f'{len(after)} states after the hold at t={t_held:.2f} s'
+    assert np.ptp(after, axis=0).max() < 1e-3, np.ptp(after, axis=0)
+    # braking at the acceleration limits from at most the velocity limits: v^2 / 2a (+5 %)
+    from scara_collab.core.model import load_cell
+    arm = load_cell().leader
+    reach = np.tile(arm.max_velocity ** 2 / (2 * arm.max_acceleration), 2) * 1.05
+    stopping = data[data[:, 0] >= t_held, 1:]
+    assert np.all(np.abs(stopping - stopping[0]).max(axis=0) <= reach), \
+        'the arms braked, they did not go on'
+    assert_children_gone(out)
+
+
 def test_a_wall_clock_stamped_state_neither_ends_nor_enters_the_run(launch, tmp_path):
     """A rogue /joint_states stamped with wall time (1.79e9 s) is refused by every consumer.
 
@@ -288,3 +351,22 @@ def test_viewer_flag_adds_the_viewer_stage_last(monkeypatch):
     assert exc.value.code == 2
     with pytest.raises(SystemExit):
         launcher.parse_args(['--viewer', '0'])
+
+
+def test_the_lockstep_watch_names_only_a_node_that_leaves_a_clock_unanswered():
+    from scara_collab.run import launcher
+    watch = launcher.LockstepWatch(['/a', '/b'], limit=10.0)
+    for name in ('/a', '/b', '/not_launched'):
+        watch.answer(name, 1.0, 0.0)
+    assert set(watch.reached) == {'/a', '/b'}
+    assert watch.silent(1.0, 30.0) is None  # sim time stands still, all up to date: a stall
+    watch.answer('/a', 5.0, 20.0)
+    assert watch.silent(5.0, 9.0) is None   # behind, but not for long
+    assert watch.silent(5.0, 25.0) == ('/b', 25.0, 1.0)
+    assert watch.silent(1.0, 25.0) == ('/b', 25.0, 1.0), 'behind /a even if /clock was lost'
+    watch.answer('/b', 0.5, 26.0)           # an old answer arriving late says nothing new
+    assert watch.silent(5.0, 26.0) == ('/b', 26.0, 1.0)
+    watch.answer('/b', float(2**31 - 1), 27.0)  # it left the lockstep
+    assert watch.silent(5.0, 40.0) is None
+    with pytest.raises(SystemExit):
+        launcher.parse_args(['--silent-timeout', '0'])

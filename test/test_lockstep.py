@@ -12,6 +12,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from ros_harness import Graph, params_args
 from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Header
 
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
@@ -135,3 +136,119 @@ def test_a_window_shorter_than_the_clock_period_is_refused():
                 'simulation', 'controllers', overrides={'lockstep_window': 0.005}))
     finally:
         g.close()
+
+
+# --- the gate's decisions, on a fake wall clock ----------------------------------------------
+class Wall:
+    """A wall clock the test sets by hand."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+@pytest.fixture
+def bare():
+    g = Graph()
+    g.node = g.add(Node('bridge_stand_in', context=g.context))
+    yield g
+    g.close()
+
+
+def answer(gate, name: str, t: float) -> None:
+    gate.receive(Header(stamp=conv.to_time(t), frame_id=name))
+
+
+def test_one_frozen_participant_is_dropped_and_the_others_are_not(bare):
+    """No cascade: while sim time waits for one node, nobody else's answers can be new.
+
+    The others' last answers are as old as the frozen one's when it is dropped; what counts
+    is how long each one has held sim time back, and they start to only when the bridge
+    steps on to their window.
+    """
+    wall = Wall()
+    gate = lockstep.LockstepGate(bare.node, 0.02, 5.0, wall_clock=wall)
+    for name in ('/frozen', '/b', '/c'):
+        answer(gate, name, 1.00)
+    assert gate.limit(1.00) == pytest.approx(1.02)
+    wall.now = 0.001                 # the bridge stepped to 1.02; b and c answer, frozen not
+    answer(gate, '/b', 1.02)
+    answer(gate, '/c', 1.02)
+    assert gate.limit(1.02) == pytest.approx(1.02)
+    wall.now = 4.9
+    assert gate.limit(1.02) == pytest.approx(1.02) and not gate.dropped
+    wall.now = 5.1
+    assert gate.limit(1.02) == pytest.approx(1.04)
+    assert set(gate.dropped) == {'/frozen'} and gate.dropped['/frozen'] == 1.02
+    wall.now = 5.101                 # stepped to 1.04 before b's and c's answers arrived
+    assert gate.limit(1.04) == pytest.approx(1.04)
+    assert set(gate.reached) == {'/b', '/c'}, 'their answers are 5.1 s old, yet they answer'
+    wall.now = 5.11
+    answer(gate, '/b', 1.04)
+    answer(gate, '/c', 1.04)
+    assert gate.limit(1.04) == pytest.approx(1.06)
+    answer(gate, '/frozen', 1.04)    # thawed: it joins again
+    assert '/frozen' in gate.reached and not gate.dropped
+    assert gate.waited['/frozen'] == pytest.approx(5.1 - 0.0, abs=0.01)
+    assert gate.waited['/b'] == pytest.approx(0.009, abs=1e-6)
+
+
+def test_per_node_timeouts_override_the_default(bare):
+    wall = Wall()
+    timeouts = lockstep.parse_timeouts(['slow:20', '', '/quick:0.5'])
+    assert timeouts == {'/slow': 20.0, '/quick': 0.5}
+    gate = lockstep.LockstepGate(bare.node, 0.02, 5.0, timeouts=timeouts, wall_clock=wall)
+    for name in ('/slow', '/quick', '/default'):
+        answer(gate, name, 1.00)
+    gate.limit(1.02)                 # all three hold sim time back from now on
+    wall.now = 0.6
+    gate.limit(1.02)
+    assert set(gate.dropped) == {'/quick'}
+    wall.now = 5.1
+    gate.limit(1.02)
+    assert set(gate.dropped) == {'/quick', '/default'}
+    wall.now = 19.9
+    assert gate.limit(1.02) == pytest.approx(1.02)
+    wall.now = 20.1
+    assert gate.limit(1.02) == float('inf')
+    assert set(gate.dropped) == {'/quick', '/default', '/slow'}
+
+
+@pytest.mark.parametrize('entry', ['monitor', 'monitor:0', ':2.0', 'monitor:soon', 'm:-1'])
+def test_a_malformed_timeout_is_refused(entry):
+    with pytest.raises(ValueError, match='expected <node>:<seconds > 0>'):
+        lockstep.parse_timeouts([entry])
+
+
+def test_a_guard_holds_the_arms_before_it_is_dropped_and_clears_when_it_answers(bare):
+    wall = Wall()
+    events = []
+
+    def on_guard(name, present, why):
+        events.append((name, present, why, name in gate.reached))
+
+    gate = lockstep.LockstepGate(bare.node, 0.02, 1.0, guards=['collision_monitor'],
+                                 on_guard=on_guard, wall_clock=wall)
+    answer(gate, '/collision_monitor', 1.00)
+    answer(gate, '/planner', 1.02)
+    gate.limit(1.02)
+    wall.now = 1.5
+    assert gate.limit(1.02) == pytest.approx(1.04)
+    assert len(events) == 1
+    name, present, why, still_waited_for = events[0]
+    assert (name, present, still_waited_for) == ('/collision_monitor', False, True)
+    assert why.startswith('silent for 1.5 s')
+    assert gate.absent == {'/collision_monitor': why}
+    wall.now = 1.6                   # the planner holds sim time back from now on
+    gate.limit(1.04)
+    wall.now = 9.0                   # a plain participant dropped: no guard event
+    gate.limit(1.04)
+    assert set(gate.dropped) == {'/collision_monitor', '/planner'} and len(events) == 1
+    answer(gate, '/collision_monitor', 1.04)
+    assert events[-1][:3] == ('/collision_monitor', True, 'answers again')
+    assert not gate.absent
+    gate.receive(Header(stamp=lockstep.END_OF_TIME, frame_id='/collision_monitor'))
+    assert events[-1][:3] == ('/collision_monitor', False, 'left the lockstep')
+    assert gate.absent

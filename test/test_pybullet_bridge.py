@@ -8,13 +8,13 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from ros_harness import Graph, params_args
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool
+from std_msgs.msg import Bool, Header
 from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from scara_collab.core.trajectory import joint_move
-from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 
@@ -156,3 +156,71 @@ def test_item_markers_read_back(cell):
         np.testing.assert_allclose(xyz, it.position)
     line = np.array([[1.0, 0.0, 0.4], [2.0, 0.5, 0.3]])
     np.testing.assert_allclose(conv.path_points(conv.path_msg(line, 1.0)), line)
+
+
+def test_lockstep_guard_silent_holds_both_arms_and_refuses_moves_until_it_answers():
+    """A guard that stops answering: the arms are held before it is dropped, moves refused.
+
+    The probe answers on /sim/lockstep as the guard ``/guard`` (every 5 ms wall, with the
+    bridge's sim time) while ``alive``; the left arm is in the middle of a long move when it
+    falls silent.
+    """
+    g = Graph()
+    g.bridge = g.add(PyBulletBridge(context=g.context, cli_args=params_args(
+        'simulation', 'controllers', overrides={
+            'real_time_factor': 0.0, 'feed_interval': 0.0, 'lockstep_timeout': 0.5,
+            'lockstep_guards': "['/guard']"})))
+    try:
+        g.states = g.collect(JointState, '/joint_states')
+        status = {a.name: g.collect(DiagnosticStatus, f'/{a.name}/execution_status')
+                  for a in g.bridge.cell.arms}
+        answers = g.probe.create_publisher(Header, lockstep.TOPIC, lockstep.QOS)
+        guard = SimpleNamespace(alive=True)
+
+        def answer():
+            if guard.alive:
+                answers.publish(Header(stamp=conv.to_time(sim_time(g)), frame_id='/guard'))
+
+        g.probe.create_timer(0.005, answer)
+        assert g.spin_until(lambda: '/guard' in g.bridge.gate.reached and len(g.states) > 5)
+        arm = g.bridge.cell.leader
+        traj_pub = g.probe.create_publisher(JointTrajectory, f'/{arm.name}/joint_trajectory', 10)
+        assert g.spin_until(lambda: traj_pub.get_subscription_count() > 0)
+
+        def send_move(dq):
+            q0 = left_q(g)
+            traj = joint_move(arm, q0, q0 + np.asarray(dq))
+            traj_pub.publish(conv.trajectory_msg(arm.joint_names, traj.t, traj.q, traj.qd))
+            return q0 + np.asarray(dq)
+
+        def last(robot, state):
+            msgs = [proto.ExecutionStatus.from_msg(m) for m in status[robot]]
+            return next((s for s in reversed(msgs) if s.state == state), None)
+
+        goal = send_move([1.2, -1.0, 0.0])
+        assert g.spin_until(lambda: last(arm.name, 'accepted') is not None)
+        moving = last(arm.name, 'accepted').start + 0.3
+        assert g.spin_until(lambda: sim_time(g) > moving, timeout=60)
+        guard.alive = False
+        assert g.spin_until(lambda: all(last(a.name, 'held') for a in g.bridge.cell.arms))
+        held = last(arm.name, 'held')
+        assert '/guard silent for' in held.reason and held.reason.endswith('holding')
+        assert '/guard' in g.bridge.gate.dropped and g.bridge.gate.absent
+        later = held.time + 1.5
+        assert g.spin_until(lambda: sim_time(g) > later, timeout=60), 'sim time goes on'
+        after = np.array([[m.position[list(m.name).index(n)] for n in arm.joint_names]
+                          for m in g.states if conv.to_sec(m.header.stamp) > held.time + 0.5])
+        assert len(after) > 50 and np.ptp(after, axis=0).max() < 1e-3, 'the arm stands'
+        assert np.abs(after[-1] - goal).max() > 0.3, 'the move was stopped, not finished'
+        send_move([0.0, 0.0, 0.2])
+        assert g.spin_until(lambda: last(arm.name, 'refused') is not None)
+        assert 'no move until it answers again' in last(arm.name, 'refused').reason
+        guard.alive = True
+        assert g.spin_until(lambda: all(last(a.name, 'cleared') for a in g.bridge.cell.arms))
+        assert not g.bridge.gate.absent
+        n_accepted = sum(1 for m in status[arm.name] if 'accepted' in m.message)
+        send_move([0.0, 0.0, 0.2])
+        assert g.spin_until(lambda: sum(1 for m in status[arm.name]
+                                        if 'accepted' in m.message) > n_accepted)
+    finally:
+        g.close()

@@ -15,17 +15,27 @@ The protocol, on one topic ``/sim/lockstep`` (``std_msgs/Header``):
 * the bridge (:class:`LockstepGate`) never steps more than ``window`` sim seconds beyond the
   oldest answer of the participants it has heard. A busy node therefore holds sim time
   (within ``window``) until it is done, as if the whole graph ran in one thread;
-* a participant that leaves says so (stamp = the end of time); one that stops answering for
-  ``timeout`` wall seconds while the bridge waits for it is dropped with a warning, and joins
-  again with its next answer. The simulation never hangs on a dead node.
+* a participant that leaves says so (stamp = the end of time); one that keeps the bridge
+  waiting for ``timeout`` wall seconds is dropped with a warning, and joins again with its
+  next answer. The simulation never hangs on a dead node. The wait is counted per
+  participant, from when its answer began to hold sim time back (or its last answer, if
+  later), never from the age of its last answer alone: while sim time stands still nobody
+  gets a new ``/clock`` to answer, so the others' answers age too, and one frozen node must
+  not take them all down. ``timeouts`` overrides ``timeout`` for named nodes;
+* a *guard* (the collision monitor) is a participant without which the arms must not move:
+  before the gate drops a guard, or when a guard leaves, it tells the bridge (``on_guard``),
+  which holds both arms and refuses trajectories until the guard answers again
+  (:attr:`LockstepGate.absent`).
 
 Nodes join with :func:`join` (parameter ``lockstep``, default true; only on sim time). The
-bridge's parameters ``lockstep_window`` (sim s, 0 = off) and ``lockstep_timeout`` (wall s)
-configure the gate. Messages are the standard ``std_msgs/Header``, so ``ros2 topic echo
-/sim/lockstep`` shows who is answering.
+bridge's parameters ``lockstep_window`` (sim s, 0 = off), ``lockstep_timeout`` (wall s),
+``lockstep_timeouts`` (``['/node:seconds', ...]``, :func:`parse_timeouts`) and
+``lockstep_guards`` (node names, default ``['/collision_monitor']``) configure the gate.
+Messages are the standard ``std_msgs/Header``, so ``ros2 topic echo /sim/lockstep`` shows who
+is answering.
 """
 import time
-from typing import Callable, Dict, Optional
+from typing import Callable, Dict, Iterable, Optional
 
 from builtin_interfaces.msg import Time
 from rclpy.clock import JumpThreshold
@@ -41,6 +51,36 @@ END_OF_TIME = Time(sec=2**31 - 1, nanosec=0)
 
 def _sec(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
+
+
+def full_name(name: str) -> str:
+    """Return a node name as the participants sign their answers: ``monitor`` -> ``/monitor``."""
+    name = name.strip()
+    return name if name.startswith('/') else '/' + name
+
+
+def parse_timeouts(entries: Iterable[str]) -> Dict[str, float]:
+    """Parse per-node timeouts: ``['/collision_monitor:2.0']`` -> ``{'/collision_monitor': 2.0}``.
+
+    Empty entries are ignored (a string-array parameter cannot be empty).
+
+    :param entries: ``'<node>:<wall seconds>'`` strings; the node name with or without ``/``.
+    :raises ValueError: an entry without a name, or a timeout that is not a number > 0.
+    """
+    out: Dict[str, float] = {}
+    for entry in entries:
+        if not entry.strip():
+            continue
+        name, _, value = entry.rpartition(':')
+        try:
+            seconds = float(value)
+        except ValueError:
+            seconds = float('nan')
+        if not name.strip() or not seconds > 0:
+            raise ValueError(f'lockstep timeout {entry!r}: expected <node>:<seconds > 0>, '
+                             "e.g. '/collision_monitor:2.0'")
+        out[full_name(name)] = seconds
+    return out
 
 
 class LockstepParticipant:
@@ -100,82 +140,113 @@ class LockstepGate:
     :param timeout: wall seconds a participant may keep the bridge waiting before it is
         dropped (it joins again when it answers).
     :param on_answer: called after each answer (the bridge re-arms its stepping timer).
+    :param timeouts: per-node ``timeout`` (full node names, see :func:`parse_timeouts`).
+    :param guards: full names of the participants the arms must not move without.
+    :param on_guard: ``on_guard(name, present, why)``: a guard is about to be dropped or has
+        left (``present`` false: hold the arms), or answers again (true). Called before the
+        gate lets sim time go on without the guard.
+    :param wall_clock: wall time source, s (tests pass a fake one).
     """
 
     def __init__(self, node: Node, window: float, timeout: float,
-                 on_answer: Optional[Callable[[], None]] = None):
+                 on_answer: Optional[Callable[[], None]] = None,
+                 timeouts: Optional[Dict[str, float]] = None, guards: Iterable[str] = (),
+                 on_guard: Optional[Callable[[str, bool, str], None]] = None,
+                 wall_clock: Callable[[], float] = time.monotonic):
         self.node = node
         self.window = float(window)
         self.timeout = float(timeout)
+        self.timeouts = dict(timeouts or {})
+        self.guards = frozenset(full_name(g) for g in guards)
         self.on_answer = on_answer
+        self.on_guard = on_guard
+        self._wall = wall_clock
         self.reached: Dict[str, float] = {}     # participant -> sim time it has reached
-        self.heard: Dict[str, float] = {}       # participant -> wall time of its last answer
         self.dropped: Dict[str, float] = {}     # participant -> sim time when dropped
         self.waited: Dict[str, float] = {}      # participant -> wall s the bridge waited
-        self._blocked_since: Optional[float] = None
-        self._blocker: Optional[str] = None
+        self.since: Dict[str, float] = {}       # participant holding sim time -> wall since
+        self.absent: Dict[str, str] = {}        # guard -> why it is missing (arms held)
         if self.window > 0:
-            node.create_subscription(Header, TOPIC, self._on_answer, QOS)
+            node.create_subscription(Header, TOPIC, self.receive, QOS)
 
     @property
     def enabled(self) -> bool:
         return self.window > 0
 
-    def _on_answer(self, msg: Header) -> None:
+    def timeout_of(self, name: str) -> float:
+        """Return the wall seconds ``name`` may keep the bridge waiting."""
+        return self.timeouts.get(name, self.timeout)
+
+    def receive(self, msg: Header) -> None:
+        """Take one answer from ``/sim/lockstep`` (the subscription's callback)."""
         name, t = msg.frame_id, _sec(msg.stamp)
         log = self.node.get_logger()
+        self._stop_waiting(name)
         if msg.stamp.sec == END_OF_TIME.sec:
             if self.reached.pop(name, None) is not None:
                 log.info(f'lockstep: {name} left')
-            self.heard.pop(name, None)
+                if name in self.guards:
+                    self._guard_missing(name, 'left the lockstep')
             self.dropped.pop(name, None)
         else:
             if name not in self.reached:
                 again = ' again' if self.dropped.pop(name, None) is not None else ''
                 log.info(f'lockstep: {name} joined{again} (window {self.window:.3f} s)')
             self.reached[name] = max(t, self.reached.get(name, t))
-            self.heard[name] = time.monotonic()
+            if self.absent.pop(name, None) is not None and self.on_guard is not None:
+                self.on_guard(name, True, 'answers again')
         if self.on_answer is not None:
             self.on_answer()
 
     def limit(self, sim_now: float) -> float:
         """Return the sim time physics may step to now (``inf`` when nobody is waited for).
 
-        Also drops a participant that has kept the bridge waiting for ``timeout`` wall s.
+        Also drops each participant that has held sim time back for its timeout (wall s,
+        counted from when it began to hold it back); a guard's ``on_guard`` comes first.
         """
         if not self.enabled or not self.reached:
-            self._unblock()
+            self._stop_waiting()
             return float('inf')
-        slowest = min(self.reached, key=self.reached.get)
-        limit = self.reached[slowest] + self.window
-        if limit > sim_now + 1e-9:
-            self._unblock()
-            return limit
-        wall = time.monotonic()
-        if self._blocked_since is None or self._blocker != slowest:
-            self._unblock(wall)
-            self._blocked_since, self._blocker = wall, slowest
-        if wall - self.heard.get(slowest, wall) > self.timeout:
-            self.node.get_logger().warning(
-                f'lockstep: {slowest} has not answered for {self.timeout:.1f} s (wall); '
-                f'not waiting for it any more (it joins again when it answers)')
-            self._unblock(wall)
-            del self.reached[slowest]
-            self.heard.pop(slowest, None)
-            self.dropped[slowest] = sim_now
-            return self.limit(sim_now)
-        return limit
+        wall = self._wall()
+        holding = [n for n, t in self.reached.items() if t + self.window <= sim_now + 1e-9]
+        for name in [n for n in self.since if n not in holding]:
+            self._stop_waiting(name, wall)
+        for name in holding:
+            waited = wall - self.since.setdefault(name, wall)
+            if waited > self.timeout_of(name):
+                self._drop(name, sim_now, waited)
+        if not self.reached:
+            return float('inf')
+        return min(self.reached.values()) + self.window
 
-    def _unblock(self, wall: Optional[float] = None) -> None:
-        if self._blocked_since is not None:
-            wall = time.monotonic() if wall is None else wall
-            self.waited[self._blocker] = (self.waited.get(self._blocker, 0.0)
-                                          + wall - self._blocked_since)
-        self._blocked_since = self._blocker = None
+    def _drop(self, name: str, sim_now: float, waited: float) -> None:
+        why = f'silent for {waited:.1f} s (wall) while sim time waited for it'
+        if name in self.guards:
+            self._guard_missing(name, why)
+        self.node.get_logger().warning(
+            f'lockstep: {name} kept sim time waiting {waited:.1f} s (wall, timeout '
+            f'{self.timeout_of(name):g} s); not waiting for it any more (it joins again when '
+            'it answers)')
+        self._stop_waiting(name)
+        del self.reached[name]
+        self.dropped[name] = sim_now
+
+    def _guard_missing(self, name: str, why: str) -> None:
+        if name not in self.absent:
+            self.absent[name] = why
+            if self.on_guard is not None:
+                self.on_guard(name, False, why)
+
+    def _stop_waiting(self, name: Optional[str] = None, wall: Optional[float] = None) -> None:
+        for n in list(self.since) if name is None else [name]:
+            since = self.since.pop(n, None)
+            if since is not None:
+                wall = self._wall() if wall is None else wall
+                self.waited[n] = self.waited.get(n, 0.0) + wall - since
 
     def summary(self) -> str:
         """One line: who the bridge waited for, and how long (wall s)."""
-        self._unblock()
+        self._stop_waiting()
         if not self.waited:
             return 'lockstep: never waited'
         parts = sorted(self.waited.items(), key=lambda kv: -kv[1])

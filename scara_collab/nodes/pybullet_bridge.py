@@ -21,8 +21,13 @@ Parameter ``faults`` (:mod:`scara_collab.nodes.faults`) can lose or delay its st
 Lockstep (:mod:`scara_collab.nodes.lockstep`): the nodes on sim time answer each ``/clock``
 on ``/sim/lockstep``, and the bridge never steps more than ``lockstep_window`` sim seconds
 (default 0.02, 0 = off) beyond the oldest answer, so a node that is computing holds sim time
-instead of falling behind it. A node silent for ``lockstep_timeout`` wall seconds is no longer
-waited for.
+instead of falling behind it. A node that keeps sim time waiting for ``lockstep_timeout`` wall
+seconds (per node: ``lockstep_timeouts``, e.g. ``['/collision_monitor:2.0']``) is no longer
+waited for; the wait is counted for each node on its own, so one frozen node does not take the
+others down. The arms never move without the nodes named in ``lockstep_guards`` (default
+``['/collision_monitor']``): before such a node is dropped, or when it leaves, both arms are
+held (status ``held``, reason ``<node> silent ...: holding``) and trajectories are refused
+until it answers again (status ``cleared``).
 """
 import math
 import time
@@ -30,6 +35,7 @@ from typing import Dict, Optional
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -46,7 +52,7 @@ from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.faults import declare_faults, FaultyPublisher
-from scara_collab.nodes.lockstep import LockstepGate
+from scara_collab.nodes.lockstep import LockstepGate, parse_timeouts
 from scara_collab.nodes.params import declare_config
 from scara_collab.nodes.qos import EVENTS, LATCHED
 from scara_collab.nodes.runner import guarded, run_node
@@ -70,6 +76,11 @@ class PyBulletBridge(Node):
         self.declare_parameter('home', [0.0, 1.5708, 0.0])  # leader joints; follower mirrored
         self.declare_parameter('lockstep_window', 0.02)
         self.declare_parameter('lockstep_timeout', 5.0)
+        for key, default, what in (
+                ('lockstep_timeouts', [''], "per-node lockstep_timeout: ['/<node>:<s>', ...]"),
+                ('lockstep_guards', ['/collision_monitor'], 'nodes the arms never move without')):
+            self.declare_parameter(key, default, ParameterDescriptor(
+                type=ParameterType.PARAMETER_STRING_ARRAY, description=what))
         sim_cfg, ctl_cfg = cfg['simulation'], cfg['controllers']
         profile = self.get_parameter('profile').value or None
         self.cell = load_cell(profile)
@@ -103,7 +114,7 @@ class PyBulletBridge(Node):
                 DiagnosticStatus, f'{name}/execution_status', EVENTS))
             self.create_subscription(
                 JointTrajectory, f'{name}/joint_trajectory',
-                guarded(self, lambda msg, n=name: self._on_trajectory(n, msg)), 10)
+                guarded(self, lambda msg, n=name: self._on_trajectory_watched(n, msg)), 10)
             self.create_service(
                 SetBool, f'{name}/gripper',
                 guarded(self, lambda req, res, n=name: self._on_gripper(n, req, res), True))
@@ -112,8 +123,12 @@ class PyBulletBridge(Node):
         if 0 < window < self._periods['clock'] - 1e-9:
             raise ValueError(f'lockstep_window {window} s is shorter than the clock period '
                              f'{self._periods["clock"]} s: the clock could never advance')
-        self.gate = LockstepGate(self, window, float(self.get_parameter('lockstep_timeout').value),
-                                 on_answer=self._wake)
+        self.gate = LockstepGate(
+            self, window, float(self.get_parameter('lockstep_timeout').value),
+            on_answer=self._wake,
+            timeouts=parse_timeouts(self.get_parameter('lockstep_timeouts').value or []),
+            guards=[g for g in self.get_parameter('lockstep_guards').value or [] if g.strip()],
+            on_guard=self._on_guard)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._timer = self.create_timer(0.0 if self._rtf == 0 else 0.002, self._tick,
                                         clock=self._steady)
@@ -158,6 +173,30 @@ class PyBulletBridge(Node):
         if self._parked:
             self._parked = False
             self._timer.reset()
+
+    # --- lockstep guards: the arms never move unwatched -----------------------------------
+    def _on_guard(self, name: str, present: bool, why: str) -> None:
+        """Hold both arms when a guard is missing; say so again when every guard is back."""
+        if present and self.gate.absent:
+            return  # another guard is still missing
+        self.get_logger().warning(
+            f'lockstep: guard {name} {why}: ' + ('trajectories are accepted again' if present
+                                                 else 'holding both arms, refusing trajectories'))
+        for arm in self.cell.arms:
+            if present:
+                self._report(arm.name, 'cleared', '', f'{name} {why}')
+            else:
+                self.sim.brake(arm.name)  # at the acceleration limits, as for an e-stop
+                move = self.running.pop(arm.name, ('', 0.0))[0]
+                self._report(arm.name, 'held', move, f'{name} {why}: holding')
+
+    def _on_trajectory_watched(self, robot: str, msg: JointTrajectory) -> None:
+        if self.gate.absent:
+            name, why = next(iter(self.gate.absent.items()))
+            self._report(robot, 'refused', msg.header.frame_id,
+                         f'{name} {why}: no move until it answers again')
+            return
+        self._on_trajectory(robot, msg)
 
     def _tick(self) -> None:
         due = self._steps_due()

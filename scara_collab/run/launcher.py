@@ -31,12 +31,22 @@ will be released to more than 4x (or unthrottled) the launcher also passes ``ste
 0.02 s, which allows up to 10x real time (``--step-chunk`` to change it; ``--launch-rtf 0``
 starts the bridge at ``--rtf`` directly, without the hold).
 
-The run ends after ``--duration`` sim seconds of job, on SIGINT / SIGTERM, or when a node
-process dies: the bridge is slowed back to the launch pace, the job is stopped
-(``/automation_manager/stop``), the children get SIGINT in reverse order (SIGTERM if still
-starting), what remains after a grace period is killed, and the run files are written
-(:mod:`scara_collab.run.recorder`). Exit status: 0 clean run, 1 a node died / was not ready /
-refused to start, 2 bad arguments, 130 SIGINT, 143 SIGTERM.
+Liveness: a process that hangs (stopped, deadlocked, starved) does not exit, so the launcher
+also watches the lockstep answers on ``/sim/lockstep`` (:class:`LockstepWatch`). A launched
+node that leaves a ``/clock`` unanswered for ``--silent-timeout`` wall seconds (default 10,
+longer than the bridge's ``lockstep_timeout`` so that the bridge has already held the arms
+if the node is the collision monitor) ends the run, named with the sim time it reached.
+Sim time that stands still with every node up to date is the bridge's stall
+(``--stall-timeout``).
+
+The run ends after ``--duration`` sim seconds of job, on SIGINT / SIGTERM, when a node
+process dies or a node stops answering: the bridge is slowed back to the launch pace, the job
+is stopped (``/automation_manager/stop``, short timeouts; skipped if the automation manager is
+the node that stopped answering), the children get SIGINT in reverse order (SIGTERM if still
+starting) and SIGCONT (so a stopped one can exit), what remains after a grace period is
+killed, and the run files are written (:mod:`scara_collab.run.recorder`; the reason is
+``exit_reason`` in ``summary.json``). Exit status: 0 clean run, 1 a node died / stopped
+answering / was not ready / refused to start, 2 bad arguments, 130 SIGINT, 143 SIGTERM.
 
 ``--record`` also writes the run's topics to ``run.mcap`` from the launcher's own process
 (:mod:`scara_collab.run.mcap_log`, closed with the other run files); ``--animation`` renders
@@ -55,19 +65,22 @@ import subprocess
 import sys
 import time
 import traceback
-from typing import Callable, Dict, IO, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, IO, Iterable, List, Optional, Sequence, Tuple
 import urllib.request
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import NodeNameNonExistentError
+from rclpy.node import Node, NodeNameNonExistentError
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from std_msgs.msg import Header
 from std_srvs.srv import SetBool, Trigger
 
 from scara_collab.core.config import load_config
 from scara_collab.core.paths import config_dir
+from scara_collab.nodes import lockstep
 from scara_collab.nodes.faults import call_with_faults, FaultPlan, parse_faults
 from scara_collab.nodes.runner import localhost_by_default
 from scara_collab.run.recorder import RunRecorder
@@ -79,6 +92,10 @@ EXIT_FAILED = 1
 EXIT_USAGE = 2
 FAST_CHUNK = 0.02  # s: with the bridge's 2 ms tick, up to 10x real time
 VIEWER_PORT = 8080  # --viewer without a port
+# the launcher's look at /sim/lockstep, taken once a second: the newest 200 answers (40 clocks
+# of 5 nodes; a live node is never more than the lockstep window behind), best effort so that
+# a slow launcher is never a burden on the nodes
+WATCH_QOS = QoSProfile(depth=200, reliability=ReliabilityPolicy.BEST_EFFORT)
 
 
 @dataclass
@@ -110,6 +127,50 @@ class RunEnd(Exception):
     def __init__(self, reason: str, code: int = EXIT_FAILED, details: str = ''):
         super().__init__(reason)
         self.reason, self.code, self.details = reason, code, details
+
+
+class LockstepWatch:
+    """Who answers on ``/sim/lockstep``, and who stopped (:mod:`scara_collab.nodes.lockstep`).
+
+    A participant is *silent* when its newest answer is older than ``limit`` wall seconds and
+    behind the newest sim time (there is a ``/clock`` it has not answered): it hangs, is
+    stopped or starves. Sim time that stands still with every participant up to date leaves
+    nobody silent; that is the bridge's stall.
+
+    :param names: full names of the nodes to watch (``/collision_monitor``); others ignored.
+    :param limit: wall seconds.
+    """
+
+    def __init__(self, names: Iterable[str], limit: float):
+        self.names = frozenset(names)
+        self.limit = float(limit)
+        self.reached: Dict[str, float] = {}  # participant -> newest sim time it answered
+        self.heard: Dict[str, float] = {}    # participant -> wall time of that answer
+
+    def answer(self, name: str, sim_t: float, wall: float) -> None:
+        """Take one answer of ``name``, at sim time ``sim_t`` (the end of time: it left)."""
+        if name not in self.names:
+            return
+        if sim_t >= lockstep.END_OF_TIME.sec:
+            self.reached.pop(name, None)
+            self.heard.pop(name, None)
+        elif sim_t > self.reached.get(name, -1.0):
+            self.reached[name], self.heard[name] = sim_t, wall
+
+    def silent(self, sim_now: float, wall: float) -> Optional[Tuple[str, float, float]]:
+        """Return ``(name, silent wall s, sim time it reached)`` of the longest silent one.
+
+        :param sim_now: the newest sim time the launcher has heard on ``/clock``, s.
+        :param wall: now, s (the clock of :meth:`answer`'s ``wall``).
+        :return: ``None`` if nobody is silent beyond the limit.
+        """
+        front = max([sim_now, *self.reached.values()])
+        late = [(wall - self.heard[n], n) for n, t in self.reached.items()
+                if t < front - 1e-6 and wall - self.heard[n] > self.limit]
+        if not late:
+            return None
+        silent, name = max(late)
+        return name, silent, self.reached[name]
 
 
 def tail(path: Path, lines: int = 20) -> str:
@@ -204,6 +265,9 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument('--stall-timeout', type=float, default=30.0, metavar='S',
                    help='end the run if sim time stands still this many wall seconds '
                    '(default: %(default)s)')
+    p.add_argument('--silent-timeout', type=float, default=10.0, metavar='S',
+                   help='end the run if a node leaves a /clock unanswered on /sim/lockstep '
+                   'this many wall seconds (hung or stopped; default: %(default)s)')
     p.add_argument('--no-plots', action='store_true', help='skip the PNG plots')
     p.add_argument('--record', action='store_true',
                    help='also record the topics of the run to <run folder>/run.mcap '
@@ -225,6 +289,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error(f'--fault: {exc}')
     if args.step_chunk is not None and not args.step_chunk > 0:
         p.error('--step-chunk must be > 0')
+    if not args.silent_timeout > 0:
+        p.error('--silent-timeout must be > 0')
     if args.viewer is not None and not 0 < args.viewer < 65536:
         p.error('--viewer PORT must be in 1..65535')
     if args.viewer is not None and not port_free(args.viewer):
@@ -368,6 +434,18 @@ class Launcher:
         self._next_checkpoint = 0.0
         self.rtf = args.rtf
         self.launch_rtf = args.launch_rtf
+        # liveness: the lockstep answers (hundreds a second) go to a node and an executor of
+        # their own, which check() drains once a second (WATCH_QOS)
+        self.watch = LockstepWatch([lockstep.full_name(s.name) for s in self.stages],
+                                   getattr(args, 'silent_timeout', 10.0))
+        self.silent_node: Optional[str] = None
+        self._answers = 0
+        self._next_watch = 0.0
+        self._watch_node = Node('launch_cell_watch', context=self.context)
+        self._watch_node.create_subscription(Header, lockstep.TOPIC, self._on_lockstep,
+                                             WATCH_QOS)
+        self._watch_executor = SingleThreadedExecutor(context=self.context)
+        self._watch_executor.add_node(self._watch_node)
 
     # --- signals ---------------------------------------------------------------------------
     def on_signal(self, signum, _frame) -> None:
@@ -396,6 +474,37 @@ class Launcher:
                 raise RunEnd(f'node {name} exited with {describe_exit(code)}', EXIT_FAILED,
                              f'[launch] last lines of {child.log_path}:\n'
                              + '\n'.join('    ' + ln for ln in tail(child.log_path).splitlines()))
+        if now >= self._next_watch:
+            self._next_watch = now + 1.0
+            self.check_answers()
+
+    def _on_lockstep(self, msg: Header) -> None:
+        self._answers += 1
+        self.watch.answer(msg.frame_id, msg.stamp.sec + msg.stamp.nanosec * 1e-9,
+                          time.monotonic())
+
+    def check_answers(self) -> None:
+        """Take the lockstep answers kept since the last look; :class:`RunEnd` if one is silent."""
+        idle = 0  # spin_once(0) takes a message only every other call or so: not the end yet
+        for _ in range(4 * WATCH_QOS.depth):
+            before = self._answers
+            self._watch_executor.spin_once(timeout_sec=0.0)
+            idle = idle + 1 if self._answers == before else 0
+            if idle >= 3:
+                break
+        silent = self.watch.silent(self.recorder.sim_time, time.monotonic())
+        if silent is None:
+            return
+        name, seconds, t = silent
+        self.silent_node = name = name.lstrip('/')
+        self.recorder.extra['silent_node'] = {'node': name, 'silent_s': round(seconds, 3),
+                                              'last_answer_sim_time': t}
+        log = self.output / 'logs' / f'{name}.log'
+        raise RunEnd(f'node {name} stopped answering (silent {seconds:.1f} s, last at sim '
+                     f't={t:.2f} s)', EXIT_FAILED,
+                     f'[launch] it leaves /clock unanswered on {lockstep.TOPIC} but has not '
+                     f'exited (stopped? hung?); last lines of {log}:\n'
+                     + '\n'.join('    ' + ln for ln in tail(log).splitlines()))
 
     def wait_until(self, predicate: Callable[[], bool], timeout: float,
                    on_timeout: Callable[[], str], supervise: bool = True) -> None:
@@ -644,6 +753,9 @@ class Launcher:
         auto = next((c for c in self.children if c.stage.name == 'automation_manager'), None)
         if auto is None or auto.proc.poll() is not None or len(self.signals) > 1:
             return
+        if self.silent_node == auto.stage.name:
+            self.recorder.extra['job_stop'] = f'not stopped: {auto.stage.name} does not answer'
+            return
         try:
             res = self.call(Trigger, '/automation_manager/stop', Trigger.Request(), 5.0,
                             'automation_manager', supervise=False, attempts=2,
@@ -654,7 +766,7 @@ class Launcher:
         self.recorder.extra['job_stop'] = res.message
 
     def stop_children(self, grace: float = 5.0) -> None:
-        """SIGINT the children in reverse order, wait for them, then kill what remains.
+        """SIGINT (and SIGCONT) the children in reverse order, wait, then kill what remains.
 
         :param grace: wall seconds the children have to exit before SIGKILL.
         """
@@ -666,6 +778,7 @@ class Launcher:
                 sig = signal.SIGINT if child.ready_after is not None else signal.SIGTERM
                 try:
                     child.proc.send_signal(sig)
+                    child.proc.send_signal(signal.SIGCONT)  # a stopped child handles it now
                 except ProcessLookupError:
                     pass
         deadline = time.monotonic() + grace
@@ -696,6 +809,8 @@ class Launcher:
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
+        self._watch_executor.shutdown(timeout_sec=1.0)
+        self._watch_node.destroy_node()
         self.recorder.destroy_node()
         rclpy.try_shutdown(context=self.context)
 

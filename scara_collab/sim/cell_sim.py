@@ -456,13 +456,20 @@ class CellSim:
         :meth:`execute`).
         """
         if on and not self._estop:
-            q, qd = self._read()
-            now = self.time
-            for a, arm in enumerate(self.arms):
-                t, pos, vel, acc = safety.braking(arm, q[a], qd[a], self._servo_dt)
-                self._hold_arm(a)
-                self._traj[a] = HermiteReference(now + t, pos, vel, acc)
+            for robot in self.robots:
+                self.brake(robot)
         self._estop = bool(on)
+
+    def brake(self, robot: str) -> None:
+        """Drop the running trajectory: brake every joint at its acceleration limit, then hold.
+
+        The stop of :func:`scara_collab.core.safety.braking` from the measured state.
+        """
+        a = self._index(robot)
+        q, qd = self._read()
+        t, pos, vel, acc = safety.braking(self.arms[a], q[a], qd[a], self._servo_dt)
+        self._hold_arm(a)
+        self._traj[a] = HermiteReference(self.time + t, pos, vel, acc)
 
     @property
     def estop(self) -> bool:
