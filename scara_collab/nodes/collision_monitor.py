@@ -37,6 +37,8 @@ from scara_collab.nodes.qos import LATCHED, LATEST
 from scara_collab.nodes.runner import guarded, run_node
 
 PARTS = ('link 1', 'link 2', 'quill')
+#: rad or m: a prediction is used only while both arms are this close to it
+TRACKING = 0.02
 
 
 class CollisionMonitor(Node):
@@ -61,12 +63,10 @@ class CollisionMonitor(Node):
             raise ValueError('marker_rate and stale_after must be > 0 and the margin finite')
         self.marker_period = 1.0 / rate
         self.latency = float(self.get_parameter('stop_latency').value)
-        # what the bridge runs: trajectories heard, by robot and move id, until it accepts one;
-        # the move it accepted and its start, until its trajectory is heard (the two come from
-        # different publishers, in either order); the running move (None: it holds)
-        self._heard = {arm.name: {} for arm in self.cell.arms}
-        self._accepted = {arm.name: None for arm in self.cell.arms}
-        self._running = {arm.name: None for arm in self.cell.arms}  # (move, Timeline) or None
+        # what the bridge runs, per arm: (move id, Timeline, start) or None (it holds); the one
+        # before (a refused trajectory leaves it running)
+        self._running = {arm.name: None for arm in self.cell.arms}
+        self._before = dict(self._running)
         self._breach: Optional[float] = None
         self._predict_again = True
         self._started = ()
@@ -116,53 +116,48 @@ class CollisionMonitor(Node):
             _, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
         except conv.MessageError:
             return  # the bridge refuses it too
-        move = msg.header.frame_id
-        accepted = self._accepted[robot]
-        if accepted is not None and accepted[0] == move:  # its acceptance came first
-            self._accepted[robot] = None
-            self._run(robot, move, accepted[1], t, q)
-            return
-        heard = self._heard[robot]
-        heard[move] = (t, q)
-        while len(heard) > 8:  # the bridge answers each at once; keep only the latest few
-            heard.pop(next(iter(heard)))
+        # as the bridge does it: a new trajectory replaces the running one, stamp 0 or a
+        # past stamp = start now; its execution status corrects this when it comes
+        stamp = conv.to_sec(msg.header.stamp)
+        start = max(stamp, self._now()) if stamp > 0 else self._now()
+        self._before[robot] = self._running[robot]
+        self._running[robot] = (msg.header.frame_id, Timeline(start + t, q), start)
+        self._predict_again = True
 
     def _on_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
-        if st.robot not in self._running:
-            return
-        if st.state == 'accepted' and st.start is not None:
-            heard = self._heard[st.robot].pop(st.move, None)
-            if heard is None:  # its trajectory is still on its way: no prediction until then
-                self._accepted[st.robot] = (st.move, st.start)
-                self._running[st.robot] = (st.move, None)
-            else:
-                self._run(st.robot, st.move, st.start, *heard)
-            return
-        if st.state in ('finished', 'held'):
-            self._accepted[st.robot] = None
+        running = self._running.get(st.robot)
+        mine = running is not None and running[0] == st.move
+        if st.state == 'accepted' and mine and st.start is not None:  # its real start
+            self._running[st.robot] = (st.move, running[1].shifted(st.start - running[2]),
+                                       st.start)
+        elif st.state == 'refused' and mine:
+            self._running[st.robot] = self._before[st.robot]
+        elif st.state == 'held' or (st.state == 'finished' and mine):
             self._running[st.robot] = None
-            self._predict_again = True
-
-    def _run(self, robot: str, move: str, start: float, t, q) -> None:
-        self._running[robot] = (move, Timeline(start + t, q))
+        else:
+            return
         self._predict_again = True
 
     def _predicted_stop(self, stamp: float, q, qd) -> Optional[str]:
         """Return why the arms must stop now to stay out of the margin, or None."""
         a, b = self.cell.arms
-        if any(r is not None and r[1] is None for r in self._running.values()):
-            return None  # a move the bridge runs is not known yet
         # a move counts from its start: until then a follower may still re-time it for a new
         # leader move (the priority rule); from then on the bridge runs it
         started = tuple(r is not None and r[1].start <= stamp for r in self._running.values())
         if self._predict_again or started != self._started:
             self._predict_again, self._started = False, started
-            lines = [self._running[arm.name] if started[k] else ('', Timeline.hold(stamp, q[k]))
-                     for k, arm in enumerate((a, b))]
+            lines = [self._running[arm.name][:2] if started[k]
+                     else ('', Timeline.hold(stamp, q[k])) for k, arm in enumerate((a, b))]
             self._breach = safety.first_breach(a, lines[0][1], b, lines[1][1], self.margin,
                                                stamp)
             self._lines = lines
+        # predict only from what the arms do: a lost or late status must not fake a stop (the
+        # measured distance against the margin still stands behind this)
+        if any(np.max(np.abs(tl.at(stamp) - q[k])) > TRACKING for k, (_, tl)
+               in enumerate(self._lines)):
+            self._predict_again = True
+            return None
         stopping = max(safety.stopping_time(a, qd[0]), safety.stopping_time(b, qd[1]))
         if not safety.stop_due(stamp, self._breach, stopping, self.latency):
             return None

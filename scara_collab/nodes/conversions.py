@@ -130,7 +130,13 @@ def admit_state(node, gate: StampGate, msg: JointState) -> bool:
     why = gate.check(to_sec(msg.header.stamp), sim_now(node))
     if why is None:
         return True
-    node.get_logger().warning(f'ignoring joint_states: {why}', throttle_duration_sec=5.0)
+    log = node.get_logger()  # one throttled call site per kind: one kind never hides another
+    if 'before any /clock' in why:
+        log.info(f'ignoring joint_states: {why}', throttle_duration_sec=5.0)
+    elif 'from the sim clock' in why:
+        log.warning(f'ignoring joint_states: {why}', throttle_duration_sec=5.0)
+    else:
+        log.warning(f'ignoring joint_states: {why}', throttle_duration_sec=5.0)
     return False
 
 
