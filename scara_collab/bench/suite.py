@@ -171,13 +171,21 @@ def run(out: Path, sizes: Sizes = FULL, only: Optional[Sequence[str]] = None,
         results['meta']['wall_s'] = progress.elapsed()
         results['meta']['cpu_s'] = cpu_seconds()
         target = out / 'RESULTS.md'
-        # the job-protocol tables come from scripts/bench_job_protocol.py: keep them
-        kept = report.kept_block(target.read_text(), 'job-protocol') if target.is_file() else ''
-        target.write_text(report.render(results) + (
-            f'\n## The job protocol through the launcher\n\n{kept}\n' if kept else ''))
+        # the launcher's tables come from their own scripts (KEPT_BLOCKS): keep them
+        old = target.read_text() if target.is_file() else ''
+        kept = ''.join(f'\n## {title}\n\n{block}\n' for name, title in KEPT_BLOCKS
+                       for block in [report.kept_block(old, name)] if block)
+        target.write_text(report.render(results) + kept)
     if json_path:
         Path(json_path).write_text(json.dumps(jsonable(results), indent=1))
     return results
+
+
+#: generated blocks of RESULTS.md written by other scripts, with their section titles:
+#: scripts/bench_job_protocol.py, scripts/bench_faults.py, scripts/bench_soak.py
+KEPT_BLOCKS = (('job-protocol', 'The job protocol through the launcher'),
+               ('faults', 'Faults against the launcher'),
+               ('soak', 'Soak: an hour of sim time through the launcher'))
 
 
 def failed(results: Dict[str, object]) -> List[str]:

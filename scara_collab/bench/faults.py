@@ -1,0 +1,368 @@
+"""The fault matrix: bad input, lost answers, hung and killed nodes against the launcher.
+
+Each case starts the launcher (one process per node, its own ROS domain), waits for the job,
+injects one fault from a probe node in this process (or a launcher flag, or a signal), waits
+for the run to end and judges it from the run's own files (``summary.json``, the node logs).
+A case passes when what was expected happened: no node died unless killed, no arm moved
+into the margin, the exit code and the summary say what happened.
+``scripts/bench_faults.py`` prints the table and writes it into ``docs/RESULTS.md``.
+"""
+from dataclasses import dataclass
+import json
+import os
+from pathlib import Path
+import queue
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from scara_collab.bench.util import Log
+
+Summary = Dict[str, object]
+
+
+@dataclass
+class Case:
+    """One fault: how to inject it, what is expected and how the run's files are judged."""
+
+    name: str
+    expected: str
+    duration: float
+    judge: Callable[[Summary, Path], Tuple[bool, str]]
+    inject: Optional[Callable[['Run'], None]] = None
+    flags: Tuple[str, ...] = ()
+
+
+class Run:
+    """The launcher as a subprocess, its output lines collected, plus a probe node."""
+
+    def __init__(self, out: Path, duration: float, flags: Sequence[str], domain: int):
+        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
+                   ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+        os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+        self.out = out
+        cmd = [sys.executable, '-c', 'import sys; from scara_collab.run.launcher import main; '
+               'sys.exit(main(sys.argv[1:]))', '--mode', 'collaborative', '--duration',
+               f'{duration:g}', '--rtf', '1', '--output', str(out), '--no-plots', *flags]
+        self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True)
+        self.lines: List[str] = []
+        self._queue: 'queue.Queue[str]' = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip('\n'))
+            self._queue.put(line)
+
+    def wait_for(self, pattern: str, timeout: float = 180.0) -> bool:
+        """Return True once a line matches ``pattern`` (False on timeout or exit)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            try:
+                line = self._queue.get(timeout=0.2)
+            except queue.Empty:
+                if self.proc.poll() is not None:
+                    return False
+                continue
+            if re.search(pattern, line):
+                return True
+        return False
+
+    def pid(self, node: str) -> int:
+        """Return the pid of a launched node."""
+        return int(json.loads((self.out / 'pids.json').read_text())[node])
+
+    def finish(self, timeout: float) -> int:
+        """Wait for the launcher to end (SIGINT, then SIGKILL, after ``timeout`` wall s)."""
+        try:
+            return self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.send_signal(signal.SIGINT)
+            try:
+                return self.proc.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                return self.proc.wait()
+
+
+class Probe:
+    """A node in this process that talks to the launched graph (publish, listen)."""
+
+    def __init__(self):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from sensor_msgs.msg import JointState
+        self.rclpy = rclpy
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx)
+        self.node = rclpy.create_node('fault_probe', context=self.ctx)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.state: Optional[JointState] = None
+        self.node.create_subscription(JointState, '/joint_states', self._on_state, 10)
+
+    def _on_state(self, msg) -> None:
+        self.state = msg
+
+    def spin(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def publisher(self, msg_type, topic: str):
+        pub = self.node.create_publisher(msg_type, topic, 10)
+        end = time.monotonic() + 10.0
+        while pub.get_subscription_count() == 0 and time.monotonic() < end:
+            self.spin(0.05)
+        return pub
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.ctx)
+
+
+# --- injections -------------------------------------------------------------------------------
+def _names() -> List[str]:
+    from scara_collab.core.model import load_cell
+    return [n for arm in load_cell().arms for n in arm.joint_names]
+
+
+def _stamp(probe: Probe) -> float:
+    from scara_collab.nodes import conversions as conv
+    return conv.to_sec(probe.state.header.stamp) if probe.state is not None else 0.0
+
+
+def nan_state_then_target(run: Run) -> None:
+    """Publish a NaN /joint_states (on sim time) five times, then a target for the left arm."""
+    from geometry_msgs.msg import PointStamped
+    from sensor_msgs.msg import JointState
+    from scara_collab.nodes import conversions as conv
+    probe = Probe()
+    try:
+        pub = probe.publisher(JointState, '/joint_states')
+        probe.spin(1.0)
+        for _ in range(5):
+            pub.publish(conv.joint_state(_stamp(probe), _names(), [float('nan')] * 6,
+                                         [0.0] * 6, [0.0] * 6))
+            probe.spin(0.05)
+        target = probe.publisher(PointStamped, '/scara_left/target')
+        target.publish(conv.make_point_stamped([2.4, -0.6, 0.5], 'world', 0.0))
+        probe.spin(1.0)
+    finally:
+        probe.close()
+
+
+def wall_clock_states(run: Run) -> None:
+    """Publish states stamped with wall time (1.79e9 s) for 3 s."""
+    from sensor_msgs.msg import JointState
+    from scara_collab.nodes import conversions as conv
+    probe = Probe()
+    try:
+        pub = probe.publisher(JointState, '/joint_states')
+        for _ in range(60):
+            pub.publish(conv.joint_state(1.79e9, _names(), [0.0] * 6, [0.0] * 6, [0.0] * 6))
+            probe.spin(0.05)
+    finally:
+        probe.close()
+
+
+def raw_crossing(run: Run) -> None:
+    """Send the right arm a raw joint move to the left arm's tool (through the left arm)."""
+    from trajectory_msgs.msg import JointTrajectory
+    from scara_collab.core.kinematics import fk, ik
+    from scara_collab.core.model import load_cell
+    from scara_collab.core.trajectory import joint_move
+    from scara_collab.nodes import conversions as conv
+    cell = load_cell()
+    left, right = cell.leader, cell.follower
+    probe = Probe()
+    try:
+        pub = probe.publisher(JointTrajectory, '/scara_right/joint_trajectory')
+        probe.spin(1.0)
+        ql = conv.joint_state_arrays(probe.state, left.joint_names)[0]
+        qr = conv.joint_state_arrays(probe.state, right.joint_names)[0]
+        goal = fk(left, ql)
+        goal[2] = max(goal[2], 0.35)
+        move = joint_move(right, qr, ik(right, goal, q_current=qr).unwrap())
+        pub.publish(conv.trajectory_msg(right.joint_names, move.t, move.q, move.qd, move.qdd,
+                                        frame_id='raw/crossing'))
+        probe.spin(2.0)
+    finally:
+        probe.close()
+
+
+def rogue_input(run: Run) -> None:
+    """Publish 200 bad targets in 2 s, a malformed trajectory and an oversized one."""
+    from geometry_msgs.msg import PointStamped
+    from trajectory_msgs.msg import JointTrajectory
+    from scara_collab.nodes import conversions as conv
+    probe = Probe()
+    try:
+        target = probe.publisher(PointStamped, '/scara_left/target')
+        traj = probe.publisher(JointTrajectory, '/scara_left/joint_trajectory')
+        bad = [[float('nan'), -1.0, 0.4], [9.0, -2.0, 0.4], [2.0, -2.0, 0.4], [3.0, -1.0, 1.5]]
+        for k in range(200):
+            frame = 'map' if k % 7 == 0 else 'world'
+            target.publish(conv.make_point_stamped(bad[k % len(bad)], frame, 0.0))
+            probe.spin(0.01)
+        names = ['scara_left_joint_1', 'nope', 'scara_left_gripper_joint']
+        traj.publish(conv.trajectory_msg(names, np.array([0.5]), np.zeros((1, 3))))
+        big = np.linspace(0.01, 1000.0, 100_001)
+        ql = conv.joint_state_arrays(probe.state, ['scara_left_joint_1', 'scara_left_joint_2',
+                                                   'scara_left_gripper_joint'])[0]
+        traj.publish(conv.trajectory_msg(['scara_left_joint_1', 'scara_left_joint_2',
+                                          'scara_left_gripper_joint'], big,
+                                         np.tile(ql, (big.size, 1))))
+        probe.spin(2.0)
+    finally:
+        probe.close()
+
+
+def sigstop_monitor(run: Run) -> None:
+    """Freeze the collision monitor (SIGSTOP) until the run ends; SIGCONT afterwards."""
+    pid = run.pid('collision_monitor')
+    os.kill(pid, signal.SIGSTOP)
+    run.resume = pid
+
+
+def sigkill_planner(run: Run) -> None:
+    """Kill the left planner (SIGKILL)."""
+    os.kill(run.pid('left_planner'), signal.SIGKILL)
+
+
+# --- judges ------------------------------------------------------------------------------------
+def _log(out: Path, node: str) -> str:
+    path = out / 'logs' / f'{node}.log'
+    return path.read_text(errors='replace') if path.is_file() else ''
+
+
+def _alive(s: Summary) -> List[str]:
+    """Return the nodes that did not end with the run (died)."""
+    return [n for n, v in (s.get('nodes') or {}).items() if v.get('exit_code') not in (0, None)]
+
+
+def _sep(s: Summary) -> float:
+    v = s.get('min_separation_m')
+    return float('nan') if v is None else float(v)
+
+
+def judge_nan(s: Summary, out: Path) -> Tuple[bool, str]:
+    reason = str(s.get('emergency_stop_reason') or '')
+    ok = s.get('exit_code') == 0 and 'unusable joint state' in reason and not _alive(s)
+    return ok, (f'exit {s.get("exit_code")}, e-stop: {reason[:60] or "none"}, died: '
+                f'{_alive(s) or "none"}')
+
+
+def judge_wall_clock(s: Summary, out: Path) -> Tuple[bool, str]:
+    ok = s.get('exit_code') == 0 and s.get('exit_reason') == 'duration reached' \
+        and (s.get('joint_states_refused') or 0) > 0 and not s.get('emergency_stops')
+    return ok, (f'exit {s.get("exit_code")} ({s.get("exit_reason")}), sim '
+                f'{s.get("sim_seconds")} s, {s.get("joint_states_refused")} states refused, '
+                f'{s.get("emergency_stops")} e-stops')
+
+
+def judge_crossing(s: Summary, out: Path) -> Tuple[bool, str]:
+    reason = str(s.get('emergency_stop_reason') or '')
+    ok = s.get('exit_code') == 0 and reason.startswith('predicted') and _sep(s) >= 0.1
+    return ok, f'e-stop: {reason[:40] or "none"}..., min separation {_sep(s):.3f} m'
+
+
+def judge_rogue(s: Summary, out: Path) -> Tuple[bool, str]:
+    bridge = _log(out, 'pybullet_bridge')
+    refused = 'do not match this arm' in bridge and '100001 points; at most' in bridge
+    ok = s.get('exit_code') == 0 and not _alive(s) and refused and _sep(s) >= 0.1
+    return ok, (f'exit {s.get("exit_code")}, died: {_alive(s) or "none"}, bridge refused the '
+                f'malformed and oversized trajectories: {refused}')
+
+
+def judge_lost(s: Summary, out: Path) -> Tuple[bool, str]:
+    ok = s.get('exit_code') == 0 and s.get('missed') == 0 and (s.get('sorted') or 0) > 0
+    return ok, f'exit {s.get("exit_code")}, sorted {s.get("sorted")}, missed {s.get("missed")}'
+
+
+def judge_saturated(s: Summary, out: Path) -> Tuple[bool, str]:
+    ok = s.get('exit_code') == 0 and _sep(s) >= 0.1 and not s.get('emergency_stops')
+    return ok, (f'exit {s.get("exit_code")}, sorted {s.get("sorted")} ({s.get("missed")} '
+                f'missed: feed beyond capacity), min separation {_sep(s):.3f} m, '
+                f'{s.get("emergency_stops")} e-stops')
+
+
+def judge_sigstop(s: Summary, out: Path) -> Tuple[bool, str]:
+    reason = str(s.get('exit_reason') or '')
+    bridge = _log(out, 'pybullet_bridge')
+    ok = s.get('exit_code') not in (0, None) and 'collision_monitor' in reason \
+        and 'holding' in bridge
+    return ok, f'exit {s.get("exit_code")}: {reason[:80]}'
+
+
+def judge_sigkill(s: Summary, out: Path) -> Tuple[bool, str]:
+    reason = str(s.get('exit_reason') or '')
+    ok = s.get('exit_code') == 1 and 'left_planner' in reason
+    return ok, f'exit {s.get("exit_code")}: {reason[:80]}'
+
+
+CASES = (
+    Case('NaN joint state, then a target', 'e-stop (fails closed), no node dies, the planner '
+         'answers the target', 20.0, judge_nan, nan_state_then_target),
+    Case('wall-clock stamped joint states', 'refused by every consumer; the run goes its '
+         'length, exit 0', 20.0, judge_wall_clock, wall_clock_states),
+    Case('raw trajectory through the other arm', 'predicted e-stop; the margin is kept', 20.0,
+         judge_crossing, raw_crossing),
+    Case('rogue publisher: 200 bad targets, malformed and 100,001-point trajectories',
+         'all refused with reasons, no node dies, margin kept', 20.0, judge_rogue,
+         rogue_input),
+    Case('lost start and gripper answers', 'a retry each; the job completes, 0 missed', 30.0,
+         judge_lost, flags=('--fault', 'drop:/automation_manager/start:1', '--fault',
+                            'drop:/scara_left/gripper:2', '--fault',
+                            'drop:/scara_right/gripper:2')),
+    Case('saturated feed (an item every 0.8 s)', 'margin kept, no e-stop', 60.0,
+         judge_saturated, flags=('--feed-interval', '0.8')),
+    Case('collision monitor frozen (SIGSTOP)', 'the bridge holds the arms; the run ends '
+         'non-zero naming the monitor', 120.0, judge_sigstop, sigstop_monitor),
+    Case('left planner killed (SIGKILL)', 'the run ends with exit 1 naming it', 120.0,
+         judge_sigkill, sigkill_planner),
+)
+
+
+def run_case(case: Case, out: Path, domain: int, log: Optional[Log] = None) -> Dict:
+    """Run one case; return its row: case, expected, observed, passed."""
+    run = Run(out, case.duration, case.flags, domain)
+    run.resume = None
+    observed, passed = '', False
+    try:
+        if not run.wait_for(r'job started at sim t='):
+            observed = 'the job did not start: ' + ' / '.join(run.lines[-3:])
+        else:
+            if case.inject is not None:
+                case.inject(run)
+            run.finish(case.duration * 3 + 120)
+            summary_path = out / 'summary.json'
+            summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+            summary.setdefault('exit_code', run.proc.returncode)
+            passed, observed = case.judge(summary, out)
+    finally:
+        if run.resume is not None:
+            try:
+                os.kill(run.resume, signal.SIGCONT)
+            except ProcessLookupError:
+                pass
+        if run.proc.poll() is None:
+            run.proc.kill()
+            run.proc.wait()
+    if log:
+        log(f'{case.name}: {"pass" if passed else "FAIL"} ({observed})')
+    return {'case': case.name, 'expected': case.expected, 'observed': observed,
+            'passed': passed}
+
+
+def matrix(out: Path, cases: Sequence[Case] = CASES, log: Optional[Log] = None) -> List[Dict]:
+    """Run every case, each in its own ROS domain and run folder."""
+    return [run_case(c, out / f'case_{k + 1}', 150 + k, log) for k, c in enumerate(cases)]

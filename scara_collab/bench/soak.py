@@ -1,0 +1,112 @@
+"""A long run through the launcher with the memory of every process sampled (the soak).
+
+:func:`soak` starts the launcher (one process per node), samples each process's resident
+memory (``VmRSS`` from ``/proc/<pid>/status``) against the run's sim time while it runs, and
+returns the run's summary figures with, per process, the RSS after the warm-up and at the end
+and the growth per sim hour between them. Lockstep drops are counted from the bridge's log.
+``scripts/bench_soak.py`` prints the table and writes it into the docs.
+"""
+import json
+import os
+from pathlib import Path
+import subprocess
+import sys
+import time
+from typing import Dict, List, Optional, Tuple
+
+from scara_collab.bench.protocol import row
+from scara_collab.bench.util import Log
+
+#: the bridge's words when it stops waiting for a silent node (scara_collab.nodes.lockstep)
+DROP_WORDS = 'not waiting for it any more'
+
+
+def rss_kib(pid: int) -> Optional[int]:
+    """Return the resident set size of ``pid`` in KiB, or None if it is gone."""
+    try:
+        with open(f'/proc/{pid}/status', encoding='ascii') as f:
+            for line in f:
+                if line.startswith('VmRSS:'):
+                    return int(line.split()[1])
+    except (OSError, ValueError):
+        return None
+    return None
+
+
+def _sim_time(folder: Path) -> Optional[float]:
+    """Return the last sim time written to ``timeseries.csv`` (it is written in batches)."""
+    try:
+        with open(folder / 'timeseries.csv', 'rb') as f:
+            f.seek(0, os.SEEK_END)
+            f.seek(max(0, f.tell() - 4096))
+            last = f.read().decode('ascii', 'replace').strip().splitlines()[-1]
+        return float(last.split(',')[0])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def growth(samples: List[Tuple[float, int]], warm: float) -> Dict[str, Optional[float]]:
+    """Return RSS after the warm-up, at the end and the growth per sim hour between them.
+
+    :param samples: ``(sim s, KiB)`` in time order.
+    :param warm: sim s of warm-up left out (imports, caches, the first items).
+    """
+    after = [(t, k) for t, k in samples if t >= warm]
+    if len(after) < 2 or after[-1][0] - after[0][0] <= 0:
+        return {'rss_warm_mib': None, 'rss_end_mib': None, 'growth_per_hour_pct': None}
+    (t0, k0), (t1, k1) = after[0], after[-1]
+    per_hour = (k1 - k0) / k0 * 3600.0 / (t1 - t0) * 100.0
+    return {'rss_warm_mib': k0 / 1024.0, 'rss_end_mib': k1 / 1024.0,
+            'growth_per_hour_pct': per_hour}
+
+
+def soak(out: Path, duration: float = 3600.0, warm: float = 300.0, every: float = 10.0,
+         extra: Tuple[str, ...] = (), log: Optional[Log] = None) -> Dict[str, object]:
+    """Run the collaborative job ``duration`` sim s through the launcher, sampling RSS.
+
+    :param warm: sim s before the growth is measured from.
+    :param every: wall s between samples.
+    :return: :func:`scara_collab.bench.protocol.row` of the summary plus ``processes``
+        (name -> :func:`growth`), ``lockstep_drops`` and ``samples`` per process.
+    """
+    out = Path(out)
+    cmd = [sys.executable, '-c',
+           'import sys; from scara_collab.run.launcher import main; sys.exit(main(sys.argv[1:]))',
+           '--mode', 'collaborative', '--duration', f'{duration:g}', '--rtf', '0', '--output',
+           str(out), '--quiet', '--no-plots', *extra]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    samples: Dict[str, List[Tuple[float, int]]] = {}
+    pids: Dict[str, int] = {}
+    next_log = time.monotonic() + 60.0
+    try:
+        while proc.poll() is None:
+            time.sleep(every)
+            if not pids and (out / 'pids.json').is_file():
+                pids = dict(json.loads((out / 'pids.json').read_text()))
+                pids['launcher'] = proc.pid
+            t = _sim_time(out)
+            if t is None:
+                continue
+            for name, pid in pids.items():
+                kib = rss_kib(pid)
+                if kib is not None:
+                    samples.setdefault(name, []).append((t, kib))
+            if log and time.monotonic() >= next_log:
+                next_log = time.monotonic() + 60.0
+                total = sum(s[-1][1] for s in samples.values() if s) / 1024.0
+                log(f'soak: sim t={t:.0f}/{duration:g} s, RSS of {len(samples)} processes '
+                    f'{total:.0f} MiB')
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+    summary_path = out / 'summary.json'
+    summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    summary['exit_code'] = proc.returncode
+    bridge_log = out / 'logs' / 'pybullet_bridge.log'
+    drops = bridge_log.read_text(errors='replace').count(DROP_WORDS) \
+        if bridge_log.is_file() else None
+    result = row(summary)
+    result.update(processes={n: growth(s, warm) for n, s in samples.items()},
+                  lockstep_drops=drops, samples=samples, warm=warm, duration=duration)
+    return result
