@@ -116,6 +116,15 @@ class Probe:
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.01)
 
+    def wait_state(self, timeout: float = 15.0):
+        """Return the newest /joint_states once one has come (discovery takes a while)."""
+        end = time.monotonic() + timeout
+        while self.state is None and time.monotonic() < end:
+            self.spin(0.05)
+        if self.state is None:
+            raise RuntimeError('no /joint_states heard from the launched graph')
+        return self.state
+
     def publisher(self, msg_type, topic: str):
         pub = self.node.create_publisher(msg_type, topic, 10)
         end = time.monotonic() + 10.0
@@ -148,9 +157,10 @@ def nan_state_then_target(run: Run) -> None:
     probe = Probe()
     try:
         pub = probe.publisher(JointState, '/joint_states')
-        probe.spin(1.0)
+        probe.wait_state()
         for _ in range(5):
-            pub.publish(conv.joint_state(_stamp(probe), _names(), [float('nan')] * 6,
+            # stamped just after the newest state: in order and on the clock, only not finite
+            pub.publish(conv.joint_state(_stamp(probe) + 0.005, _names(), [float('nan')] * 6,
                                          [0.0] * 6, [0.0] * 6))
             probe.spin(0.05)
         target = probe.publisher(PointStamped, '/scara_left/target')
@@ -177,7 +187,7 @@ def wall_clock_states(run: Run) -> None:
 def raw_crossing(run: Run) -> None:
     """Send the right arm a raw joint move to the left arm's tool (through the left arm)."""
     from trajectory_msgs.msg import JointTrajectory
-    from scara_collab.core.kinematics import fk, ik
+    from scara_collab.core.kinematics import arm_points, ik
     from scara_collab.core.model import load_cell
     from scara_collab.core.trajectory import joint_move
     from scara_collab.nodes import conversions as conv
@@ -186,12 +196,16 @@ def raw_crossing(run: Run) -> None:
     probe = Probe()
     try:
         pub = probe.publisher(JointTrajectory, '/scara_right/joint_trajectory')
-        probe.spin(1.0)
+        probe.wait_state()
         ql = conv.joint_state_arrays(probe.state, left.joint_names)[0]
         qr = conv.joint_state_arrays(probe.state, right.joint_names)[0]
-        goal = fk(left, ql)
-        goal[2] = max(goal[2], 0.35)
-        move = joint_move(right, qr, ik(right, goal, q_current=qr).unwrap())
+        _, elbow, tool = arm_points(left, ql)
+        for goal in (tool, 0.5 * (elbow + tool), elbow):  # a point of the left arm it reaches
+            goal = np.array([goal[0], goal[1], max(tool[2], 0.35)])
+            sol = ik(right, goal, q_current=qr)
+            if sol.ok:
+                break
+        move = joint_move(right, qr, sol.unwrap())
         pub.publish(conv.trajectory_msg(right.joint_names, move.t, move.q, move.qd, move.qdd,
                                         frame_id='raw/crossing'))
         probe.spin(2.0)
@@ -208,6 +222,7 @@ def rogue_input(run: Run) -> None:
     try:
         target = probe.publisher(PointStamped, '/scara_left/target')
         traj = probe.publisher(JointTrajectory, '/scara_left/joint_trajectory')
+        probe.wait_state()
         bad = [[float('nan'), -1.0, 0.4], [9.0, -2.0, 0.4], [2.0, -2.0, 0.4], [3.0, -1.0, 1.5]]
         for k in range(200):
             frame = 'map' if k % 7 == 0 else 'world'
@@ -342,7 +357,11 @@ def run_case(case: Case, out: Path, domain: int, log: Optional[Log] = None) -> D
             observed = 'the job did not start: ' + ' / '.join(run.lines[-3:])
         else:
             if case.inject is not None:
-                case.inject(run)
+                try:
+                    case.inject(run)
+                except Exception as exc:  # noqa: B902 - a failed injection is a failed case
+                    observed = f'the injection failed: {type(exc).__name__}: {exc}'
+                    return _row(case, observed, False, log)
             run.finish(case.duration * 3 + 120)
             summary_path = out / 'summary.json'
             summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
@@ -357,6 +376,10 @@ def run_case(case: Case, out: Path, domain: int, log: Optional[Log] = None) -> D
         if run.proc.poll() is None:
             run.proc.kill()
             run.proc.wait()
+    return _row(case, observed, passed, log)
+
+
+def _row(case: Case, observed: str, passed: bool, log: Optional[Log]) -> Dict:
     if log:
         log(f'{case.name}: {"pass" if passed else "FAIL"} ({observed})')
     return {'case': case.name, 'expected': case.expected, 'observed': observed,
