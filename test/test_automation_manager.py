@@ -15,18 +15,26 @@ def test_collaborative_sorts_with_both_arms_and_keeps_the_margin():
     assert s['sorted'] >= 8 and s['wrong_bin'] == 0 and s['missed'] == 0
     assert s['sorted_by_scara_left'] > 0 and s['sorted_by_scara_right'] > 0
     assert s['min_separation_m'] >= 0.10 and not s['estop']
-    assert s['dropped'] == 0  # give-ups (an arm blocked by the other for 3 s) still happen
+    assert s['dropped'] == 0
+    # no item given up: an arm no longer waits for the other arm's past motion (both waited
+    # for each other, 5 give-ups in 160 s before)
+    assert s['give_ups'] == 0, s['last_give_up']
+
+
+def test_a_saturated_feed_keeps_the_margin():
+    """An item every 0.8 s, twice what the pair can take: busy arms, the margin still holds."""
+    s = run_job('collaborative', 60.0, 0.8)
+    assert s['sorted'] >= 15 and s['missed'] >= 1  # beyond capacity: misses are counted
+    assert s['min_separation_m'] >= 0.10 and not s['estop'], s['estop_reason']
 
 
 def test_mirrored_pairs_are_sorted_in_step():
     s = run_job('mirrored', 35.0, 1.8)
     assert s['sorted'] >= 6 and s['sorted'] % 2 == 0 or s['sorted'] >= 7
     assert s['sorted_by_scara_left'] > 0 and s['sorted_by_scara_right'] > 0
-    # Single mirrored moves meet the SPEC's 1 mm (test_motion_graph asserts it). Over a whole
-    # job the in-step error reaches 0.8-2.2 mm (README, "Not met yet" (3): not analysed yet,
-    # likely items grasped off the quill axis); 3 mm still catches broken replication, which
-    # shows up as metres.
-    assert s['mirror_error_max_m'] is not None and s['mirror_error_max_m'] <= 3e-3
+    # the SPEC's 1 mm over pairs the bridge started together from mirrored poses (the
+    # replication manager's in-step error; through the launcher it is below 0.1 mm)
+    assert s['mirror_error_max_m'] is not None and s['mirror_error_max_m'] <= 1e-3
     assert s['min_separation_m'] >= 0.10 and not s['estop']
 
 

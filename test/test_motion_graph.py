@@ -212,3 +212,27 @@ def test_a_raw_crossing_trajectory_is_stopped_before_the_margin_and_can_be_undon
     assert res.success, res.message
     assert cell.spin_until(lambda: not cell.bridge.sim.estop)
     assert min(m.data for m in cell.distance) >= margin
+
+
+def test_a_nan_state_then_a_target_leaves_the_planner_planning(cell):
+    """A NaN /joint_states once killed the left planner at its next target; now it is refused.
+
+    The monitor fails closed on it (it cannot check a NaN state), the planner keeps its last
+    good state and plans the next target from it.
+    """
+    left = cell.bridge.cell.leader
+    pub = cell.probe.create_publisher(JointState, '/joint_states', 10)
+    names = [n for arm in cell.bridge.cell.arms for n in arm.joint_names]
+    q_before = cell.left.q.copy()
+    stamp = cell.bridge.sim.time + 0.005  # in order and on the clock: only the values are bad
+    pub.publish(conv.joint_state(stamp, names, [float('nan')] * 6, [0.0] * 6, [0.0] * 6))
+    assert cell.spin_until(lambda: cell.monitor.stopped)
+    assert 'unusable joint state' in cell.monitor.reason
+    assert np.all(np.isfinite(cell.left.q))
+    np.testing.assert_allclose(cell.left.q, q_before, atol=1e-3)
+    publish(cell, '/scara_left/target', [2.4, -0.6, 0.5])
+    assert cell.spin_until(lambda: cell.status['scara_left'])
+    st = proto.PlannerStatus.from_msg(cell.status['scara_left'][-1])
+    assert st.state in ('planned', 'refused'), st
+    assert 'nan' not in st.reason.lower()
+    assert np.all(np.isfinite(fk(left, cell.left.q)))
