@@ -167,7 +167,8 @@ class LockstepGate:
         self.since: Dict[str, float] = {}       # participant holding sim time -> wall since
         self.absent: Dict[str, str] = {}        # guard -> why it is missing (arms held)
         if self.window > 0:
-            node.create_subscription(Header, TOPIC, self.receive, QOS)
+            from scara_collab.nodes.runner import guarded  # runner imports this module
+            node.create_subscription(Header, TOPIC, guarded(node, self.receive), QOS)
 
     @property
     def enabled(self) -> bool:

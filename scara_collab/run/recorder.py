@@ -47,6 +47,7 @@ from scara_collab.core.model import CellModel, load_cell
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.qos import LATCHED
+from scara_collab.nodes.runner import guarded
 from scara_collab.run import report
 from scara_collab.run.telemetry import RunLog
 
@@ -100,14 +101,15 @@ class RunRecorder(Node):
         self.sinks: List = []
         self._index: Dict[tuple, np.ndarray] = {}
         self._names = list(self.cell.leader.joint_names) + list(self.cell.follower.joint_names)
-        self.create_subscription(JointState, '/joint_states', self.on_joint_state, STATE_QOS)
-        self.create_subscription(DiagnosticStatus, '/conveyor/events', self.on_event, EVENTS_QOS)
-        self.create_subscription(DiagnosticStatus, '/automation_manager/stats', self.on_stats, 10)
-        self.create_subscription(DiagnosticStatus, '/collision_monitor/status', self.on_monitor,
-                                 10)
-        self.create_subscription(DiagnosticStatus, '/replication_manager/status',
-                                 self.on_mirror, 10)
-        self.create_subscription(Bool, '/emergency_stop', self.on_estop, LATCHED)
+        # no exception escapes a callback (runner.guarded: logged, the recording goes on)
+        for msg_type, topic, callback, qos in (
+                (JointState, '/joint_states', self.on_joint_state, STATE_QOS),
+                (DiagnosticStatus, '/conveyor/events', self.on_event, EVENTS_QOS),
+                (DiagnosticStatus, '/automation_manager/stats', self.on_stats, 10),
+                (DiagnosticStatus, '/collision_monitor/status', self.on_monitor, 10),
+                (DiagnosticStatus, '/replication_manager/status', self.on_mirror, 10),
+                (Bool, '/emergency_stop', self.on_estop, LATCHED)):
+            self.create_subscription(msg_type, topic, guarded(self, callback), qos)
 
     # --- time ------------------------------------------------------------------------------
     @property
