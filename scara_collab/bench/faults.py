@@ -161,8 +161,9 @@ def nan_state_then_target(run: Run) -> None:
         pub = probe.publisher(JointState, '/joint_states')
         probe.wait_state()
         for _ in range(5):
-            # stamped just after the newest state: in order and on the clock, only not finite
-            pub.publish(conv.joint_state(_stamp(probe) + 0.005, _names(), [float('nan')] * 6,
+            # stamped a little ahead of the newest state the probe heard (which may lag the
+            # graph): in order and on the clock, only not finite
+            pub.publish(conv.joint_state(_stamp(probe) + 0.1, _names(), [float('nan')] * 6,
                                          [0.0] * 6, [0.0] * 6))
             probe.spin(0.05)
         target = probe.publisher(PointStamped, '/scara_left/target')
