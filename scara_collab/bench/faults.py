@@ -108,7 +108,8 @@ class Probe:
         self.executor = SingleThreadedExecutor(context=self.ctx)
         self.executor.add_node(self.node)
         self.state: Optional[JointState] = None
-        self.node.create_subscription(JointState, '/joint_states', self._on_state, 10)
+        # depth 1: the newest state, never a backlog (a slow probe would lag the graph)
+        self.node.create_subscription(JointState, '/joint_states', self._on_state, 1)
 
     def _on_state(self, msg) -> None:
         self.state = msg
@@ -161,6 +162,7 @@ def nan_state_then_target(run: Run) -> None:
         pub = probe.publisher(JointState, '/joint_states')
         probe.wait_state()
         for _ in range(5):
+            probe.spin(0.1)  # take the newest state
             # stamped a little ahead of the newest state the probe heard (which may lag the
             # graph): in order and on the clock, only not finite
             pub.publish(conv.joint_state(_stamp(probe) + 0.1, _names(), [float('nan')] * 6,
