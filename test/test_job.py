@@ -255,3 +255,36 @@ def test_an_arm_in_the_way_parks_and_a_deadlock_is_broken_by_the_follower(cell):
     job.tick(job.s.unblock_after + 0.1)
     assert job.phases() == {lead: 'to_item', foll: 'to_park'}
     assert 'scara_right gives way' in job.last_give_up
+
+
+def test_two_arms_holding_items_and_blocking_each_other_untangle(cell):
+    """Untangle two arms that hold items and wait for each other's bin moves.
+
+    Seen in the hour-long soak at t=3087 s: 21 s stuck, then items let go where the arms
+    stood. Neither may put its item down, so the follower backs out on its own side first,
+    then goes to its bin.
+    """
+    from scara_collab.core.job import MoveTrack
+    lead, foll = cell.leader.name, cell.follower.name
+    job = make_job(cell)
+    job.on_items([])
+    for robot, tool in ((lead, [1.34, -0.26, 0.34]), (foll, [0.83, 0.05, 0.34])):
+        job.on_arm_state(robot, ik(cell.arm(robot), tool).unwrap())
+    for k, lane in enumerate(job.lanes):
+        lane.phase, lane.holding, lane.item = 'to_bin', True, item_on_belt(cell, k + 1)
+        lane.target = drop_point(cell, lane.robot, lane.item.cls, job.s.drop_clearance)
+        lane.request = 1000 + k
+        lane.moves = {lane.robot: MoveTrack(state='waiting', since=0.0)}
+    out = moves(job.tick(job.s.unblock_after + 0.1))
+    assert [m.robot for m in out] == [foll] and out[0].purpose == 'via'
+    assert out[0].target[1] >= cell.belt.centre_y + 0.6  # out on the right arm's side
+    assert job.phases() == {lead: 'to_bin', foll: 'via'}
+    assert job.give_ups == 0  # nothing given up, nothing put down
+    lane = next(la for la in job.lanes if la.robot == foll)
+    assert lane.holding and [p for p, _ in lane.route] == ['to_bin']
+    # at the waypoint it goes on to its bin with the item
+    job.on_arm_state(foll, ik(cell.follower, out[0].target).unwrap())
+    job.on_planner(foll, out[0].request, 'finished', None, None)
+    job.on_execution(foll, out[0].request, 'finished', None, None)
+    nxt = moves(job.tick(job.s.unblock_after + 1.0))
+    assert [m.purpose for m in nxt if m.robot == foll] == ['to_bin']

@@ -359,7 +359,9 @@ class SortingJob:
         """Clear the way for an arm that waits for the other one (collaborative mode).
 
         An idle arm in the way parks; when both wait for each other, the follower's lane
-        gives way (unless it holds an item), as the priority rule has it.
+        gives way (unless it holds an item), as the priority rule has it. When both hold
+        items (neither may put its item down), the follower first backs out of the shared zone
+        by a waypoint on its own side (:meth:`_retreat`), then goes to its bin.
         """
         for lane in self.lanes:
             if not self._blocked(lane, now):
@@ -376,7 +378,45 @@ class SortingJob:
                                    free[0])
                     self._give_up(yielder, now, 'both arms wait for each other: '
                                   f'{yielder.robot} gives way')
+                else:  # both carry items: one backs out of the way, follower first
+                    for o in sorted((lane, other), key=lambda o: o.robot ==
+                                    self.cell.leader.name):
+                        if o.phase != 'via' and self._retreat(o, now):
+                            break
             return
+
+    def _retreat(self, lane: Lane, now: float) -> bool:
+        """Back an arm holding an item out of the shared zone, away from the other arm.
+
+        The waypoint is straight out from the belt on the arm's own side (``VIA_OFFSETS``
+        from the centre line, at carry height); the first whose leg keeps the planners'
+        margin from the other arm where it stands is taken, then the bin. Return False if
+        none does.
+        """
+        arm = self.cell.arm(lane.robot)
+        other = next(a for a in self.cell.arms if a.name != lane.robot)
+        q0, q_other = self.q[lane.robot], self.q.get(other.name)
+        if q_other is None:
+            return False
+        start = fk(arm, q0)
+        side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
+        for off in VIA_OFFSETS:
+            via = np.array([start[0], self.cell.belt.centre_y + side * off,
+                            max(start[2], self.s.carry_z)])
+            try:
+                leg = self.plan(lane.robot, q0, via)
+            except ValueError:
+                continue
+            if np.min(collision.arm_distance(arm, leg.q, other, q_other)) < self.s.pair_margin:
+                continue
+            drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls,
+                                      self.s.drop_clearance)
+            self.log('info', f'{lane.robot}: both arms hold items and wait for each other: '
+                     f'{lane.robot} backs out to y={via[1]:.2f} first')
+            lane.route = [('to_bin', drop)]
+            self._move(lane, 'via', via, self._soon(lane, now), now)
+            return True
+        return False
 
     def phases(self) -> Dict[str, str]:
         """Each lane's phase, by its robot."""
