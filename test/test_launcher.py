@@ -297,7 +297,7 @@ def test_a_wall_clock_stamped_state_neither_ends_nor_enters_the_run(launch, tmp_
     from scara_collab.nodes import conversions as conv
 
     out = tmp_path / 'rogue'
-    la = launch('--mode', 'idle', '--duration', '6', '--rtf', '1', '--output', str(out),
+    la = launch('--mode', 'idle', '--duration', '25', '--rtf', '1', '--output', str(out),
                 '--no-plots')
     la.wait_for_line(r'\[launch\] graph idle at sim t=')
     ctx = rclpy.Context()
@@ -308,17 +308,20 @@ def test_a_wall_clock_stamped_state_neither_ends_nor_enters_the_run(launch, tmp_
         names = [n for a in ('scara_left', 'scara_right')
                  for n in (f'{a}_joint_1', f'{a}_joint_2', f'{a}_gripper_joint')]
         rogue = conv.joint_state(1.79e9, names, [0.0] * 6, [0.0] * 6, [0.0] * 6)
-        end = time.monotonic() + 3.0
-        while time.monotonic() < end:
-            pub.publish(rogue)
-            time.sleep(0.05)
+        logs = [out / 'logs' / f'{n}.log' for n in ('collision_monitor', 'left_planner')]
+        end = time.monotonic() + 15.0  # until both have heard it (discovery can be slow)
+        while time.monotonic() < end and not all(
+                'stamp t=1790000000.000 s' in p.read_text() for p in logs):
+            for _ in range(10):
+                pub.publish(rogue)
+                time.sleep(0.05)
     finally:
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
     assert la.wait() == 0, la.output
     summary = json.loads((out / 'summary.json').read_text())
     assert summary['exit_reason'] == 'duration reached'
-    assert summary['sim_seconds'] == pytest.approx(6.0, abs=0.05)
+    assert summary['sim_seconds'] == pytest.approx(25.0, abs=0.05)
     assert summary['joint_states_refused'] >= 1
     assert summary['joint_states_missing'] < 10
     assert summary['emergency_stops'] == 0
