@@ -309,9 +309,10 @@ def test_a_wall_clock_stamped_state_neither_ends_nor_enters_the_run(launch, tmp_
                  for n in (f'{a}_joint_1', f'{a}_joint_2', f'{a}_gripper_joint')]
         rogue = conv.joint_state(1.79e9, names, [0.0] * 6, [0.0] * 6, [0.0] * 6)
         logs = [out / 'logs' / f'{n}.log' for n in ('collision_monitor', 'left_planner')]
-        end = time.monotonic() + 15.0  # until both have heard it (discovery can be slow)
-        while time.monotonic() < end and not all(
-                'stamp t=1790000000.000 s' in p.read_text() for p in logs):
+        end = time.monotonic() + 15.0  # until all have heard it (discovery can be slow):
+        while time.monotonic() < end and not (  # the nodes, and the launcher's recorder
+                all('stamp t=1790000000.000 s' in p.read_text() for p in logs)
+                and 'stamp t=1790000000.000 s' in la.output):
             for _ in range(10):
                 pub.publish(rogue)
                 time.sleep(0.05)
