@@ -70,6 +70,7 @@ class CollisionMonitor(Node):
         self._breach: Optional[float] = None
         self._predict_again = True
         self._started = ()
+        self._lines: list = []  # (move id, Timeline) per arm the breach was predicted from
         self.stopped = False
         self.reason = ''
         self.last: Optional[float] = None
