@@ -76,3 +76,34 @@ def test_the_node_logs_the_jobs_decisions_at_both_levels():
         node.destroy_node()
     finally:
         rclpy.try_shutdown(context=ctx)
+
+
+def test_the_job_starts_only_once_every_endpoint_it_uses_is_matched():
+    """A start before discovery has matched the job's endpoints is refused, naming them.
+
+    Seen through the launcher: the first targets went out before the planners had matched
+    the manager's publisher, were lost, and the arm gave up after its retries.
+    """
+    import rclpy
+    from geometry_msgs.msg import PointStamped
+    from std_srvs.srv import Trigger
+
+    from scara_collab.nodes.automation_manager import AutomationManager
+    from scara_collab.nodes.params import ros_args
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        node = AutomationManager(context=ctx, cli_args=ros_args('automation', 'controllers'))
+        res = node._on_start(Trigger.Request(), Trigger.Response())
+        assert not res.success and not node.job.running
+        assert '/scara_left/target (no subscriber)' in res.message
+        assert '/scara_right/planner_status (no publisher)' in res.message
+        assert '/scara_left/gripper (no server)' in res.message
+        sub = node.create_subscription(PointStamped, '/scara_left/target', lambda m: None, 1)
+        assert '/scara_left/target' not in ' '.join(node.missing_links())
+        node.destroy_subscription(sub)
+        node._tick()  # no auto_start: nothing happens, nothing raised
+        assert not node.job.running
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)

@@ -288,3 +288,48 @@ def test_two_arms_holding_items_and_blocking_each_other_untangle(cell):
     job.on_execution(foll, out[0].request, 'finished', None, None)
     nxt = moves(job.tick(job.s.unblock_after + 1.0))
     assert [m.purpose for m in nxt if m.robot == foll] == ['to_bin']
+
+
+def test_an_arm_waiting_for_the_other_arms_work_re_aims_instead_of_giving_up(cell):
+    """Keep the target current while the other arm works next to the item, then meet it.
+
+    Seen in-process (seed 8, t=180.7 s): the leader went to an item 0.26 m from the
+    follower's, so the follower's planner waited until the leader lifted. The job gave up
+    after ``move_timeout`` (3 s), 60 ms before the way was clear. Now it asks again for the
+    item where the belt has carried it, and gives up only when the item has got away.
+    """
+    from scara_collab.core.job import MoveTrack
+    lead, foll = cell.leader.name, cell.follower.name
+    job = make_job(cell)
+    item = item_on_belt(cell, 97, x=1.12, y=0.01, stamp=0.0)
+    job.on_items([item])
+    lane = next(la for la in job.lanes if la.robot == foll)
+    busy = next(la for la in job.lanes if la.robot == lead)
+    busy.phase, busy.item, busy.request = 'to_item', item_on_belt(cell, 98, 1.07, 0.27), 5
+    busy.target = busy.item.position
+    busy.moves = {lead: MoveTrack(state='accepted', start=0.0, end=3.0)}
+    job.claimed[97] = foll
+    assert job._chase(lane, item, 0.0)
+    first = lane.request
+    job.on_planner(foll, first, 'waiting', None, None, f'{lead} blocks it')
+    assert moves(job.tick(job.s.unblock_after - 0.1)) == []  # waiting is normal at first
+    t = job.s.unblock_after + 0.1
+    job.on_items([SeenItem(97, item.cls, item.position + [cell.belt.speed * t, 0, 0], t)])
+    again = moves(job.tick(t))
+    assert [(m.robot, m.purpose) for m in again] == [(foll, 'to_item')]
+    assert again[0].request != first
+    assert again[0].target[0] > item.position[0] + cell.belt.speed * t - 1e-9  # downstream
+    assert job.give_ups == 0 and job.claimed[97] == foll
+    assert any('re-aims at item 97' in text for _, text in job.logs)
+    # the leader stays in the way: the follower re-aims every unblock_after while its
+    # planner waits, and gives up once the item has got away (never on move_timeout)
+    busy.moves[lead].end = 60.0
+    sent = [again[0]]
+    while job.give_ups == 0 and t < 30.0:
+        job.on_planner(foll, sent[-1].request, 'waiting', None, None, f'{lead} blocks it')
+        t += 0.1
+        job.on_items([SeenItem(97, item.cls, item.position + [cell.belt.speed * t, 0, 0], t)])
+        sent += [m for m in moves(job.tick(t)) if m.purpose == 'to_item']
+    assert job.give_ups == 1 and 'got away' in job.last_give_up, job.logs
+    assert len(sent) > 3 and all(b.target[0] > a.target[0] for a, b in zip(sent, sent[1:]))
+    assert 97 not in job.claimed

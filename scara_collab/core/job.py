@@ -202,6 +202,7 @@ class Lane:
     moves: Dict[str, MoveTrack] = field(default_factory=dict)
     grips: Dict[str, GripTrack] = field(default_factory=dict)
     bin_tries: int = 0
+    reaims: int = 0
     holding: bool = False
     route: List[Tuple[str, np.ndarray]] = field(default_factory=list)
     failures: Dict[int, int] = field(default_factory=dict)
@@ -361,7 +362,9 @@ class SortingJob:
         An idle arm in the way parks; when both wait for each other, the follower's lane
         gives way (unless it holds an item), as the priority rule has it. When both hold
         items (neither may put its item down), the follower first backs out of the shared zone
-        by a waypoint on its own side (:meth:`_retreat`), then goes to its bin.
+        by a waypoint on its own side (:meth:`_retreat`), then goes to its bin. An arm on its
+        way to an item that waits for the other arm's work (it will leave when done) re-aims
+        at the item as the belt carries it on (:meth:`_reaim`).
         """
         for lane in self.lanes:
             if not self._blocked(lane, now):
@@ -370,6 +373,9 @@ class SortingJob:
             if other.phase == 'idle':
                 self.log('info', f'{other.robot}: parks to clear the way for {lane.robot}')
                 self._park(other, now)
+            elif not self._blocked(other, now):
+                if lane.phase == 'to_item' and not lane.holding:
+                    self._reaim(lane, other, now)
             elif self._blocked(other, now):
                 # the one not holding an item gives way; if neither holds one, the follower
                 free = [o for o in (lane, other) if not o.holding]
@@ -384,6 +390,27 @@ class SortingJob:
                         if o.phase != 'via' and self._retreat(o, now):
                             break
             return
+
+    def _reaim(self, lane: Lane, other: Lane, now: float) -> None:
+        """Ask again for the item an arm waits to meet, where the belt has carried it by now.
+
+        The planner holds a waiting move until the other arm's next move clears the way (the
+        other arm waits at an item or its bin while it grips), then plans the target it has:
+        by then the item has moved on. Asking again every ``unblock_after`` keeps the target
+        current, so the arm meets the item as soon as the way is clear; the item's deadline
+        is the belt's end (the intercept no longer exists: give up).
+        """
+        seen = self.items.get(lane.item.id)
+        if seen is None:
+            return self._give_up(lane, now, f'item {lane.item.id} is no longer on the belt')
+        if lane.reaims == 0:
+            self.log('info', f'{lane.robot}: waits for {other.robot} ({other.phase}); '
+                     f're-aims at item {seen.id} while it waits')
+        reaims = lane.reaims + 1
+        if not self._chase(lane, seen, now):
+            return self._give_up(lane, now, f'item {seen.id} got away while {lane.robot} '
+                                 f'waited for {other.robot}')
+        lane.reaims = reaims
 
     def _retreat(self, lane: Lane, now: float) -> bool:
         """Back an arm holding an item out of the shared zone, away from the other arm.
@@ -734,6 +761,7 @@ class SortingJob:
     def _idle(self, lane: Lane) -> None:
         lane.phase, lane.item, lane.moves, lane.grips = 'idle', None, {}, {}
         lane.holding, lane.route = False, []
+        lane.reaims = 0
 
     def _give_up(self, lane: Lane, now: float, why: str) -> None:
         self.log('warn', f'{lane.robot}: {why}')

@@ -14,11 +14,15 @@ retries, :mod:`scara_collab.nodes.protocol` for the statuses):
   each answer goes back to the job with its request's token, a lost one is asked again).
 
 Services ``~/start`` and ``~/stop`` (std_srvs/Trigger, idempotent: starting a running job
-succeeds); parameter ``auto_start``; ``~/stats`` (:class:`~scara_collab.nodes.protocol.JobStats`,
+succeeds; a start before every endpoint the job uses is matched is refused, naming what is
+missing, since the first targets would be lost: ask again); parameter ``auto_start`` (the job
+starts once the graph is connected); ``~/stats`` (:class:`~scara_collab.nodes.protocol.JobStats`,
 1 Hz sim time). Modes: ``single`` (the leader alone), ``collaborative`` (both arms, each
 preferring its half of the belt), ``mirrored`` (items arrive in mirror pairs; the leader's moves
 go through the replication manager so the follower replicates them).
 """
+from typing import List
+
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
@@ -75,24 +79,27 @@ class AutomationManager(Node):
         self.stats_pub = self.create_publisher(DiagnosticStatus, '~/stats', 10)
         self.grippers = {a.name: self.create_client(SetBool, f'/{a.name}/gripper')
                          for a in self.cell.arms}
+        self.status_subs = {}
         for a in self.cell.arms:
-            self.create_subscription(DiagnosticStatus, f'/{a.name}/planner_status',
-                                     guarded(self, self._on_planner), 50)
-            self.create_subscription(DiagnosticStatus, f'/{a.name}/execution_status',
-                                     guarded(self, self._on_execution), 50)
-        self.create_subscription(MarkerArray, '/conveyor/items', guarded(self, self._on_items),
-                                 QoSProfile(depth=1))
-        self.create_subscription(DiagnosticStatus, '/conveyor/events',
-                                 guarded(self, self._on_event), 100)
-        self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
-                                 QoSProfile(depth=1))
+            self.status_subs[a.name] = (
+                self.create_subscription(DiagnosticStatus, f'/{a.name}/planner_status',
+                                         guarded(self, self._on_planner), 50),
+                self.create_subscription(DiagnosticStatus, f'/{a.name}/execution_status',
+                                         guarded(self, self._on_execution), 50))
+        self.world_subs = (
+            self.create_subscription(MarkerArray, '/conveyor/items',
+                                     guarded(self, self._on_items), QoSProfile(depth=1)),
+            self.create_subscription(DiagnosticStatus, '/conveyor/events',
+                                     guarded(self, self._on_event), 100),
+            self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
+                                     QoSProfile(depth=1)))
         self.create_subscription(Bool, '/emergency_stop', guarded(self, self._on_estop), LATCHED)
         self.create_service(Trigger, '~/start', guarded(self, self._on_start, service=True))
         self.create_service(Trigger, '~/stop', guarded(self, self._on_stop, service=True))
         self.create_timer(float(self.get_parameter('tick').value), guarded(self, self._tick))
         self.create_timer(1.0, guarded(self, self._publish_stats))
-        if self.get_parameter('auto_start').value:
-            self.job.start(self._now())
+        # auto_start: the job starts on the first tick that finds the graph connected
+        self.start_pending = bool(self.get_parameter('auto_start').value)
         self.lockstep = lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'sorting job ready: mode {self.mode}, lanes '
                                f'{[lane.robot for lane in self.job.lanes]}')
@@ -141,7 +148,34 @@ class AutomationManager(Node):
         if msg.data:
             self.get_logger().error('emergency stop: the job pauses')
 
+    def missing_links(self) -> List[str]:
+        """Return the topics and services the job needs that are not matched yet.
+
+        A message published before the other side has matched its endpoint is lost (DDS
+        discovery takes a while, longer on a busy machine), so the job does not start before
+        every endpoint it uses is matched: its targets, the planners' and the bridge's
+        statuses, the grippers, the items and the joint states.
+        """
+        missing = []
+        for lane in self.job.lanes:
+            pub = (self.collab_pub if len(lane.robots) > 1 else self.target_pub[lane.robot])
+            if pub.get_subscription_count() == 0:
+                missing.append(f'{pub.topic_name} (no subscriber)')
+            for robot in lane.robots:
+                missing += [f'{sub.topic_name} (no publisher)'
+                            for sub in self.status_subs[robot] if sub.get_publisher_count() == 0]
+                if not self.grippers[robot].service_is_ready():
+                    missing.append(f'/{robot}/gripper (no server)')
+        missing += [f'{sub.topic_name} (no publisher)'
+                    for sub in self.world_subs if sub.get_publisher_count() == 0]
+        return missing
+
     def _on_start(self, req, res):
+        missing = self.missing_links()
+        if missing and not self.job.running:
+            res.success = False
+            res.message = f'not connected yet: {", ".join(missing)}'
+            return res
         fresh = self.job.start(self._now())
         res.success = True
         res.message = f'sorting job {"running" if fresh else "already running"} ({self.mode})'
@@ -149,6 +183,7 @@ class AutomationManager(Node):
         return res
 
     def _on_stop(self, req, res):
+        self.start_pending = False
         was = self.job.stop()
         res.success = True
         res.message = ('sorting job stopped; arms holding items bring them to their bins'
@@ -158,6 +193,15 @@ class AutomationManager(Node):
 
     # --- the job ----------------------------------------------------------------------------
     def _tick(self) -> None:
+        if self.start_pending:
+            missing = self.missing_links()
+            if missing:
+                self.get_logger().warning(f'auto_start: waiting for {", ".join(missing)}',
+                                          throttle_duration_sec=5.0)
+                return
+            self.start_pending = False
+            self.job.start(self._now())
+            self.get_logger().info(f'sorting job running ({self.mode})')
         for cmd in self.job.tick(self._now()):
             if isinstance(cmd, MoveCommand):
                 msg = conv.make_point_stamped(cmd.target, 'world', cmd.start)

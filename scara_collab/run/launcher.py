@@ -11,7 +11,8 @@ right_planner          node ``right_planner`` listed, subscribed to ``/scara_rig
 replication_manager    service ``/replication_manager/enable`` available
 collision_monitor      service ``/collision_monitor/clear`` available
 automation_manager     service ``/automation_manager/start`` available; then ``start`` is
-                       called (not in ``--mode idle``)
+                       called (not in ``--mode idle``), again every 0.5 s while the
+                       manager refuses it because an endpoint it uses is not matched yet
 cell_viewer            ``--viewer [PORT]`` only: node ``cell_viewer`` subscribed to
                        ``/joint_states`` and http://localhost:PORT answering (the URL is
                        printed; a port in use is refused at the command line)
@@ -686,10 +687,19 @@ class Launcher:
     def start_job(self) -> None:
         """Call ``/automation_manager/start`` (not in idle mode) and release the clock."""
         if self.args.mode != 'idle':
-            res = self.call(Trigger, '/automation_manager/start', Trigger.Request(),
-                            self.args.ready_timeout, 'automation_manager')
-            if not res.success:
-                raise RunEnd(f'automation_manager refused to start: {res.message}')
+            # refused while its endpoints are not matched yet (DDS discovery): ask again
+            deadline = time.monotonic() + self.args.ready_timeout
+            while True:
+                res = self.call(Trigger, '/automation_manager/start', Trigger.Request(),
+                                self.args.ready_timeout, 'automation_manager')
+                if res.success:
+                    break
+                if time.monotonic() > deadline:
+                    raise RunEnd(f'automation_manager refused to start for '
+                                 f'{self.args.ready_timeout:g} s: {res.message}')
+                self.console.say(f'[launch] automation_manager: {res.message}; asking again')
+                again = time.monotonic() + 0.5
+                self.wait_until(lambda: time.monotonic() >= again, 1.0, lambda: '')
             self.job_started = True
         t0 = self.recorder.start_job()
         release = {}
