@@ -15,6 +15,7 @@ import subprocess
 import sys
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -374,3 +375,44 @@ def test_the_lockstep_watch_names_only_a_node_that_leaves_a_clock_unanswered():
     assert watch.silent(5.0, 40.0) is None
     with pytest.raises(SystemExit):
         launcher.parse_args(['--silent-timeout', '0'])
+
+
+def test_the_job_start_is_asked_again_while_the_manager_is_not_connected(tmp_path, monkeypatch):
+    """Ask for the job's start again every 0.5 s while the manager refuses it as not connected.
+
+    However slowly the launcher is scheduled: a deadline just beyond the pause fired when two
+    CPU hogs descheduled it, and ended a run with an empty error.
+    """
+    from scara_collab.run import launcher as la
+    args = la.parse_args(['--output', str(tmp_path), '--quiet'])
+    console = la.Console(tmp_path / 'launch.log', True)
+    run = la.Launcher(args, tmp_path, console)
+    try:
+        connect_after = [3]  # the third request finds the manager connected
+        asked = []
+
+        def call(srv_type, name, request, timeout, what, **kwargs):
+            asked.append(time.monotonic())
+            ok = len(asked) >= connect_after[0]
+            return SimpleNamespace(success=ok, message='started' if ok else
+                                   'not connected yet: /scara_right/target (no subscriber)')
+
+        slow = run.check
+        monkeypatch.setattr(run, 'call', call)
+        monkeypatch.setattr(run, 'check', lambda: (time.sleep(0.7), slow()))  # descheduled
+        monkeypatch.setattr(run, 'set_bridge', lambda **values: None)
+        monkeypatch.setattr(run.recorder, 'start_job', lambda: 0.0)
+        run.start_job()
+        assert len(asked) == 3 and run.job_started
+        assert all(b - a >= 0.5 for a, b in zip(asked, asked[1:]))
+        log = (tmp_path / 'launch.log').read_text()
+        assert log.count('not connected yet: /scara_right/target (no subscriber); asking '
+                         'again') == 2
+        connect_after[0] = 10 ** 6  # never connected: ends with the reason, within the timeout
+        asked.clear()
+        run.args.ready_timeout = 1.0
+        with pytest.raises(la.RunEnd, match='refused to start for 1 s: not connected yet'):
+            run.start_job()
+    finally:
+        run.close()
+        console.close()

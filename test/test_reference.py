@@ -78,3 +78,72 @@ def test_given_velocities_above_the_limit_are_refused():
         _check([0.0, 1.0], np.zeros((2, 3)), qd=[[0, 0, 0], [0, 0, 0.6]])
     with pytest.raises(TrajectoryError, match='accelerations has a non-finite'):
         _check([0.0, 1.0], np.zeros((2, 3)), qdd=[[0, 0, 0], [0, np.nan, 0]])
+
+
+@pytest.mark.parametrize('switch', [0.0125, 0.0151, 0.018])
+def test_a_bang_bang_plan_is_followed_exactly_between_its_samples(switch):
+    """Accelerate at +A, then brake at -A from ``switch`` s: the switch falls between samples.
+
+    A cubic through the samples' positions and velocities overshoots A by up to 1.5x; the
+    switch model reproduces the plan (positions to 1e-12, accelerations exactly A).
+    """
+    a_max, dt = 6.0, 0.01
+    t = np.arange(0.0, 0.0401, dt)
+
+    def exact(time):
+        up = np.minimum(time, switch)
+        down = np.maximum(time - switch, 0.0)
+        v_top = a_max * up
+        return (0.5 * a_max * up ** 2 + v_top * down - 0.5 * a_max * down ** 2,
+                v_top - a_max * down, np.where(time < switch, a_max, -a_max))
+
+    pos, vel, acc = (np.stack([x, -x, 0.1 * x], axis=1) for x in exact(t))
+    pos[:, 2] += 0.2  # the quill inside its limits
+    lower, upper, vmax = np.array([-3, -3, 0.0]), np.array([3, 3, 0.6]), np.array([2, 2, 0.5])
+    args = validate_trajectory(t, pos, vel, lower, upper, vmax, qdd=acc)
+    fine = np.linspace(t[0], t[-1], 50 * (len(t) - 1) + 1)
+    ref = HermiteReference(*args)
+    q = np.array([ref.sample(x)[0] for x in fine])
+    npt.assert_allclose(q[:, 0], exact(fine)[0], atol=1e-12)
+    npt.assert_allclose([ref.sample(x)[2][0] for x in fine[1:-1]], exact(fine[1:-1])[2],
+                        atol=1e-9)
+    step = fine[1] - fine[0]
+    assert np.max(np.abs(np.diff(q[:, 0], 2))) / step ** 2 <= a_max * (1 + 1e-6)
+    cubic = HermiteReference(t, pos, vel)  # no accelerations given: the old reference
+    q3 = np.array([cubic.sample(x)[0][0] for x in fine])
+    assert np.max(np.abs(np.diff(q3, 2))) / step ** 2 > 1.1 * a_max
+
+
+def test_planned_lines_stay_within_the_limits_between_their_samples():
+    """What the simulator executes from planned lines, resampled 50x: within the limits.
+
+    The planner's lines are time-optimal (bang-bang), sampled every 10 ms. Over 60 random
+    lines the reference's velocity stays within 0.5 % of the limit and its acceleration
+    (second differences of the positions at 0.2 ms) within 5 % (the cubic reached 1.57x;
+    what is left are segments whose acceleration ramps and switches inside one sample).
+    """
+    from scara_collab.core.kinematics import fk
+    from scara_collab.core.model import load_cell
+    from scara_collab.core.planning import plan_path
+    arm = load_cell().arms[0]
+    rng = np.random.default_rng(1)
+    worst_v, worst_a, lines = [], [], 0
+    while lines < 60:
+        q0 = rng.uniform(arm.lower * 0.9, arm.upper * 0.9)
+        goal = fk(arm, rng.uniform(arm.lower * 0.9, arm.upper * 0.9))
+        try:
+            tr = plan_path(arm, q0, goal, 'world', 'line')
+        except ValueError:
+            continue
+        lines += 1
+        args = validate_trajectory(tr.t, tr.q, tr.qd, arm.lower, arm.upper, arm.max_velocity,
+                                   qdd=tr.qdd)
+        ref = HermiteReference(*args)
+        fine = np.linspace(tr.t[0], tr.t[-1], 50 * (len(tr.t) - 1) + 1)
+        q = np.array([ref.sample(x)[0] for x in fine])
+        step = fine[1] - fine[0]
+        worst_v.append(np.max(np.abs(np.diff(q, axis=0)) / step / arm.max_velocity))
+        worst_a.append(np.max(np.abs(np.diff(q, 2, axis=0)) / step ** 2 / arm.max_acceleration))
+    assert max(worst_v) <= 1.005, max(worst_v)
+    worst, median = max(worst_a), float(np.median(worst_a))
+    assert worst <= 1.05 and median <= 1.005, (worst, median)

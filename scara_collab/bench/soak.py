@@ -81,8 +81,12 @@ def soak(out: Path, duration: float = 3600.0, warm: float = 300.0, every: float 
     try:
         while proc.poll() is None:
             time.sleep(every)
-            if not pids and (out / 'pids.json').is_file():
-                pids = dict(json.loads((out / 'pids.json').read_text()))
+            # read every time: the launcher adds each node as it starts it
+            if (out / 'pids.json').is_file():
+                try:
+                    pids = dict(json.loads((out / 'pids.json').read_text()))
+                except ValueError:  # never half-written (os.replace), but be sure
+                    pass
                 pids['launcher'] = proc.pid
             t = _sim_time(out)
             if t is None:

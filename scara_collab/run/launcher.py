@@ -524,6 +524,17 @@ class Launcher:
                 raise RunEnd(on_timeout())
             self.executor.spin_once(timeout_sec=0.02)
 
+    def pause(self, seconds: float) -> None:
+        """Spin the recorder for ``seconds`` (wall), supervising; never a timeout of its own.
+
+        (A deadline just beyond the pause would fire whenever the busy machine descheduled
+        the launcher longer than the difference: seen with two CPU hogs.)
+        """
+        until = time.monotonic() + seconds
+        while time.monotonic() < until:
+            self.check()
+            self.executor.spin_once(timeout_sec=min(0.02, max(until - time.monotonic(), 0.0)))
+
     def client(self, srv_type, name: str):
         if name not in self._clients:
             self._clients[name] = self.node.create_client(srv_type, name)
@@ -698,8 +709,7 @@ class Launcher:
                     raise RunEnd(f'automation_manager refused to start for '
                                  f'{self.args.ready_timeout:g} s: {res.message}')
                 self.console.say(f'[launch] automation_manager: {res.message}; asking again')
-                again = time.monotonic() + 0.5
-                self.wait_until(lambda: time.monotonic() >= again, 1.0, lambda: '')
+                self.pause(0.5)
             self.job_started = True
         t0 = self.recorder.start_job()
         release = {}
