@@ -325,7 +325,10 @@ def test_a_wall_clock_stamped_state_neither_ends_nor_enters_the_run(launch, tmp_
     assert summary['exit_reason'] == 'duration reached'
     assert summary['sim_seconds'] == pytest.approx(25.0, abs=0.05)
     assert summary['joint_states_refused'] >= 1
-    assert summary['joint_states_missing'] < 10
+    # gaps in the recorded states, not 1.8e11 from a wall-clock stamp: fewer than the run's
+    # own 100 Hz states (a quiet machine misses none; at load 12-20, with two benchmarks
+    # beside it, the recorder lost 700 and 2,959 of its ~3,500)
+    assert summary['joint_states_missing'] < 100 * 60
     assert summary['emergency_stops'] == 0
     rows = assert_complete_csv(out / 'timeseries.csv', min_rows=100)
     assert max(float(r[0]) for r in rows[1:]) < 100.0  # no wall-clock row
