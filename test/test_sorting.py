@@ -64,6 +64,28 @@ def test_urgent_items_first_and_own_half_preferred():
     assert [i.id for i in order_candidates(CELL, LEFT, [b, c, a], 0.0, z, None, False)][0] == 3
 
 
+def test_an_item_the_busy_other_arm_would_miss_comes_before_the_arms_own():
+    """A burst on the right half: the left arm takes the one the right arm cannot reach in time.
+
+    Seen in the hour-long soak (t = 2272-2297 s): five items on the right half, the right arm
+    busy at 3.5 s an item, the left arm took its own newer items and one right-half item left
+    the belt unpicked.
+    """
+    z = pick_height(CELL, 0.04)
+    own = SeenItem(1, 'red', np.array([1.0, -0.2, 0.25]), 0.0)  # upstream, left half
+    burst = [SeenItem(10 + k, 'blue', np.array([2.3 - 0.35 * k, 0.2, 0.25]), 0.0)
+             for k in range(5)]  # right half, 6.75 s to 13.75 s left in the right arm's reach
+    items = [own] + burst
+    plain = order_candidates(CELL, LEFT, items, 0.0, z, True, True)
+    assert plain[0].id == 1  # own half first, as before
+    shared = order_candidates(CELL, LEFT, items, 0.0, z, True, True, other_cycle=3.6)
+    # at 3.6 s an item the right arm gets to items 10 and 11 in time, not to 12, 13, 14
+    assert [i.id for i in shared] == [12, 13, 14, 1, 10, 11]
+    # nothing to share when the other arm keeps up
+    calm = order_candidates(CELL, LEFT, [own, burst[0]], 0.0, z, True, True, other_cycle=3.6)
+    assert calm[0].id == 1
+
+
 def test_joint_time_is_a_lower_bound_of_planned_moves():
     q0 = home_q()
     target = np.array([2.5, -0.2, 0.34])

@@ -100,6 +100,7 @@ class JobSettings:
     pair_lead: float = 0.1
     unblock_after: float = 0.5
     bin_retries: int = 3
+    steal_cycle: float = 0.0
 
     @staticmethod
     def from_config(cell: CellModel, cfg: dict, mode: Optional[str] = None,
@@ -129,6 +130,7 @@ class JobSettings:
             pair_offset=float(cfg['mirror_pair_offset']),
             pair_lead=float(cfg['mirror_start_lead']),
             unblock_after=float(cfg['unblock_after']),
+            steal_cycle=float(cfg['steal_cycle']),
             pair_margin=cell.safety_margin + float(planning_buffer))
 
 
@@ -401,8 +403,8 @@ class SortingJob:
         is the belt's end (the intercept no longer exists: give up).
         """
         seen = self.items.get(lane.item.id)
-        if seen is None:
-            return self._give_up(lane, now, f'item {lane.item.id} is no longer on the belt')
+        if seen is None:  # not seen resting on the belt just now: the move's deadline holds
+            return
         if lane.reaims == 0:
             self.log('info', f'{lane.robot}: waits for {other.robot} ({other.phase}); '
                      f're-aims at item {seen.id} while it waits')
@@ -652,7 +654,8 @@ class SortingJob:
             free = [it for it in free if np.sign(it.position[1]) == side]
         own = None if self.s.mode == 'single' else True
         for item in sorting.order_candidates(self.cell, arm, free, now + self.s.decision_lead,
-                                             self.s.pick_z, own, steal=others_busy)[:2]:
+                                             self.s.pick_z, own, steal=others_busy,
+                                             other_cycle=self.s.steal_cycle or None)[:2]:
             if not self._chase(lane, item, now):
                 continue
             self.claimed[item.id] = lane.robot

@@ -145,11 +145,20 @@ def reach_exit_x(arm: ArmModel, y: float, z: float, x_from: float, x_to: float,
 
 
 def order_candidates(cell: CellModel, arm: ArmModel, items: Iterable[SeenItem], now: float,
-                     z: float, own_side: Optional[bool], steal: bool) -> List[SeenItem]:
+                     z: float, own_side: Optional[bool], steal: bool,
+                     other_cycle: Optional[float] = None) -> List[SeenItem]:
     """Return the items an arm may take next, most urgent first (closest to leaving reach).
+
+    Items on the arm's own half come first; with ``steal``, the other half's follow. An item on
+    the other half comes with the arm's own, by urgency, when the other arm would not get to it
+    in time: when ``other_cycle`` (s per item) times one more than the free items on its half
+    that leave before it (the other arm is busy with one now) exceeds the time it has left. A
+    burst of items on one half is then shared before one gets away.
 
     :param own_side: ``True`` to keep items on the arm's half of the belt, ``None`` for all.
     :param steal: also offer items on the other half (the other arm is busy).
+    :param other_cycle: the other arm's time per item, s; ``None``: never take an item of the
+        other half before the arm's own.
     """
     side = np.sign(arm.base_position[1] - cell.belt.centre_y)
     out = []
@@ -162,7 +171,16 @@ def order_candidates(cell: CellModel, arm: ArmModel, items: Iterable[SeenItem], 
         if exit_x <= p[0]:
             continue  # already past this arm
         slack = (exit_x - p[0]) / max(cell.belt.speed, 1e-9)
-        out.append((0 if mine or own_side is None else 1, slack, it))
+        out.append([0 if mine or own_side is None else 1, slack, it, p])
+    others = [a for a in cell.arms if a.name != arm.name]
+    if other_cycle is not None and own_side is not None and others:
+        # the other arm's time left for each item of its half (its own reach), in its order
+        theirs = sorted(((reach_exit_x(others[0], e[3][1], z, e[3][0], cell.belt.x_end)
+                          - e[3][0]) / max(cell.belt.speed, 1e-9), k)
+                        for k, e in enumerate(out) if e[0] == 1)
+        for ahead, (left, k) in enumerate(theirs):
+            if (1 + ahead) * other_cycle > left:
+                out[k][0] = 0  # the other arm, busy now, would not get to it in time
     out.sort(key=lambda e: (e[0], e[1]))
     return [e[2] for e in out]
 
