@@ -290,6 +290,40 @@ def test_two_arms_holding_items_and_blocking_each_other_untangle(cell):
     assert [m.purpose for m in nxt if m.robot == foll] == ['to_bin']
 
 
+def test_a_retreat_that_did_not_clear_the_way_is_followed_by_one_further_out(cell):
+    """Back out further, then the other arm, instead of backing out to the same place again.
+
+    Seen in a soak (t = 480-525 s, 16 items missed): the follower, holding an item, backed
+    out to y = 0.60 m, was still in the way of the leader's bin move, and "backed out" to
+    y = 0.60 again every second while both arms waited.
+    """
+    from scara_collab.core.job import MoveTrack
+    lead, foll = cell.leader.name, cell.follower.name
+    job = make_job(cell)
+    job.on_items([])
+    job.on_arm_state(lead, ik(cell.arm(lead), [1.34, -0.26, 0.34]).unwrap())
+    for k, lane in enumerate(job.lanes):
+        lane.phase, lane.holding, lane.item = 'to_bin', True, item_on_belt(cell, k + 1)
+        lane.target = drop_point(cell, lane.robot, lane.item.cls, job.s.drop_clearance)
+        lane.request = 1000 + k
+        lane.moves = {lane.robot: MoveTrack(state='waiting', since=0.0)}
+    ys = []
+    for step in range(4):
+        t = job.s.unblock_after + 0.1 + step
+        for lane in job.lanes:  # still both waiting after whatever came before
+            lane.phase = 'to_bin'
+            lane.moves = {lane.robot: MoveTrack(state='waiting', since=t - 0.6)}
+        out = [m for m in moves(job.tick(t)) if m.purpose == 'via']
+        if not out:
+            break
+        ys.append((out[0].robot, round(float(out[0].target[1]), 2)))
+        arm = cell.arm(out[0].robot)  # it got there
+        job.on_arm_state(out[0].robot, ik(arm, out[0].target).unwrap())
+    foll_ys = [abs(y) for r, y in ys if r == foll]
+    assert foll_ys and foll_ys == sorted(set(foll_ys)), ys  # each one further out
+    assert len(ys) >= 2
+
+
 def test_an_arm_waiting_for_the_other_arms_work_re_aims_instead_of_giving_up(cell):
     """Keep the target current while the other arm works next to the item, then meet it.
 

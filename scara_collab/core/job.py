@@ -418,9 +418,10 @@ class SortingJob:
         """Back an arm holding an item out of the shared zone, away from the other arm.
 
         The waypoint is straight out from the belt on the arm's own side (``VIA_OFFSETS``
-        from the centre line, at carry height); the first whose leg keeps the planners'
-        margin from the other arm where it stands is taken, then the bin. Return False if
-        none does.
+        from the centre line, at carry height) and further out than the tool is now (so a
+        retreat that did not clear the way is followed by one further out); the first whose
+        leg keeps the planners' margin from the other arm where it stands is taken, then the
+        bin. Return False if none does (then the other arm backs out).
         """
         arm = self.cell.arm(lane.robot)
         other = next(a for a in self.cell.arms if a.name != lane.robot)
@@ -432,6 +433,8 @@ class SortingJob:
         for off in VIA_OFFSETS:
             via = np.array([start[0], self.cell.belt.centre_y + side * off,
                             max(start[2], self.s.carry_z)])
+            if side * (via[1] - start[1]) < 0.05:
+                continue  # out there already (an earlier retreat did not clear the way)
             try:
                 leg = self.plan(lane.robot, q0, via)
             except ValueError:
