@@ -408,11 +408,10 @@ class SortingJob:
         if lane.reaims == 0:
             self.log('info', f'{lane.robot}: waits for {other.robot} ({other.phase}); '
                      f're-aims at item {seen.id} while it waits')
-        reaims = lane.reaims + 1
         if not self._chase(lane, seen, now):
             return self._give_up(lane, now, f'item {seen.id} got away while {lane.robot} '
                                  f'waited for {other.robot}')
-        lane.reaims = reaims
+        lane.reaims += 1
 
     def _retreat(self, lane: Lane, now: float) -> bool:
         """Back an arm holding an item out of the shared zone, away from the other arm.

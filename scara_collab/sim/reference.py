@@ -70,8 +70,11 @@ def hermite_coefficients(t: np.ndarray, q: np.ndarray,
     return a2, a3
 
 
-def switch_model(t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray):
+def switch_model(t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                 a2: np.ndarray, a3: np.ndarray):
     """Fit the switch model (see the module docstring) to every segment and joint.
+
+    :param a2, a3: the cubic's coefficients (:func:`hermite_coefficients`), to compare with.
 
     :return: ``(use, ts, r)``, each ``(N-1, 3)``: where the switch model replaces the cubic,
         its switch time ``tau_s`` (s from the segment's start) and its position residual ``r``
@@ -88,7 +91,6 @@ def switch_model(t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray):
     rest = h - ts
     reach = q[:-1] + v0 * h + 0.5 * a0 * ts * ts + a0 * ts * rest + 0.5 * a1 * rest * rest
     r = q[1:] - reach
-    a2, a3 = hermite_coefficients(t, q, qd)
     cubic_peak = np.maximum(np.abs(2.0 * a2), np.abs(2.0 * a2 + 6.0 * a3 * h))
     switch_peak = np.maximum(np.abs(a0), np.abs(a1)) + 6.0 * np.abs(r) / (h * h)
     use = fits & (switch_peak < cubic_peak)
@@ -96,13 +98,13 @@ def switch_model(t: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray):
 
 
 def model_peak_speed(t: np.ndarray, qd: np.ndarray, a2: np.ndarray, a3: np.ndarray,
-                     qdd: Optional[np.ndarray], use, ts, r) -> np.ndarray:
+                     qdd: np.ndarray, use, ts, r) -> np.ndarray:
     """Largest ``|qd|`` per joint of the reference as interpolated (cubic or switch model).
 
     :return: ``(3,)`` peak absolute velocity.
     """
     peak = peak_speed(t, qd, a2, a3, exclude=use)
-    if qdd is None or not np.any(use):
+    if not np.any(use):
         return peak
     h = np.diff(t)[:, None]
     vs = qd[:-1] + qdd[:-1] * ts  # the velocity at the switch: the piecewise-linear peak
@@ -180,7 +182,7 @@ def validate_trajectory(t: ArrayLike, q: ArrayLike, qd: Optional[ArrayLike], low
         if qdd is None:
             peak = peak_speed(t, qd, a2, a3)
         else:
-            peak = model_peak_speed(t, qd, a2, a3, qdd, *switch_model(t, q, qd, qdd))
+            peak = model_peak_speed(t, qd, a2, a3, qdd, *switch_model(t, q, qd, qdd, a2, a3))
     over = peak > max_velocity * (1.0 + velocity_tolerance)
     if np.any(over):
         j = int(np.argmax(over))
@@ -218,7 +220,7 @@ class HermiteReference:
             self._coef[:, 0], self._coef[:, 1] = q[:-1], qd[:-1]
             self._coef[:, 2], self._coef[:, 3] = a2, a3
             if qdd is not None:
-                use, ts, self._r = switch_model(t, q, qd, qdd)
+                use, ts, self._r = switch_model(t, q, qd, qdd, a2, a3)
                 # before the switch: constant acceleration a_i; after it (rows value, rate,
                 # half the acceleration in u = tau - tau_s): a_{i+1}
                 self._coef[:, 2] = np.where(use, 0.5 * qdd[:-1], a2)
