@@ -117,29 +117,37 @@ def path_metrics(traj: Trajectory, start: Optional[ArrayLike] = None,
     )
 
 
-def _accel_bounds(dq, d2q, x, amax):
-    """Bounds on s_ddot from ``|dq s_ddot + d2q x| <= amax`` per joint; arrays ``(M, 3)``."""
+def _accel_coefficients(dq, d2q, amax):
+    """Return the ``s_ddot`` bounds of each grid point and joint as lines in ``x = s_dot^2``.
+
+    ``|dq s_ddot + d2q x| <= amax`` is ``c + d x <= s_ddot <= -c + d x`` with
+    ``c = -amax / |dq|`` and ``d = -d2q / dq``. A joint that does not move along the path
+    (``|dq| <= 1e-12``) bounds nothing here (``c = -inf``, ``d = 0``).
+
+    :return: ``(c, d)``, each ``(M, 3)``.
+    """
     moving = np.abs(dq) > 1e-12
     safe = np.where(moving, dq, 1.0)
-    lo = np.where(moving, (-amax - d2q * x[:, None]) / safe, -np.inf)
-    hi = np.where(moving, (amax - d2q * x[:, None]) / safe, np.inf)
-    lo, hi = np.minimum(lo, hi), np.maximum(lo, hi)
-    # a joint that does not move along the path still feels d2q x: bound x instead (below)
-    return lo.max(axis=1), hi.min(axis=1)
+    c = np.where(moving, -amax / np.abs(safe), -np.inf)
+    d = np.where(moving, -d2q / safe, 0.0)
+    return c, d
 
 
 def _max_sdot_sq(dq, d2q, vmax, amax):
-    """Largest ``x = s_dot^2`` per grid point allowed by velocity and acceleration limits."""
+    """Largest ``x = s_dot^2`` per grid point allowed by velocity and acceleration limits.
+
+    The ``s_ddot`` interval is non-empty while ``c_j + d_j x <= -c_k + d_k x`` for every pair
+    of joints (:func:`_accel_coefficients`), i.e. ``x <= (-c_j - c_k) / (d_j - d_k)`` wherever
+    ``d_j > d_k``: the exact bound, in closed form.
+    """
     with np.errstate(divide='ignore'):
         xv = np.min(np.where(np.abs(dq) > 1e-12, (vmax / np.abs(dq)) ** 2, np.inf), axis=1)
-    # acceleration: the interval of s_ddot must be non-empty; feasibility shrinks with x
-    lo_x, hi_x = np.zeros(len(dq)), np.where(np.isfinite(xv), xv, 1e6)
-    for _ in range(60):  # bisection, vectorised over the grid
-        mid = 0.5 * (lo_x + hi_x)
-        umin, umax = _accel_bounds(dq, d2q, mid, amax)
-        ok = umin <= umax
-        lo_x, hi_x = np.where(ok, mid, lo_x), np.where(ok, hi_x, mid)
-    return np.minimum(xv, lo_x)
+    c, d = _accel_coefficients(dq, d2q, amax)
+    num = -c[:, :, None] - c[:, None, :]  # (M, j, k), >= 0; inf with a joint that stays
+    den = d[:, :, None] - d[:, None, :]
+    with np.errstate(invalid='ignore'):
+        xa = np.where((den > 0) & np.isfinite(num), num / np.where(den > 0, den, 1.0), np.inf)
+    return np.minimum(np.where(np.isfinite(xv), xv, 1e6), xa.reshape(len(dq), -1).min(axis=1))
 
 
 def time_optimal_scaling(s: np.ndarray, dq: np.ndarray, d2q: np.ndarray, vmax: ArrayLike,
@@ -153,7 +161,8 @@ def time_optimal_scaling(s: np.ndarray, dq: np.ndarray, d2q: np.ndarray, vmax: A
     ``s_ddot``). Both passes take the bound as it is, also where the path needs
     deceleration to stay within the acceleration limits (holding speed there instead
     overshot the limits and cost a uniform stretch of the whole move: up to 1.23x TOPP-RA;
-    now within 1 % of toppra, ``test/test_topp.py``).
+    now within 1 % of toppra, ``test/test_topp.py``). The passes are sequential, so they run
+    on plain floats with the bounds as precomputed lines in ``x`` (:func:`_accel_coefficients`).
 
     :param s: ``(M,)`` increasing path parameter.
     :param dq: ``(M, 3)`` ``dq/ds``; :param d2q: ``(M, 3)`` ``d2q/ds2``.
@@ -161,31 +170,25 @@ def time_optimal_scaling(s: np.ndarray, dq: np.ndarray, d2q: np.ndarray, vmax: A
     :return: ``(M,)`` ``s_dot`` (0 at both ends).
     """
     vmax, amax = np.asarray(vmax, float), np.asarray(amax, float)
+    if dq.shape[1:] != (3,):
+        raise ValueError(f'dq must be (M, 3), got {dq.shape}')
     xmax = _max_sdot_sq(dq, d2q, vmax, amax).tolist()
     ds = np.diff(s).tolist()
-    a_list, b_list, lim = dq.tolist(), d2q.tolist(), amax.tolist()
+    c, d = _accel_coefficients(dq, d2q, amax)
+    c0, c1, c2 = c.T.tolist()
+    d0, d1, d2 = d.T.tolist()
     m = len(s)
-
-    def bounds(i, x):  # s_ddot interval at grid point i for s_dot^2 = x (plain floats: fast)
-        lo, hi = -math.inf, math.inf
-        for a, b, am in zip(a_list[i], b_list[i], lim):
-            if abs(a) > 1e-12:
-                u1, u2 = (-am - b * x) / a, (am - b * x) / a
-                if u1 > u2:
-                    u1, u2 = u2, u1
-                lo, hi = max(lo, u1), min(hi, u2)
-        return lo, hi
-
-    back = [0.0] * m
+    back = [0.0] * m  # decelerate as hard as allowed into the end
     for i in range(m - 2, -1, -1):
-        umin = bounds(i + 1, back[i + 1])[0]
-        back[i] = max(0.0, min(xmax[i], back[i + 1] - 2.0 * ds[i] * umin))
-    x = [0.0] * m
+        j, xb = i + 1, back[i + 1]
+        umin = max(c0[j] + d0[j] * xb, c1[j] + d1[j] * xb, c2[j] + d2[j] * xb)
+        back[i] = max(0.0, min(xmax[i], xb - 2.0 * ds[i] * umin))
+    x = [0.0] * m  # accelerate as hard as allowed from rest, under both caps
     for i in range(m - 1):
-        umax = bounds(i, x[i])[1]
-        x[i + 1] = max(0.0, min(back[i + 1], xmax[i + 1], x[i] + 2.0 * ds[i] * umax))
-    x = np.asarray(x)
-    return np.sqrt(np.maximum(x, 0.0))
+        xi = x[i]
+        umax = min(d0[i] * xi - c0[i], d1[i] * xi - c1[i], d2[i] * xi - c2[i])
+        x[i + 1] = max(0.0, min(back[i + 1], xmax[i + 1], xi + 2.0 * ds[i] * umax))
+    return np.sqrt(np.maximum(np.asarray(x), 0.0))
 
 
 def _interp_rows(x, xp, fp):
