@@ -20,7 +20,8 @@ def test_all_files_load_with_spec_defaults():
         0.05, 0.10, 0.15]
     assert sim['physics_rate'] == 1000.0 and sim['solver_iterations'] == 50
     assert sim['gravity'] == [0.0, 0.0, -9.81]
-    assert sim['servo_rate'] == 1000.0 and sim['item_rate'] == 100.0
+    assert sim['servo_rate'] == 250.0 and sim['item_rate'] == 100.0
+    assert sim['state_rate'] == 100.0  # SPEC: /joint_states at 100 Hz sim time
     assert sim['feed_interval'] == 1.8 and sim['feed_pattern'] == 'random'
     assert sim['lateral_jitter'] == 0.3 and sim['grasp_tolerance'] == 0.06
     assert ctl['control_rate'] == 100.0

@@ -98,9 +98,9 @@ def assert_complete_csv(path: Path, min_rows: int = 1) -> list:
     return rows
 
 
-def assert_children_gone(out: Path) -> dict:
+def assert_children_gone(out: Path, names=NODES) -> dict:
     pids = json.loads((out / 'pids.json').read_text())
-    assert set(NODES) <= set(pids)
+    assert set(names) <= set(pids)
     for name, pid in pids.items():
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)  # reaped by the launcher: no process, not even a zombie
@@ -134,6 +134,13 @@ def test_idle_run_writes_report_and_files(launch, tmp_path):
     for node in NODES:
         assert (out / 'logs' / f'{node}.log').is_file(), node
     assert all(n['exit_code'] is not None for n in summary['nodes'].values())
+    # the cost of each process over the run, CPU s per sim s, in the summary and the report
+    cost = summary['cpu_per_sim_s']
+    assert set(NODES) | {'launcher', 'total'} <= set(cost) <= set(NODES) | {
+        'automation_manager', 'launcher', 'total'}
+    assert all(v >= 0 for v in cost.values()) and cost['total'] > 0
+    assert abs(cost['total'] - sum(v for k, v in cost.items() if k != 'total')) < 1e-3
+    assert re.search(r'CPU per sim s +\d+\.\d{3} s +\(pybullet bridge \d', text)
     assert_children_gone(out)
     # --record: every node's topics in run.mcap; --animation: run.gif after the report
     topics = assert_complete_mcap(out, summary)
@@ -154,6 +161,66 @@ def assert_complete_mcap(out: Path, summary: dict) -> set:
     assert counts == summary['mcap']['topics'] and sum(counts.values()) > 0
     assert counts['/clock'] > 100 and counts['/joint_states'] > 100
     return set(counts)
+
+
+@pytest.mark.skipif(not HAVE_AUTOMATION, reason='needs the automation manager')
+def test_one_process_runs_every_node_on_one_executor(launch, tmp_path):
+    """``--one-process``: the same stages, readiness and job, in one container process."""
+    out = tmp_path / 'one'
+    la = launch('--mode', 'collaborative', '--duration', '20', '--rtf', '0', '--output',
+                str(out), '--no-plots', '--one-process')
+    assert la.wait() == 0, la.output
+    pid = re.search(r'\[launch\] cell: 6 nodes on one executor \(pid (\d+)\)', la.output)
+    assert pid, la.output
+    for stage in NODES + ('automation_manager',):  # each node's readiness, one process
+        assert re.search(rf'\[launch\] {stage} +ready in .*\(pid {pid.group(1)}\)', la.output)
+    pids = assert_children_gone(out, names=('cell',))
+    assert list(pids) == ['cell'] and pids['cell'] == int(pid.group(1))
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['exit_reason'] == 'duration reached' and summary['margin_ok'] is True
+    assert summary['sorted'] > 0 and summary['missed'] == 0
+    assert summary['job']['give_ups'] == 0
+    assert set(summary['cpu_per_sim_s']) == {'cell', 'launcher', 'total'}
+    assert list(summary['nodes']) == ['cell']
+    log = (out / 'logs' / 'cell.log').read_text()
+    assert '[automation_manager]' in log and '[pybullet_bridge]' in log
+    launch_json = json.loads((out / 'launch.json').read_text())
+    cmd = launch_json['commands']['cell']
+    assert cmd[1:3] == ['-m', 'scara_collab.run.container'] and cmd.count('--node') == 6
+
+
+def test_the_container_reads_one_entry_and_its_arguments_per_node():
+    from scara_collab.run import container
+    bridge = 'scara_collab.nodes.pybullet_bridge:main'
+    left = 'scara_collab.nodes.planner:main_left'
+    assert container.parse(['--node', bridge, '--ros-args', '-p', 'a:=1', '--node', left]) == [
+        (bridge, ['--ros-args', '-p', 'a:=1']), (left, [])]
+    for argv, why in (([], 'no node'), (['--ros-args'], 'expected --node'),
+                      (['--node'], 'needs an entry'), (['--node', 'os:system'], 'unknown node')):
+        with pytest.raises(ValueError, match=why):
+            container.parse(argv)
+    # every stage the launcher can start is a component the container can build
+    from scara_collab.run import launcher
+    args = launcher.parse_args(['--one-process'])
+    assert args.one_process
+    stages = launcher.stages(args, True)
+    assert {s.entry for s in stages} <= set(container.COMPONENTS)
+    cmd = launcher.command(launcher.one_process(stages), Path('/cfg'))
+    assert container.parse(cmd[3:])[0] == (stages[0].entry, launcher.node_args(stages[0],
+                                                                               Path('/cfg')))
+
+
+def test_the_cpu_meter_gives_cpu_seconds_per_sim_second_per_process():
+    from scara_collab.run.telemetry import CpuMeter, process_cpu_seconds
+    own = process_cpu_seconds(os.getpid())
+    assert own is not None and own > 0
+    assert process_cpu_seconds(2 ** 22 + 7) is None  # no such process
+    meter = CpuMeter()
+    assert not meter.marked
+    meter.mark({'a': 1.0, 'b': 10.0, 'gone': None}, sim_time=5.0)
+    assert meter.marked
+    assert meter.close({'a': 3.0, 'b': 11.0, 'gone': 4.0}, sim_time=15.0) == {
+        'a': 0.2, 'b': 0.1, 'total': 0.3}
 
 
 def test_sigint_mid_run_shuts_down_cleanly(launch, tmp_path):

@@ -147,10 +147,18 @@ def test_bad_targets_are_refused_and_nothing_moves(cell, xyz, frame, reason):
     assert not cell.trajs['scara_left']
 
 
+def listens_to_states(node) -> bool:
+    return any(t == '/joint_states' for t, _ in node.get_subscriber_names_and_types_by_node(
+        node.get_name(), node.get_namespace()))
+
+
 def test_base_frame_targets_and_mirroring_off(cell):
     left = cell.bridge.cell.leader
+    assert listens_to_states(cell.replicator)
     res = cell.call(SetBool, '/replication_manager/enable', SetBool.Request(data=False))
     assert res.success
+    # off, it has nothing to measure: it does not take /joint_states (the cost of a message)
+    assert not listens_to_states(cell.replicator) and cell.replicator.error is None
     q_right = cell.right.q.copy()
     publish(cell, '/collab/target', [0.8, 1.3, 0.2], frame='scara_left_base')
     assert cell.spin_until(lambda: cell.status['scara_left'])
@@ -159,6 +167,10 @@ def test_base_frame_targets_and_mirroring_off(cell):
                                atol=1e-3)
     np.testing.assert_allclose(cell.right.q, q_right, atol=1e-4)
     assert not cell.status['scara_right']
+    assert cell.replicator.error is None  # no mirror error measured while off
+    assert cell.call(SetBool, '/replication_manager/enable', SetBool.Request(data=True)).success
+    assert listens_to_states(cell.replicator)
+    assert cell.spin_until(lambda: cell.replicator.error is not None)
 
 
 def test_a_raw_crossing_trajectory_is_stopped_before_the_margin_and_can_be_undone(cell):

@@ -65,7 +65,8 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
     bridge = PyBulletBridge(context=ctx, cli_args=ros_args(
         'simulation', 'controllers', real_time_factor=0.0, feed_interval=feed,
         feed_pattern=pattern, item_seed=seed, **extra))
-    replication = ReplicationManager(context=ctx, cli_args=ros_args())
+    replication = ReplicationManager(context=ctx, cli_args=ros_args(
+        enabled=str(mode == 'mirrored').lower()))  # as the launcher starts it
     monitor = CollisionMonitor(context=ctx, cli_args=ros_args())
     nodes = [bridge,
              Planner('scara_left', 'left_planner', context=ctx,

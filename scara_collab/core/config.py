@@ -108,6 +108,7 @@ SCHEMAS = {
         Rule('gravity', 'vec3'),
         Rule('real_time_factor', 'nonneg'),
         Rule('state_rate', 'positive'),
+        Rule('clock_rate', 'positive'),
         Rule('gui', 'bool'),
         Rule('servo_rate', 'positive'),
         Rule('friction_smoothing', 'positive'),

@@ -13,7 +13,7 @@ missing joints) or no valid state for ``stale_after`` sim seconds also latches t
 are apart again and the state is fresh. ``~/status``
 (:class:`~scara_collab.nodes.protocol.MonitorStatus`, 1 Hz and on every change) carries the
 smallest distance seen and when: the run's one source of the minimum separation. Capsule
-markers coloured by distance go to ``~/capsules``.
+markers coloured by distance go to ``~/capsules`` while something subscribes to it.
 """
 import math
 from typing import Optional
@@ -51,9 +51,9 @@ class CollisionMonitor(Node):
         self.declare_parameter('safety_margin', -1.0)  # < 0: the cell's margin
         self.declare_parameter('marker_rate', 10.0)
         self.declare_parameter('stale_after', 0.2)     # sim s without a valid state: stop
-        # s from a state to the bridge braking on the stop it causes: a state period, the
-        # lockstep window and the monitor's own turn
-        self.declare_parameter('stop_latency', 0.04)
+        # s from a state to the bridge braking on the stop it causes: a state period (20 ms at
+        # simulation.yaml's 50 Hz), the lockstep window (20 ms) and the monitor's own turn
+        self.declare_parameter('stop_latency', 0.05)
         self.cell = load_cell(self.get_parameter('profile').value or None)
         margin = float(self.get_parameter('safety_margin').value)
         self.margin = self.cell.safety_margin if margin < 0 else margin
@@ -199,8 +199,8 @@ class CollisionMonitor(Node):
             why = self._predicted_stop(stamp, (qa, qb), (va, vb))
             if why is not None:
                 self._stop(why)
-        if stamp >= self._next_marker:
-            self._next_marker = stamp + self.marker_period
+        if stamp >= self._next_marker and self.marker_pub.get_subscription_count():
+            self._next_marker = stamp + self.marker_period  # markers only for a listener
             self.marker_pub.publish(self._markers(qa, qb, d, msg.header))
 
     def _watch(self) -> None:

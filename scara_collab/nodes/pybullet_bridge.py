@@ -70,7 +70,6 @@ class PyBulletBridge(Node):
                              dynamic=('real_time_factor', 'feed_interval'),
                              on_change=self._on_config)
         self.declare_parameter('profile', '')
-        self.declare_parameter('clock_rate', 100.0)
         self.declare_parameter('markers_rate', 10.0)
         self.declare_parameter('step_chunk', 0.01)
         self.declare_parameter('home', [0.0, 1.5708, 0.0])  # leader joints; follower mirrored
@@ -94,7 +93,7 @@ class PyBulletBridge(Node):
         self._rtf = float(sim_cfg['real_time_factor'])
         self._periods = {
             'state': 1.0 / float(sim_cfg['state_rate']),
-            'clock': 1.0 / float(self.get_parameter('clock_rate').value),
+            'clock': 1.0 / float(sim_cfg['clock_rate']),
             'markers': 1.0 / float(self.get_parameter('markers_rate').value),
         }
         self._next = {k: 0.0 for k in self._periods}

@@ -6,7 +6,9 @@ to ``/<follower>/target`` with the *same* stamp: the stamp is the requested star
 move's identity (:mod:`scara_collab.nodes.protocol`), so both planners plan the same request
 and both arms start at the same sim instant (unless the follower's planner must delay it for
 safety, which its status says). A target stamped zero gets ``now + collab_lead``.
-``~/enable`` (SetBool, idempotent) turns mirroring on and off; off, only the leader moves.
+``~/enable`` (SetBool, idempotent) turns mirroring on and off; off, only the leader moves and
+the node does not listen to ``/joint_states`` (the launcher starts it off, ``enabled:=false``,
+in every mode but mirrored and idle: a collaborative job has no mirror error to measure).
 
 The mirror error (follower tool vs the mirror image of the leader tool, from ``/joint_states``)
 is measured here and only here. A replicated request is *in step* when the bridge accepted
@@ -70,8 +72,8 @@ class ReplicationManager(Node):
         self.error_pub = self.create_publisher(Float64, '~/mirror_error', 10)
         self.create_subscription(PointStamped, '/collab/target', guarded(self, self._on_target),
                                  10)
-        self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
-                                 LATEST)
+        self._state_sub = None  # /joint_states only while mirroring (nothing to measure else)
+        self._set_enabled(self.enabled)
         for arm in self.cell.arms:
             self.create_subscription(DiagnosticStatus, f'/{arm.name}/execution_status',
                                      guarded(self, self._on_execution), EVENTS)
@@ -84,8 +86,18 @@ class ReplicationManager(Node):
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
 
+    def _set_enabled(self, on: bool) -> None:
+        self.enabled = on
+        if on and self._state_sub is None:
+            self._state_sub = self.create_subscription(
+                JointState, '/joint_states', guarded(self, self._on_state), LATEST)
+        elif not on and self._state_sub is not None:
+            self.destroy_subscription(self._state_sub)
+            self._state_sub = None
+            self.error = None  # no live error while off
+
     def _on_enable(self, req: SetBool.Request, res: SetBool.Response) -> SetBool.Response:
-        self.enabled = bool(req.data)
+        self._set_enabled(bool(req.data))
         res.success, res.message = True, f'mirroring {"on" if self.enabled else "off"}'
         self.get_logger().info(res.message)
         return res

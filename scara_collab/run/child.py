@@ -17,7 +17,7 @@ from typing import List, Optional
 _PR_SET_PDEATHSIG = 1
 
 
-def _die_with_parent(parent: int) -> None:
+def die_with_parent(parent: int) -> None:
     if not sys.platform.startswith('linux'):
         return
     try:
@@ -34,7 +34,7 @@ def main(argv: Optional[List[str]] = None) -> None:
     argv = list(sys.argv if argv is None else argv)
     if len(argv) < 2 or ':' not in argv[1]:
         sys.exit('usage: python -m scara_collab.run.child MODULE:FUNC [--ros-args ...]')
-    _die_with_parent(int(os.environ.get('SCARA_LAUNCHER_PID', os.getppid())))
+    die_with_parent(int(os.environ.get('SCARA_LAUNCHER_PID', os.getppid())))
     module, func = argv[1].split(':', 1)
     try:
         entry = getattr(importlib.import_module(module), func)

@@ -86,6 +86,7 @@ from scara_collab.nodes.faults import call_with_faults, FaultPlan, parse_faults
 from scara_collab.nodes.runner import localhost_by_default
 from scara_collab.run.recorder import RunRecorder
 from scara_collab.run.report import format_progress, format_report
+from scara_collab.run.telemetry import CpuMeter, process_cpu_seconds
 
 RUN_MODES = ('idle', 'single', 'collaborative', 'mirrored')
 AUTOMATION_MODULE = 'scara_collab.nodes.automation_manager'
@@ -108,6 +109,10 @@ class Stage:
     configs: Tuple[str, ...]    # config/<name>.yaml files passed with --params-file
     ready: str                  # what the launcher waits for, for messages
     params: Dict[str, str] = field(default_factory=dict)
+    members: Tuple['Stage', ...] = ()  # --one-process: the stages this process runs
+
+
+CONTAINER = 'cell'  # --one-process: the one process's name (logs/cell.log)
 
 
 @dataclass
@@ -241,6 +246,9 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    'bounds the real-time factor at step_chunk / 0.002 (default: '
                    f'{FAST_CHUNK} when the bridge is released to more than 4x, else the '
                    'bridge default)')
+    p.add_argument('--one-process', action='store_true',
+                   help='run every node in one process on one executor (a component '
+                   'container, scara_collab.run.container) instead of one process per node')
     p.add_argument('--gui', action='store_true', help='PyBullet GUI (bridge gui:=true)')
     p.add_argument('--viewer', type=int, nargs='?', const=VIEWER_PORT, default=None,
                    metavar='PORT', help='also start the live 3D view (cell_viewer) on '
@@ -328,7 +336,8 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
         Stage('right_planner', 'scara_collab.nodes.planner:main_right', ('controllers',),
               'node right_planner subscribed to /scara_right/target', dict(common)),
         Stage('replication_manager', 'scara_collab.nodes.replication_manager:main', (),
-              'service /replication_manager/enable', dict(common)),
+              'service /replication_manager/enable',
+              dict(common, enabled=str(args.mode in ('mirrored', 'idle')).lower())),
         Stage('collision_monitor', 'scara_collab.nodes.collision_monitor:main', (),
               'service /collision_monitor/clear', dict(common)),
     ]
@@ -350,15 +359,31 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
     return out
 
 
-def command(stage: Stage, config_dir: Path) -> List[str]:
-    """Return the command line of one stage."""
-    cmd = [sys.executable, '-m', 'scara_collab.run.child', stage.entry,
-           '--ros-args', '-p', 'use_sim_time:=true']
+def node_args(stage: Stage, config_dir: Path) -> List[str]:
+    """Return the ``--ros-args`` of one stage's node."""
+    out = ['--ros-args', '-p', 'use_sim_time:=true']
     for name in stage.configs:
-        cmd += ['--params-file', str(config_dir / f'{name}.yaml')]
+        out += ['--params-file', str(config_dir / f'{name}.yaml')]
     for key, value in stage.params.items():
-        cmd += ['-p', f'{key}:={value}']
-    return cmd
+        out += ['-p', f'{key}:={value}']
+    return out
+
+
+def command(stage: Stage, config_dir: Path) -> List[str]:
+    """Return the command line of one stage (or of the one process running ``members``)."""
+    if stage.members:
+        cmd = [sys.executable, '-m', stage.entry]
+        for member in stage.members:
+            cmd += ['--node', member.entry] + node_args(member, config_dir)
+        return cmd
+    return [sys.executable, '-m', 'scara_collab.run.child', stage.entry] + node_args(
+        stage, config_dir)
+
+
+def one_process(members: Sequence[Stage]) -> Stage:
+    """Return the stage running ``members`` in one process (:mod:`scara_collab.run.container`)."""
+    return Stage(CONTAINER, 'scara_collab.run.container', (),
+                 f'{len(members)} nodes on one executor', {}, tuple(members))
 
 
 class Console:
@@ -431,6 +456,7 @@ class Launcher:
         self._clients: Dict[str, object] = {}
         self.faults = FaultPlan(getattr(args, 'fault', []))
         self._bridge_params: Optional[AsyncParameterClient] = None
+        self.cpu = CpuMeter()
         self._next_poll = 0.0
         self._next_checkpoint = 0.0
         self.rtf = args.rtf
@@ -500,7 +526,8 @@ class Launcher:
         self.silent_node = name = name.lstrip('/')
         self.recorder.extra['silent_node'] = {'node': name, 'silent_s': round(seconds, 3),
                                               'last_answer_sim_time': t}
-        log = self.output / 'logs' / f'{name}.log'
+        child = self.child_of(name)
+        log = child.log_path if child else self.output / 'logs' / f'{name}.log'
         raise RunEnd(f'node {name} stopped answering (silent {seconds:.1f} s, last at sim '
                      f't={t:.2f} s)', EXIT_FAILED,
                      f'[launch] it leaves /clock unanswered on {lockstep.TOPIC} but has not '
@@ -623,6 +650,11 @@ class Launcher:
         self._write_launch_file()
         return child
 
+    def child_of(self, node: str) -> Optional[Child]:
+        """Return the process that runs ``node`` (its own, or the one process), if started."""
+        return next((c for c in self.children if c.stage.name == node
+                     or any(m.name == node for m in c.stage.members)), None)
+
     def write_pids(self) -> None:
         pids = {c.stage.name: c.proc.pid for c in self.children}
         tmp = self.output / 'pids.json.tmp'
@@ -681,18 +713,24 @@ class Launcher:
             if self._duplicates(stage.name):
                 raise RunEnd(f'a node named {stage.name} is already running on ROS_DOMAIN_ID '
                              f'{domain}; stop it or use another ROS_DOMAIN_ID')
-            child = self.start(stage)
+        container = None
+        if getattr(self.args, 'one_process', False):  # every node at once, in one process
+            container = self.start(one_process(self.stages))
+            self.console.say(f'[launch] {container.stage.name}: {container.stage.ready} '
+                             f'(pid {container.proc.pid}), log {container.log_path}')
+        for stage in self.stages:
+            child = container or self.start(stage)
             timeout = self.args.ready_timeout
             self.wait_until(self.ready_check(stage), timeout,
                             lambda: f'stage {stage.name} not ready after {timeout:g} s '
                             f'(waiting for {stage.ready}); see {child.log_path}')
-            child.ready_after = time.monotonic() - child.started
+            child.ready_after = ready_after = time.monotonic() - child.started
             extra = ''
             if stage.name == 'pybullet_bridge':
                 extra = f', sim t={self.recorder.sim_time:.2f} s'
                 if self.launch_rtf != self.rtf:
                     extra += f', held at rtf {self.launch_rtf:g} until the job starts'
-            self.console.say(f'[launch] {stage.name:<20} ready in {child.ready_after:4.1f} s '
+            self.console.say(f'[launch] {stage.name:<20} ready in {ready_after:4.1f} s '
                              f'(pid {child.proc.pid}): {stage.ready}{extra}')
 
     def start_job(self) -> None:
@@ -723,6 +761,7 @@ class Launcher:
             self.set_bridge(**release)
             self.rtf_released = 'real_time_factor' in release
         self.recorder.extra['launch_wall_seconds'] = time.monotonic() - self.t_launch
+        self.cpu.mark(self.cpu_now(), self.recorder.sim_time)
         job = f'{self.args.mode} job started' if self.job_started else 'graph idle'
         self.console.say(f'[launch] {job} at sim t={t0:.2f} s after '
                          f'{time.monotonic() - self.t_launch:.1f} s; running '
@@ -752,6 +791,20 @@ class Launcher:
                 self.console.progress(format_progress(self.recorder.progress(),
                                                       self.args.duration))
 
+    # --- cost ------------------------------------------------------------------------------
+    def cpu_now(self) -> Dict[str, Optional[float]]:
+        """CPU seconds used so far by each node process and by the launcher itself."""
+        out = {c.stage.name: process_cpu_seconds(c.proc.pid) for c in self.children}
+        out['launcher'] = time.process_time()
+        return out
+
+    def measure_cpu(self) -> None:
+        """Close the job's CPU window: CPU s per sim s per process into the summary."""
+        if self.cpu.marked:
+            cost = self.cpu.close(self.cpu_now(), self.recorder.sim_time)
+            if cost:
+                self.recorder.extra['cpu_per_sim_s'] = cost
+
     # --- shutdown --------------------------------------------------------------------------
     def hold_clock(self) -> None:
         """Slow the bridge back to the launch pace, so the shutdown does not race sim time."""
@@ -770,11 +823,11 @@ class Launcher:
         if not self.job_started:
             return
         self.job_started = False
-        auto = next((c for c in self.children if c.stage.name == 'automation_manager'), None)
+        auto = self.child_of('automation_manager')
         if auto is None or auto.proc.poll() is not None or len(self.signals) > 1:
             return
-        if self.silent_node == auto.stage.name:
-            self.recorder.extra['job_stop'] = f'not stopped: {auto.stage.name} does not answer'
+        if self.silent_node == 'automation_manager':
+            self.recorder.extra['job_stop'] = 'not stopped: automation_manager does not answer'
             return
         try:
             res = self.call(Trigger, '/automation_manager/stop', Trigger.Request(), 5.0,
@@ -886,6 +939,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     finally:
         try:
             launcher.recorder.freeze()
+            launcher.measure_cpu()
             launcher.hold_clock()
             launcher.stop_job()
             launcher.stop_children(grace=0.5 if len(launcher.signals) > 1 else 5.0)

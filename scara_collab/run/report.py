@@ -304,6 +304,11 @@ def format_report(s: Dict) -> str:
         rows = s.get('joint_state_rows') or 0
         lines.append(f'  telemetry      {missing} of {rows + missing} joint states not heard '
                      f'(largest gap {s.get("largest_gap_s") or 0.0:.2f} s): short of CPU?')
+    cost = s.get('cpu_per_sim_s') or {}
+    if cost:
+        parts = [f'{k.replace("_", " ")} {v:.3f}' for k, v in cost.items() if k != 'total']
+        lines.append(f'  CPU per sim s  {cost.get("total", 0.0):.3f} s   (' + ', '.join(parts)
+                     + ')')
     if s.get('emergency_stops'):
         lines.append(f'  emergency stop {s["emergency_stops"]} time(s)')
     lines.append(f'  run folder     {s.get("output")}')

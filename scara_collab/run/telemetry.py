@@ -21,6 +21,7 @@ Example::
 """
 import csv
 import math
+import os
 from pathlib import Path
 from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple, Union
 
@@ -37,6 +38,10 @@ EVENT_COLUMNS = ('time', 'kind', 'item', 'class', 'robot', 'cause')
 COUNTED = ('spawned', 'sorted', 'missed', 'wrong_bin', 'dropped')
 MIRROR_ERROR = 'mirror_error_m'
 ARM_DISTANCE = 'arm_distance_m'
+try:
+    _CLOCK_TICKS = float(os.sysconf('SC_CLK_TCK'))
+except (AttributeError, ValueError, OSError):  # not POSIX: process_cpu_seconds gives None
+    _CLOCK_TICKS = 100.0
 
 
 class Event(NamedTuple):
@@ -224,3 +229,53 @@ class RunLog:
             if t_start <= ev.time <= t_end:
                 counts[ev.kind] = counts.get(ev.kind, 0) + 1
         return counts
+
+
+def process_cpu_seconds(pid: int) -> Optional[float]:
+    """CPU seconds (user + system) a process has used so far, from ``/proc/<pid>/stat``.
+
+    ``None`` where there is no ``/proc`` (not Linux) or the process is gone.
+    """
+    try:
+        with open(f'/proc/{int(pid)}/stat', encoding='ascii') as f:
+            fields = f.read().rsplit(')', 1)[1].split()  # the name in () may hold spaces
+    except (OSError, IndexError):
+        return None
+    # fields[0] is field 3 (state); utime and stime are fields 14 and 15
+    return (int(fields[11]) + int(fields[12])) / _CLOCK_TICKS
+
+
+class CpuMeter:
+    """CPU seconds per sim second of each process over a window of sim time.
+
+    The launcher marks the job's start and end; the cost of the graph is what each process
+    used in between divided by the sim time that passed (so it does not depend on how fast
+    the machine ran the graph, and it adds up to the cores the graph needs at 1x).
+    """
+
+    def __init__(self):
+        self._start: Dict[str, Tuple[float, float]] = {}
+        self.result: Dict[str, float] = {}
+
+    @property
+    def marked(self) -> bool:
+        """Whether the window has started."""
+        return bool(self._start)
+
+    def mark(self, cpu: Dict[str, Optional[float]], sim_time: float) -> None:
+        """Start the window: ``cpu`` maps a process name to its CPU seconds so far."""
+        self._start = {k: (v, sim_time) for k, v in cpu.items() if v is not None}
+
+    def close(self, cpu: Dict[str, Optional[float]], sim_time: float) -> Dict[str, float]:
+        """End the window; return ``{name: CPU s per sim s}`` plus ``total`` (rounded)."""
+        out: Dict[str, float] = {}
+        for name, used in cpu.items():
+            if used is None or name not in self._start:
+                continue
+            c0, t0 = self._start[name]
+            if sim_time > t0:
+                out[name] = round((used - c0) / (sim_time - t0), 4)
+        if out:
+            out['total'] = round(sum(out.values()), 4)
+        self.result = out
+        return out

@@ -1,0 +1,97 @@
+"""Several nodes of the cell in one process, on one executor (``launch_cell.py --one-process``).
+
+``python -m scara_collab.run.container --node MODULE:FUNC [--ros-args ...] --node ...``
+
+Each ``--node`` names a node by the entry point of its executable (the launcher's stages:
+``scara_collab.nodes.planner:main_left``, ...) followed by that node's own ``--ros-args``,
+which become its ``cli_args`` (parameters and parameter files apply to it alone). All nodes
+are built in the order given and spin on one executor (:func:`scara_collab.nodes.runner.
+run_nodes`): the ROS 2 way to run a graph in one process, as a component container does. The
+messages between them still go through DDS, but no callback waits for another process to be
+scheduled, and the process pays one executor and one interpreter instead of six.
+
+Like :mod:`scara_collab.run.child`, the container asks for SIGTERM when the launcher dies.
+"""
+import functools
+import importlib
+import os
+import signal
+import sys
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
+
+from rclpy.node import Node
+
+from scara_collab.nodes.runner import run_nodes
+from scara_collab.run.child import die_with_parent
+
+#: entry point of an executable -> (module, callable that builds its node, fixed kwargs)
+COMPONENTS: Dict[str, Tuple[str, str, Dict[str, str]]] = {
+    'scara_collab.nodes.pybullet_bridge:main': ('scara_collab.nodes.pybullet_bridge',
+                                                'PyBulletBridge', {}),
+    'scara_collab.nodes.planner:main_left': ('scara_collab.nodes.planner', 'Planner',
+                                             {'robot': 'scara_left',
+                                              'node_name': 'left_planner'}),
+    'scara_collab.nodes.planner:main_right': ('scara_collab.nodes.planner', 'Planner',
+                                              {'robot': 'scara_right',
+                                               'node_name': 'right_planner'}),
+    'scara_collab.nodes.replication_manager:main': ('scara_collab.nodes.replication_manager',
+                                                    'ReplicationManager', {}),
+    'scara_collab.nodes.collision_monitor:main': ('scara_collab.nodes.collision_monitor',
+                                                  'CollisionMonitor', {}),
+    'scara_collab.nodes.automation_manager:main': ('scara_collab.nodes.automation_manager',
+                                                   'AutomationManager', {}),
+    'scara_collab.nodes.cell_viewer:main': ('scara_collab.nodes.cell_viewer', 'CellViewer', {}),
+}
+FLAG = '--node'
+
+
+def parse(argv: Sequence[str]) -> List[Tuple[str, List[str]]]:
+    """Split ``--node ENTRY args... --node ENTRY args...`` into ``[(entry, args), ...]``.
+
+    :raises ValueError: no node, an argument before the first ``--node``, or an entry point
+        that is not one of :data:`COMPONENTS`.
+    """
+    out: List[Tuple[str, List[str]]] = []
+    it = iter(argv)
+    for token in it:
+        if token == FLAG:
+            entry = next(it, None)
+            if entry is None:
+                raise ValueError(f'{FLAG} needs an entry point')
+            if entry not in COMPONENTS:
+                raise ValueError(f'unknown node {entry!r}; one of: {", ".join(COMPONENTS)}')
+            out.append((entry, []))
+        elif not out:
+            raise ValueError(f'expected {FLAG} ENTRY first, got {token!r}')
+        else:
+            out[-1][1].append(token)
+    if not out:
+        raise ValueError(f'no node given ({FLAG} ENTRY [--ros-args ...], repeated)')
+    return out
+
+
+def factory(entry: str, args: Sequence[str]) -> Callable[[], Node]:
+    """Return a callable that builds the node of ``entry`` with its own ``cli_args``."""
+    module, name, fixed = COMPONENTS[entry]
+    build = getattr(importlib.import_module(module), name)
+    return functools.partial(build, cli_args=list(args), **fixed)
+
+
+def main(argv: Optional[List[str]] = None) -> None:
+    """Build the nodes named on the command line and spin them on one executor."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        nodes = parse(argv)
+    except ValueError as exc:
+        sys.exit(f'usage: python -m scara_collab.run.container {FLAG} MODULE:FUNC '
+                 f'[--ros-args ...] ...: {exc}')
+    die_with_parent(int(os.environ.get('SCARA_LAUNCHER_PID', os.getppid())))
+    try:
+        factories = [factory(entry, args) for entry, args in nodes]
+    except KeyboardInterrupt:  # stopped while importing, before rclpy handles signals
+        sys.exit(128 + signal.SIGINT)
+    run_nodes(factories, args=[])
+
+
+if __name__ == '__main__':
+    main()
