@@ -367,3 +367,53 @@ def test_an_arm_waiting_for_the_other_arms_work_re_aims_instead_of_giving_up(cel
     assert job.give_ups == 1 and 'got away' in job.last_give_up, job.logs
     assert len(sent) > 3 and all(b.target[0] > a.target[0] for a, b in zip(sent, sent[1:]))
     assert 97 not in job.claimed
+
+
+def test_an_arm_takes_no_item_the_other_arms_booked_move_would_make_it_wait_for(cell):
+    """The shared zone booked in time: a chase is scheduled against the other arm's move.
+
+    At saturation (an item a second) most give-ups were "got away while it waited for the
+    other arm": the follower went for an item beside the leader's, its planner held it back
+    for the leader, and the item left. Now the job plans the leader's timed move as its
+    planner did and schedules the follower's chase against it with the planners' rule: an
+    item it would wait for is met later, or another item is taken.
+    """
+    from scara_collab.core import planning
+    lead, foll = cell.leader, cell.follower
+    near, ours = item_on_belt(cell, 98, x=1.07, y=0.27), item_on_belt(cell, 97, x=1.12, y=0.01)
+
+    def follower_chase(booked: bool):
+        job = make_job(cell)
+        job.on_items([near, ours])
+        busy = next(la for la in job.lanes if la.robot == lead.name)
+        assert job._chase(busy, near, 0.0)
+        cmd = job._out[-1]
+        if booked:  # the leader's planner timed it: the job now knows the motion
+            job.on_planner(lead.name, cmd.request, 'planned', cmd.start, cmd.start + 2.0)
+        track = busy.moves[lead.name]
+        assert (track.timeline is not None) == booked
+        lane = next(la for la in job.lanes if la.robot == foll.name)
+        job._out = []
+        took = job._chase(lane, ours, 0.0)
+        return job, track, lane, took
+
+    job, _, lane, took = follower_chase(booked=False)
+    assert took  # blind to the leader's motion: it goes at once ...
+    plan = job.plan(foll.name, job.q[foll.name], lane.target)
+    first = job._out[-1]
+    job, track, lane, took = follower_chase(booked=True)
+    leader_motion = track.timeline
+    # ... into a move the planners would hold back for the leader (the follower yields)
+    held = planning.schedule(foll, plan, first.start, lead, leader_motion, job.s.pair_margin,
+                             leader=False)
+    tolerance = 0.5 * job.s.grasp_reach / cell.belt.speed
+    assert held is None or held.delay > tolerance
+    if took:  # booked: met later, when the way is clear, never into a wait
+        cmd = job._out[-1]
+        assert cmd.start > first.start
+        traj = job.plan(foll.name, job.q[foll.name], cmd.target)
+        later = planning.schedule(foll, traj, cmd.start, lead, leader_motion,
+                                  job.s.pair_margin, leader=False)
+        assert later is not None and later.delay <= tolerance
+    else:
+        assert lane.phase == 'idle' and lane.item is None

@@ -47,7 +47,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from scara_collab.core import collision, sorting
+from scara_collab.core import collision, planning, sorting
 from scara_collab.core.kinematics import fk
 from scara_collab.core.mirror import mirror_joints, mirror_point
 from scara_collab.core.model import CellModel
@@ -58,6 +58,8 @@ PHASES = ('idle', 'to_item', 'grasping', 'lift', 'via', 'to_bin', 'releasing', '
 MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
 #: m: waypoints a mirrored pair may take to stay apart: this far out from the belt centre line
 VIA_OFFSETS = (0.6, 0.9, 1.2)
+#: s an idle arm that found nothing to take waits before it looks again (the items move 2 cm)
+LOOK_AGAIN = 0.1
 #: planner / bridge answers about a move, in the order a move goes through them
 MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
 FAILED_MOVE = ('refused', 'superseded', 'held')
@@ -174,6 +176,8 @@ class MoveTrack:
     end: Optional[float] = None
     reason: str = ''
     arrived: bool = False
+    #: the motion it commits to (the job's own plan of it, from its start), once timed
+    timeline: Optional[planning.Timeline] = None
 
 
 @dataclass
@@ -208,6 +212,7 @@ class Lane:
     holding: bool = False
     route: List[Tuple[str, np.ndarray]] = field(default_factory=list)
     failures: Dict[int, int] = field(default_factory=dict)
+    next_look: float = 0.0  # idle with nothing to take: look again from then
 
 
 class SortingJob:
@@ -296,6 +301,7 @@ class SortingJob:
             if track.state == 'accepted' and abs(start - track.start) < 1e-6:
                 return  # the bridge already runs it (its start is the one that counts)
             track.state, track.start, track.end = 'planned', start, end
+            self._book(robot, request, track)
         elif state in ('queued', 'waiting'):  # not (or no longer) committed
             if track.state != state:
                 track.since = self._now
@@ -311,6 +317,7 @@ class SortingJob:
             return
         if state == 'accepted':
             track.state, track.start, track.end = 'accepted', start, end
+            self._book(robot, request, track)
         elif state == 'finished':
             track.state = 'finished'
         elif state == 'preempted':  # the planner took it back (it says what comes next)
@@ -324,6 +331,34 @@ class SortingJob:
             for track in lane.grips.values():
                 if track.token == token and track.ok is None:
                     track.ok, track.message = bool(ok), message
+
+    def _book(self, robot: str, request: int, track: MoveTrack) -> None:
+        """Keep the motion a timed move commits ``robot`` to (collaborative look-ahead).
+
+        The job plans the move itself, as the planner did, from where the arm is when the
+        move is first timed (it has not started yet); a later start only shifts it.
+        """
+        if len(self.lanes) < 2 or track.start is None:
+            return
+        if track.timeline is not None:
+            shift = track.start - track.timeline.start
+            track.timeline = planning.Timeline(track.timeline.t + shift, track.timeline.q)
+            return
+        lane = next(la for la in self.lanes if la.request == request and robot in la.moves)
+        try:
+            traj = self.plan(robot, self.q[robot], self._target_of(lane, robot))
+        except (ValueError, KeyError):
+            return
+        track.timeline = planning.Timeline.of(traj, track.start)
+
+    def _committed(self, robot: str, now: float) -> planning.Timeline:
+        """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds)."""
+        for lane in self.lanes:
+            track = lane.moves.get(robot) if lane.phase in MOVING else None
+            if (track is not None and track.timeline is not None
+                    and track.state in ('planned', 'accepted') and track.timeline.end > now):
+                return track.timeline
+        return planning.Timeline.hold(now, self.q[robot])
 
     def _track(self, robot: str, request: int) -> Optional[MoveTrack]:
         for lane in self.lanes:
@@ -342,7 +377,7 @@ class SortingJob:
             self._park_unused(now)
         for lane in self.lanes:
             if lane.phase == 'idle':
-                if self.running:
+                if self.running and now >= lane.next_look:
                     self._pick_next(lane, now)
             elif lane.phase in MOVING:
                 self._tick_move(lane, now)
@@ -579,6 +614,8 @@ class SortingJob:
         q0 = self.q[lane.robot]
         hit = sorting.intercept(self.cell, arm, q0, self._aim(item), start,
                                 self.s.pick_z, lambda q, p: self.plan(lane.robot, q, p))
+        if hit is not None and len(self.lanes) > 1:
+            hit = self._unhindered(lane, item, hit, now)
         if hit is None:
             return False
         lane.item = item
@@ -590,6 +627,38 @@ class SortingJob:
                 return True
         self._move(lane, 'to_item', hit.target, hit.start, now)
         return True
+
+    def _unhindered(self, lane: Lane, item: sorting.SeenItem, hit: sorting.Intercept,
+                    now: float) -> Optional[sorting.Intercept]:
+        """Return an intercept the other arm's booked motion does not hold up, or None.
+
+        The shared zone booked in time (collaborative): the chase is scheduled against the
+        other arm's committed move as its planner will schedule it (the priority rule,
+        :func:`scara_collab.core.planning.schedule`, with the planners' margin). If it would
+        have to wait longer than the item takes to move half the grasp reach, the item is
+        met later, from where the arm waits; if even that is held up, or the item would get
+        away meanwhile, None: the arm takes another item instead of waiting for this one.
+        """
+        arm = self.cell.arm(lane.robot)
+        other = next(a for a in self.cell.arms if a.name != lane.robot)
+        if other.name not in self.q:
+            return hit
+        tolerance = 0.5 * self.s.grasp_reach / max(self.cell.belt.speed, 1e-9)
+        booked = self._committed(other.name, now)
+        for _ in range(2):
+            plan = planning.schedule(arm, hit.traj, hit.start, other, booked,
+                                     self.s.pair_margin, leader=arm.name == self.cell.leader.name,
+                                     max_delay=self.s.move_timeout)
+            if plan is None:
+                return None
+            if plan.delay <= tolerance:
+                return hit
+            hit = sorting.intercept(self.cell, arm, self.q[lane.robot], self._aim(item),
+                                    hit.start + plan.delay, self.s.pick_z,
+                                    lambda q, p: self.plan(lane.robot, q, p))
+            if hit is None:
+                return None
+        return None
 
     def _to_bin(self, lane: Lane, now: float) -> None:
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, self.s.drop_clearance)
@@ -666,6 +735,7 @@ class SortingJob:
                 if partner is not None:
                     self.claimed[partner.id] = self.cell.follower.name
             return
+        lane.next_look = now + LOOK_AGAIN  # each look plans: not at every tick
 
     def _park_unused(self, now: float) -> None:
         """Arms no lane uses wait above their first bin, off the belt (once)."""
