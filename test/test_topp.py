@@ -1,30 +1,13 @@
 """Line timing against TOPP-RA (toppra): the same path and limits, within 1 % (correctness)."""
-import logging
-
 import numpy as np
 import pytest
 
+from scara_collab.bench.capacity import toppra_duration
 from scara_collab.core.kinematics import ik, IKError
 from scara_collab.core.model import load_cell
 from scara_collab.core.trajectory import line_move
 
-ta = pytest.importorskip('toppra')
-algorithm = pytest.importorskip('toppra.algorithm')
-constraint = pytest.importorskip('toppra.constraint')
-
-logging.getLogger('toppra').setLevel(logging.ERROR)
-
-
-def toppra_duration(arm, traj) -> float:
-    """Return TOPP-RA's time along ``traj``'s own path (arc length), at the arm's limits."""
-    d = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(traj.p, axis=0), axis=1))])
-    keep = np.concatenate([[True], np.diff(d) > 1e-9])
-    path = ta.SplineInterpolator(d[keep] / d[keep][-1], traj.q[keep])
-    inst = algorithm.TOPPRA([constraint.JointVelocityConstraint(arm.max_velocity),
-                             constraint.JointAccelerationConstraint(arm.max_acceleration)],
-                            path, gridpoints=np.linspace(0.0, 1.0, 1001),
-                            parametrizer='ParametrizeConstAccel')
-    return inst.compute_trajectory().duration
+pytest.importorskip('toppra')  # toppra_duration imports it when called
 
 
 def test_lines_are_within_one_percent_of_toppra():

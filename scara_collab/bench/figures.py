@@ -194,12 +194,10 @@ def foresight_figure(data: dict, path: Path) -> None:
 def throughput_figure(data: dict, path: Path) -> None:
     """Items per minute per mode and seed, with the seeds' claims."""
     fig, ax = _figure(6.0, 3.6)
-    modes = list(data['modes']) + (['mirrored'] if data.get('mirrored') else [])
+    modes = list(data['modes'])
     claims = {'single': 12.0, 'collaborative': 22.0}
     for i, mode in enumerate(modes):
-        runs = [r for r in data['runs'] if r['mode'] == mode] if mode != 'mirrored' \
-            else [data['mirrored']]
-        vals = [r['items_per_minute'] for r in runs]
+        vals = [r['items_per_minute'] for r in data['runs'] if r['mode'] == mode]
         ax.bar(i, np.mean(vals), color=COLOURS.get(mode, 'tab:gray'), alpha=0.5,
                yerr=np.std(vals, ddof=1) if len(vals) > 1 else None, capsize=4)
         ax.plot([i] * len(vals), vals, 'ko', ms=4)
@@ -213,7 +211,8 @@ def throughput_figure(data: dict, path: Path) -> None:
     ax.set_xticks(range(len(modes)))
     ax.set_xticklabels(modes)
     ax.set_ylabel('items sorted per sim minute')
-    ax.set_title(f'sorting job, {data["duration"]:g} sim s per run', fontsize=10)
+    ax.set_title(f'capacity: an item every {data["feed_interval"]:g} s, {data["duration"]:g} '
+                 'sim s per run', fontsize=10)
     ax.legend(fontsize=7, loc='lower right')
     _save(fig, path)
 

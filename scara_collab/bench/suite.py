@@ -17,7 +17,7 @@ from typing import Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from scara_collab.bench import (
-    figures, foresight, graph, job, paths, physics, report, singularity, solvers)
+    capacity, figures, foresight, graph, job, paths, physics, report, singularity, solvers)
 from scara_collab.bench.util import machine, Progress
 
 
@@ -38,18 +38,22 @@ class Sizes:
     foresight_pairs: int = 200
     foresight_execute: int = 30
     job_seeds: Tuple[int, ...] = (1, 2, 3)
-    job_modes: Tuple[str, ...] = ('single', 'collaborative')
-    job_duration: float = 120.0      # sim s per job (items/min of shorter runs reads low)
-    mirrored_job_duration: float = 120.0  # 0 = no mirrored job
-    launcher_duration: float = 60.0  # sim s of the separate-process run; 0 = none
+    job_modes: Tuple[str, ...] = ('single', 'collaborative', 'mirrored')
+    job_duration: float = 240.0      # sim s per capacity run (shorter runs read low)
+    capacity_feed: float = 1.0       # s per item: faster than the arms can take (~60/min)
+    repeats: int = 3                 # collaborative, first seed: the same run this many times
+    rated_duration: float = 600.0    # sim s of collaborative at the rated feed; 0 = none
+    launcher_duration: float = 60.0  # sim s of each launcher run (processes, one process)
+    cycle_step: float = 0.1          # m between pick points of the cycle bound
+    topp_lines: int = 100            # random lines timed against TOPP-RA
 
 
 FULL = Sizes()
 SMOKE = Sizes(quick_solvers=True, settle=0.2, pid_settle=0.5, speed_items=(0,),
               speed_modes=('computed_torque',), speed_seconds=0.5, speed_repeat=1,
               mirrored_moves=1, singularity_dt=0.01, foresight_pairs=6, foresight_execute=2,
-              job_seeds=(1,), job_modes=('collaborative',), job_duration=8.0,
-              mirrored_job_duration=0.0, launcher_duration=0.0)
+              job_seeds=(1,), job_modes=('collaborative',), job_duration=8.0, repeats=1,
+              rated_duration=0.0, launcher_duration=0.0, cycle_step=0.6, topp_lines=2)
 
 
 def _paths(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
@@ -83,27 +87,47 @@ def _foresight(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
 
 
 def _throughput(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
+    feed = sizes.capacity_feed
     runs: List[dict] = []
     for seed in sizes.job_seeds:
         for mode in sizes.job_modes:
-            progress.note(f'job: {mode}, seed {seed}, {sizes.job_duration:g} sim s')
-            runs.append(job.run_job(mode, sizes.job_duration, seed=seed, log=progress.note,
-                                    report_every=30.0))
-    mirrored = None
-    if sizes.mirrored_job_duration > 0:
-        seed = sizes.job_seeds[0]
-        progress.note(f'job: mirrored, seed {seed}, {sizes.mirrored_job_duration:g} sim s')
-        mirrored = job.run_job('mirrored', sizes.mirrored_job_duration, seed=seed,
-                               log=progress.note, report_every=30.0)
-    launcher = None
+            progress.note(f'capacity: {mode}, seed {seed}, an item every {feed:g} s, '
+                          f'{sizes.job_duration:g} sim s')
+            runs.append(job.run_job(mode, sizes.job_duration, feed=feed, seed=seed,
+                                    log=progress.note, report_every=60.0))
+    first = sizes.job_seeds[0]
+    repeats = [r for r in runs if r['mode'] == 'collaborative' and r['seed'] == first]
+    for k in range(1, sizes.repeats):
+        progress.note(f'repeat {k + 1}/{sizes.repeats}: collaborative, seed {first}')
+        repeats.append(job.run_job('collaborative', sizes.job_duration, feed=feed, seed=first,
+                                   log=progress.note, report_every=60.0))
+    rated = None
+    if sizes.rated_duration > 0:
+        progress.note(f'rated feed: collaborative, an item every {job.default_feed():g} s, '
+                      f'{sizes.rated_duration:g} sim s')
+        rated = job.run_job('collaborative', sizes.rated_duration, seed=first,
+                            log=progress.note, report_every=60.0)
+    launchers = {}
     if sizes.launcher_duration > 0:
-        progress.note(f'launcher: collaborative, separate processes, unthrottled, '
-                      f'{sizes.launcher_duration:g} sim s')
-        launcher = job.run_launcher('collaborative', sizes.launcher_duration,
-                                    scratch / 'launcher_run', seed=sizes.job_seeds[0])
-    return {'runs': runs, 'mirrored': mirrored, 'launcher': launcher,
+        for name, flags in (('processes', ()), ('one_process', ('--one-process',))):
+            progress.note(f'launcher ({name.replace("_", " ")}): collaborative, unthrottled, '
+                          f'{sizes.launcher_duration:g} sim s')
+            launchers[name] = job.run_launcher('collaborative', sizes.launcher_duration,
+                                               scratch / f'launcher_{name}', seed=first,
+                                               extra=flags)
+    progress.note('cycle bound: bin -> pick -> bin over the belt')
+    cycle = capacity.cycle_bound(step=sizes.cycle_step)
+    try:
+        ratios = capacity.topp_ratios(sizes.topp_lines)
+        topp = {'n': len(ratios), 'median': float(np.median(ratios)),
+                'worst': float(ratios.max()), 'best': float(ratios.min())}
+    except ImportError as exc:
+        topp = {'error': f'toppra not installed ({exc})'}
+    return {'runs': runs, 'mirrored': None, 'repeats': repeats, 'rated': rated,
+            'launchers': launchers, 'cycle': cycle, 'topp': topp,
             'duration': sizes.job_duration, 'seeds': list(sizes.job_seeds),
-            'modes': list(sizes.job_modes), 'feed_interval': job.default_feed()}
+            'modes': list(sizes.job_modes), 'feed_interval': feed,
+            'rated_feed': job.default_feed()}
 
 
 Section = Callable[[Sizes, Progress, Path], dict]
