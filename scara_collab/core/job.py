@@ -633,11 +633,13 @@ class SortingJob:
         """Return an intercept the other arm's booked motion does not hold up, or None.
 
         The shared zone booked in time (collaborative): the chase is scheduled against the
-        other arm's committed move as its planner will schedule it (the priority rule,
-        :func:`scara_collab.core.planning.schedule`, with the planners' margin). If it would
-        have to wait longer than the item takes to move half the grasp reach, the item is
-        met later, from where the arm waits; if even that is held up, or the item would get
-        away meanwhile, None: the arm takes another item instead of waiting for this one.
+        other arm's committed move (:func:`scara_collab.core.planning.schedule`, with the
+        planners' margin), first booked, first served: the leader too respects a move the
+        follower has already booked, though its planner would make the follower yield (it
+        does when a conflict comes anyway: the priority rule stays the planners' safety). If
+        the chase would have to wait longer than the item takes to move half the grasp
+        reach, the item is met later, from where the arm waits; if even that is held up, or
+        the item would get away meanwhile, None: the arm takes another item instead.
         """
         arm = self.cell.arm(lane.robot)
         other = next(a for a in self.cell.arms if a.name != lane.robot)
@@ -647,7 +649,7 @@ class SortingJob:
         booked = self._committed(other.name, now)
         for _ in range(2):
             plan = planning.schedule(arm, hit.traj, hit.start, other, booked,
-                                     self.s.pair_margin, leader=arm.name == self.cell.leader.name,
+                                     self.s.pair_margin, leader=False,
                                      max_delay=self.s.move_timeout)
             if plan is None:
                 return None
