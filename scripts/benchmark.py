@@ -2,10 +2,11 @@
 """Measure every result the design documents claim, on this machine; write docs/RESULTS.md.
 
 One command, seven sections (path deviation, solver speed, payload response,
-synchronisation, singularity, collision foresight, throughput and real-time factor), each with
+synchronisation, singularity, collision foresight, capacity and real-time factor), each with
 the seeds' claimed figure beside the measured one, a progress line per section with the
-elapsed time, PNG figures under ``<out>/figures/``. The full run takes about 10 minutes on
-2 cores; ``--smoke`` is a seconds-long version with tiny sizes (CI runs it).
+elapsed time, PNG figures under ``<out>/figures/``. The full run takes about 20 minutes on
+2 cores (the capacity runs are most of it); ``--smoke`` is a seconds-long version with tiny
+sizes (CI runs it).
 
 Usage: benchmark.py [--smoke] [--out DIR] [--only SECTION ...] [--json FILE] [--no-readme]
 

@@ -23,7 +23,7 @@ from scara_collab.bench.util import machine, Progress
 
 @dataclass(frozen=True)
 class Sizes:
-    """How much each section runs (the full run's defaults fit 15 minutes on 2 cores)."""
+    """How much each section runs (the full run's defaults take about 20 minutes on 2 cores)."""
 
     quick_solvers: bool = False
     payloads: Tuple[float, ...] = (0.0, 1.0, 2.5)
