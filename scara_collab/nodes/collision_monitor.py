@@ -67,6 +67,9 @@ class CollisionMonitor(Node):
         # before (a refused trajectory leaves it running)
         self._running = {arm.name: None for arm in self.cell.arms}
         self._before = dict(self._running)
+        # an 'accepted' heard before its trajectory (two topics: no order between them):
+        # robot -> (move id, start), applied when the trajectory comes
+        self._early: dict = {}
         self._breach: Optional[float] = None
         self._predict_again = True
         self._started = ()
@@ -121,6 +124,9 @@ class CollisionMonitor(Node):
         # past stamp = start now; its execution status corrects this when it comes
         stamp = conv.to_sec(msg.header.stamp)
         start = max(stamp, self._now()) if stamp > 0 else self._now()
+        early = self._early.pop(robot, None)
+        if early is not None and early[0] == msg.header.frame_id:
+            start = early[1]  # the bridge's own start, heard first
         self._before[robot] = self._running[robot]
         self._running[robot] = (msg.header.frame_id, Timeline(start + t, q), start)
         self._predict_again = True
@@ -132,6 +138,9 @@ class CollisionMonitor(Node):
         if st.state == 'accepted' and mine and st.start is not None:  # its real start
             self._running[st.robot] = (st.move, running[1].shifted(st.start - running[2]),
                                        st.start)
+        elif st.state == 'accepted' and st.start is not None:  # before its trajectory
+            self._early[st.robot] = (st.move, st.start)
+            return
         elif st.state == 'refused' and mine:
             self._running[st.robot] = self._before[st.robot]
         elif st.state == 'held' or (st.state == 'finished' and mine):
