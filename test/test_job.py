@@ -417,3 +417,43 @@ def test_an_arm_takes_no_item_the_other_arms_booked_move_would_make_it_wait_for(
         assert later is not None and later.delay <= tolerance
     else:
         assert lane.phase == 'idle' and lane.item is None
+
+
+def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):
+    """Deferring is for items with time to spare: else both arms may defer one until it is gone.
+
+    In an hour's soak one item rode the whole belt while both arms took younger ones: each
+    deferred it for the other's booked move. An item with less than ``DEFER_SLACK`` left in
+    the arm's reach is chased at once (the planner holds the arm back if it must).
+    """
+    from scara_collab.core import job as job_module, planning
+    from scara_collab.core.sorting import reach_exit_x
+    lead, foll = cell.leader, cell.follower
+    job = make_job(cell)
+    near = item_on_belt(cell, 98, x=2.5, y=0.0)
+    ours = item_on_belt(cell, 97, x=2.7, y=0.05)  # beside it, downstream
+    exit_x = reach_exit_x(foll, ours.position[1], job.s.pick_z, 0.0, cell.belt.x_end)
+    job.on_items([near, ours])
+    busy = next(la for la in job.lanes if la.robot == lead.name)
+    assert job._chase(busy, near, 0.0)
+    booked = busy.moves[lead.name]
+    job.on_planner(lead.name, busy.request, 'planned', job._out[-1].start, 3.0)
+    assert booked.timeline is not None
+    lane = next(la for la in job.lanes if la.robot == foll.name)
+    assert job._chase(lane, ours, 0.0)  # urgent: taken at once, though the leader is in the way
+    cmd = job._out[-1]
+    plan = job.plan(foll.name, job.q[foll.name], cmd.target)
+    held = planning.schedule(foll, plan, cmd.start, lead, booked.timeline, job.s.pair_margin,
+                             leader=False)
+    tolerance = 0.5 * job.s.grasp_reach / cell.belt.speed
+    assert held is None or held.delay > tolerance  # it will wait: deferring would have skipped
+    assert (exit_x - ours.position[0]) / cell.belt.speed < job_module.DEFER_SLACK
+    # the same item with time to spare is deferred (met later or left for another)
+    job_module.DEFER_SLACK, saved = 0.0, job_module.DEFER_SLACK
+    try:
+        lane.phase, lane.item = 'idle', None
+        job._out = []
+        if job._chase(lane, ours, 0.0):
+            assert job._out[-1].start > cmd.start
+    finally:
+        job_module.DEFER_SLACK = saved

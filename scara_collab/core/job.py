@@ -60,6 +60,9 @@ MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
 VIA_OFFSETS = (0.6, 0.9, 1.2)
 #: s an idle arm that found nothing to take waits before it looks again (the items move 2 cm)
 LOOK_AGAIN = 0.1
+#: s: an item with less time than this left in an arm's reach is chased even when the other
+#: arm's booked move will hold the arm up (else both arms may defer it until it is missed)
+DEFER_SLACK = 4.0
 #: planner / bridge answers about a move, in the order a move goes through them
 MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
 FAILED_MOVE = ('refused', 'superseded', 'held')
@@ -639,11 +642,17 @@ class SortingJob:
         does when a conflict comes anyway: the priority rule stays the planners' safety). If
         the chase would have to wait longer than the item takes to move half the grasp
         reach, the item is met later, from where the arm waits; if even that is held up, or
-        the item would get away meanwhile, None: the arm takes another item instead.
+        the item would get away meanwhile, None: the arm takes another item instead. An item
+        with less than ``DEFER_SLACK`` left in reach is never deferred: the arm goes for it and
+        waits if it must (in an hour's soak both arms deferred one item until it was missed).
         """
         arm = self.cell.arm(lane.robot)
         other = next(a for a in self.cell.arms if a.name != lane.robot)
         if other.name not in self.q:
+            return hit
+        p = sorting.predict(self.cell, item, now)
+        exit_x = sorting.reach_exit_x(arm, p[1], self.s.pick_z, p[0], self.cell.belt.x_end)
+        if (exit_x - p[0]) / max(self.cell.belt.speed, 1e-9) < DEFER_SLACK:
             return hit
         tolerance = 0.5 * self.s.grasp_reach / max(self.cell.belt.speed, 1e-9)
         booked = self._committed(other.name, now)

@@ -8,7 +8,8 @@ bridge runs (each ``/<robot>/joint_trajectory`` the bridge reports ``accepted``)
 soon as their predicted first breach of the margin is nearer than the arms' braking time plus
 ``stop_latency`` (:mod:`scara_collab.core.safety`), so a command the bridge accepted cannot
 carry the arms into the margin. It fails closed: a joint state it cannot use (non-finite,
-missing joints) or no valid state for ``stale_after`` sim seconds also latches the stop.
+missing joints) or no valid state for ``stale_after`` sim seconds (seen at two looks in a row,
+``stale_after / 2`` apart) also latches the stop.
 ``/collision_monitor/clear`` (std_srvs/Trigger, idempotent) releases the stop once the arms
 are apart again and the state is fresh. ``~/status``
 (:class:`~scara_collab.nodes.protocol.MonitorStatus`, 1 Hz and on every change) carries the
@@ -78,6 +79,7 @@ class CollisionMonitor(Node):
         self.reason = ''
         self.last: Optional[float] = None
         self.last_time: Optional[float] = None  # sim time of the last valid state
+        self._stale_since: Optional[float] = None  # the watch's first stale look
         self.minimum: Optional[float] = None
         self.minimum_time: Optional[float] = None
         self._next_marker = 0.0
@@ -213,9 +215,19 @@ class CollisionMonitor(Node):
             self.marker_pub.publish(self._markers(qa, qb, d, msg.header))
 
     def _watch(self) -> None:
-        """Fail closed when the valid states stop coming (sim time runs on without them)."""
+        """Fail closed when the valid states stop coming (sim time runs on without them).
+
+        Stale at two looks in a row (``stale_after / 2`` apart): after the monitor itself was
+        held up (starting, descheduled), the clock that wakes this timer can be taken before
+        the state that came with it; one look would stop the arms for the monitor's delay,
+        not for missing states (seen at start-up, 0.32-0.34 s, in 3 of 16 launcher runs).
+        """
         now = self._now()
-        if self.last_time is not None and now - self.last_time > self.stale_after:
+        if self.last_time is None or now - self.last_time <= self.stale_after:
+            self._stale_since = None
+        elif self._stale_since is None:
+            self._stale_since = now  # look again at the next tick, after the queued states
+        elif now > self._stale_since:
             self._stop(f'no valid joint state for {now - self.last_time:.3f} s (sim)')
 
     def _on_clear(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
