@@ -651,8 +651,7 @@ class SortingJob:
         if other.name not in self.q:
             return hit
         p = sorting.predict(self.cell, item, now)
-        exit_x = sorting.reach_exit_x(arm, p[1], self.s.pick_z, p[0], self.cell.belt.x_end)
-        if (exit_x - p[0]) / max(self.cell.belt.speed, 1e-9) < DEFER_SLACK:
+        if sorting.time_in_reach(self.cell, arm, p, self.s.pick_z) < DEFER_SLACK:
             return hit
         tolerance = 0.5 * self.s.grasp_reach / max(self.cell.belt.speed, 1e-9)
         booked = self._committed(other.name, now)

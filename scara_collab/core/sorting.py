@@ -144,6 +144,15 @@ def reach_exit_x(arm: ArmModel, y: float, z: float, x_from: float, x_to: float,
     return float(xs[ok].max()) if np.any(ok) else float('-inf')
 
 
+def time_in_reach(cell: CellModel, arm: ArmModel, p: np.ndarray, z: float) -> float:
+    """Seconds the belt takes to carry a point at ``p`` (world) out of ``arm``'s reach.
+
+    At tool height ``z``; 0 or less once it is past the arm (or never in its reach).
+    """
+    exit_x = reach_exit_x(arm, p[1], z, p[0], cell.belt.x_end)
+    return max(exit_x - p[0], -1.0) / max(cell.belt.speed, 1e-9)
+
+
 def order_candidates(cell: CellModel, arm: ArmModel, items: Iterable[SeenItem], now: float,
                      z: float, own_side: Optional[bool], steal: bool,
                      other_cycle: Optional[float] = None) -> List[SeenItem]:
@@ -167,10 +176,9 @@ def order_candidates(cell: CellModel, arm: ArmModel, items: Iterable[SeenItem], 
         mine = np.sign(p[1] - cell.belt.centre_y) in (side, 0.0)
         if own_side is not None and not mine and not steal:
             continue
-        exit_x = reach_exit_x(arm, p[1], z, p[0], cell.belt.x_end)
-        if exit_x <= p[0]:
+        slack = time_in_reach(cell, arm, p, z)
+        if slack <= 0.0:
             continue  # already past this arm
-        slack = (exit_x - p[0]) / max(cell.belt.speed, 1e-9)
         out.append([0 if mine or own_side is None else 1, slack, it, p])
     others = [a for a in cell.arms if a.name != arm.name]
     if other_cycle is not None and own_side is not None and others:

@@ -210,9 +210,10 @@ class CollisionMonitor(Node):
             why = self._predicted_stop(stamp, (qa, qb), (va, vb))
             if why is not None:
                 self._stop(why)
-        if stamp >= self._next_marker and self.marker_pub.get_subscription_count():
-            self._next_marker = stamp + self.marker_period  # markers only for a listener
-            self.marker_pub.publish(self._markers(qa, qb, d, msg.header))
+        if stamp >= self._next_marker:
+            self._next_marker = stamp + self.marker_period
+            if self.marker_pub.get_subscription_count():  # markers only for a listener
+                self.marker_pub.publish(self._markers(qa, qb, d, msg.header))
 
     def _watch(self) -> None:
         """Fail closed when the valid states stop coming (sim time runs on without them).
