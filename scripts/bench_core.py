@@ -58,6 +58,10 @@ def run(quick: bool) -> dict:
 
 
 def main(argv=None) -> int:
+    """Run the benchmark and print its table (and JSON with ``--json``); return 0.
+
+    :param argv: the command-line arguments (default ``sys.argv[1:]``).
+    """
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='few iterations (CI smoke run)')
     parser.add_argument('--json', help='also write the results here')

@@ -21,6 +21,10 @@ from scara_collab.bench.util import stderr_log
 
 
 def main(argv=None) -> int:
+    """Measure the moves through the graph and print them beside the claims; return 0.
+
+    :param argv: the command-line arguments (default ``sys.argv[1:]``).
+    """
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--moves', type=int, default=1,
                         help='mirrored moves to measure: the 1.5 m move, then random lines')

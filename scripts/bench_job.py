@@ -19,6 +19,11 @@ from scara_collab.bench.util import stderr_log
 
 
 def main(argv=None) -> int:
+    """Run the job in each mode and print its figures and the pair / single ratio.
+
+    :param argv: the command-line arguments (default ``sys.argv[1:]``).
+    :return: 0.
+    """
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--modes', nargs='+', default=list(job.MODES), choices=job.MODES)
     parser.add_argument('--duration', type=float, default=120.0, help='sim seconds per mode')

@@ -22,6 +22,10 @@ from scara_collab.bench.util import Progress  # noqa: E402
 
 
 def main() -> int:
+    """Run the demo with CPU hogs and print how many runs completed.
+
+    :return: 0 if every run completed, else 1.
+    """
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument('--runs', type=int, default=5)
     p.add_argument('--hogs', type=int, default=2, help='busy-looping processes (default 2)')

@@ -22,6 +22,10 @@ from scara_collab.bench.util import stderr_log
 
 
 def main(argv=None) -> int:
+    """Print the simulation speed and the PID vs computed-torque tracking; return 0.
+
+    :param argv: the command-line arguments (default ``sys.argv[1:]``).
+    """
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--seconds', type=float, default=3.0,
                         help='sim seconds per throughput run (default 3)')

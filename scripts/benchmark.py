@@ -28,6 +28,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def main(argv=None) -> int:
+    """Run the sections and write RESULTS.md, the figures and README's block.
+
+    :param argv: the command-line arguments (default ``sys.argv[1:]``).
+    :return: 1 if a section failed, else 0.
+    """
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--smoke', action='store_true',
                         help='tiny sizes, one short job: seconds, not minutes (CI)')

@@ -12,6 +12,10 @@ from scara_collab.core.model import load_cell
 
 
 def main(argv=None) -> int:
+    """Print the arms, joints, links and bins of the cell (and write its URDF); return 0.
+
+    :param argv: the command-line arguments (default ``sys.argv[1:]``).
+    """
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--profile', default=None, help='slim, default or heavy')
     parser.add_argument('--urdf', default=None, help='also write the expanded cell URDF here')

@@ -45,6 +45,11 @@ def _value(v, depth: int, indent: str) -> str:
 
 
 def main(argv=None) -> int:
+    """Print the file's summary and per-topic table, and dump messages if asked.
+
+    :param argv: the command-line arguments (default ``sys.argv[1:]``).
+    :return: 0 for a complete file, 3 for one without a footer, 1 if there is no file.
+    """
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('path', type=Path, help='the .mcap file (e.g. runs/<run>/run.mcap)')
     parser.add_argument('--dump', type=int, default=0, metavar='N',

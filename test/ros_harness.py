@@ -27,6 +27,7 @@ class Graph:
     """A Context, an executor and the nodes added to it; closed by :meth:`close`."""
 
     def __init__(self):
+        """Initialise a Context of its own, with an executor and the ``probe`` node."""
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
@@ -34,6 +35,7 @@ class Graph:
         self.probe = self.add(Node('probe', context=self.context))
 
     def add(self, node: Node) -> Node:
+        """Add ``node`` to the executor and return it."""
         self.nodes.append(node)
         self.executor.add_node(node)
         return node
@@ -62,6 +64,7 @@ class Graph:
         return future.result()
 
     def close(self) -> None:
+        """Shut down the executor, destroy every node and shut down the Context."""
         self.executor.shutdown()
         for node in self.nodes:
             node.destroy_node()

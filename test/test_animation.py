@@ -29,6 +29,7 @@ ARM_PARTS = ('base_link', 'link_1', 'link_2', 'quill')
 
 @pytest.fixture(scope='module')
 def run_dir(tmp_path_factory, cell):
+    """Record a 2.5 s run in-process once; return its folder."""
     directory = tmp_path_factory.mktemp('anim_run')
     record_run(directory, cell, seconds=2.5)
     return directory
@@ -36,10 +37,12 @@ def run_dir(tmp_path_factory, cell):
 
 @pytest.fixture(scope='module')
 def gif(run_dir):
+    """Render the run folder to a GIF at 3 fps once; return its path."""
     return render_gif(run_dir, fps=FPS, max_seconds=10.0)
 
 
 def gif_frames(path: Path):
+    """Return a GIF's frames as RGB int arrays and their durations, ms."""
     with Image.open(path) as im:
         frames, durations = [], []
         for k in range(im.n_frames):
@@ -50,6 +53,7 @@ def gif_frames(path: Path):
 
 
 def arm_links(scene: CellScene):
+    """Return the scene's arm link indices, each mapped to its robot."""
     pb, body = scene.pb, scene.cell_body
     names = {pb.getJointInfo(body, j)[12].decode(): j for j in range(pb.getNumJoints(body))}
     wanted = {f'{arm.name}_{part}': arm.name for arm in scene.cell.arms for part in ARM_PARTS}
@@ -57,6 +61,7 @@ def arm_links(scene: CellScene):
 
 
 def segmentation(scene: CellScene) -> np.ndarray:
+    """Return PyBullet's segmentation mask (object and link index) of the scene's camera."""
     _, _, _, _, seg = scene.pb.getCameraImage(
         scene.width, scene.height, scene.view_matrix, scene.projection_matrix,
         renderer=pybullet.ER_TINY_RENDERER,
@@ -65,6 +70,7 @@ def segmentation(scene: CellScene) -> np.ndarray:
 
 
 def test_frame_times_make_a_bounded_time_lapse():
+    """Frame times span the job window at ``fps``, thinned to ``max_seconds`` of GIF."""
     np.testing.assert_allclose(frame_times(0.0, 2.0, fps=10, max_seconds=30), np.arange(21) / 10)
     long = frame_times(10.0, 130.0, fps=10, max_seconds=30)
     assert len(long) == 300 and long[0] == 10.0 and long[-1] == 130.0
@@ -72,6 +78,11 @@ def test_frame_times_make_a_bounded_time_lapse():
 
 
 def test_the_gif_shows_the_moving_arms_and_the_items(run_dir, gif, cell):
+    """The GIF shows the moving arms and the items, and nothing else differs.
+
+    Where they are is found independently: the same scene posed from the run's files and
+    rendered with a segmentation mask.
+    """
     summary = report.read_summary(run_dir)
     times = frame_times(summary['job_start_sim_time'], summary['sim_time_end'], FPS, 10.0)
     frames, durations = gif_frames(gif)
@@ -122,6 +133,10 @@ def test_the_gif_shows_the_moving_arms_and_the_items(run_dir, gif, cell):
 
 
 def test_render_run_script_and_the_launcher_hook(run_dir, tmp_path):
+    """``render_run.py`` writes a GIF of the asked size; the launcher hook reports and stops.
+
+    The hook says why a run without files is not rendered, and stops when asked to.
+    """
     out = tmp_path / 'small.gif'
     proc = subprocess.run([sys.executable, str(ROOT / 'scripts' / 'render_run.py'),
                            str(run_dir), '--output', str(out), '--fps', '2', '--size',

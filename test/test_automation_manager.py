@@ -5,12 +5,17 @@ from scara_collab.bench.job import run_job as run_graph
 
 
 def run_job(mode: str, seconds: float, feed: float, seed: int = 7, faults=()) -> dict:
+    """Run the job graph in-process for ``seconds`` of sim time; print and return it."""
     out = run_graph(mode, seconds, feed=feed, seed=seed, faults=faults)
     print(f'\n{mode} {seconds:.0f} s: {out}')
     return out
 
 
 def test_collaborative_sorts_with_both_arms_and_keeps_the_margin():
+    """The collaborative job sorts with both arms and keeps the margin.
+
+    Nothing is missed, dropped, put in the wrong bin or given up.
+    """
     s = run_job('collaborative', 40.0, 1.8)
     assert s['sorted'] >= 8 and s['wrong_bin'] == 0 and s['missed'] == 0
     assert s['sorted_by_scara_left'] > 0 and s['sorted_by_scara_right'] > 0
@@ -29,6 +34,7 @@ def test_a_saturated_feed_keeps_the_margin():
 
 
 def test_mirrored_pairs_are_sorted_in_step():
+    """Mirrored pairs are sorted by both arms, in step within 1 mm, keeping the margin."""
     s = run_job('mirrored', 35.0, 1.8)
     assert s['sorted'] >= 6 and s['sorted'] % 2 == 0 or s['sorted'] >= 7
     assert s['sorted_by_scara_left'] > 0 and s['sorted_by_scara_right'] > 0
@@ -40,6 +46,7 @@ def test_mirrored_pairs_are_sorted_in_step():
 
 @pytest.mark.parametrize('feed', [0.8])
 def test_single_arm_cannot_keep_up_and_misses_are_counted(feed):
+    """A single arm cannot keep up with a fast feed: the misses are counted."""
     s = run_job('single', 32.0, feed)
     assert s['sorted'] >= 3 and s['sorted_by_scara_right'] == 0
     assert s['missed'] >= 1, 'items that leave the belt unpicked are counted'

@@ -7,6 +7,10 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_bench_core_quick_run(tmp_path):
+    """``bench_core.py --quick`` runs, compares with Pinocchio and writes its JSON rows.
+
+    The planned line deviation meets its target.
+    """
     out = tmp_path / 'bench.json'
     proc = subprocess.run([sys.executable, str(ROOT / 'scripts' / 'bench_core.py'), '--quick',
                            '--json', str(out)], capture_output=True, text=True, timeout=300)

@@ -18,6 +18,7 @@ SEEDS = ROOT.parent / 'shared' / 'seeds'
 
 @pytest.fixture(scope='module')
 def smoke(tmp_path_factory):
+    """Run ``benchmark.py --smoke`` once; return its folder, process and parsed results."""
     out = tmp_path_factory.mktemp('bench')
     proc = subprocess.run(
         [sys.executable, str(ROOT / 'scripts' / 'benchmark.py'), '--smoke', '--out', str(out),
@@ -34,6 +35,7 @@ def _sections(text):
 
 
 def test_every_section_reports_progress_with_elapsed_time(smoke):
+    """Every benchmark section prints its progress line with the elapsed time on stderr."""
     _, proc, _ = smoke
     for title, _ in suite.SECTIONS.values():
         assert re.search(rf'^\[\s*\d+\.\d s\] {re.escape(title)} done in \d+\.\d s$',
@@ -41,6 +43,7 @@ def test_every_section_reports_progress_with_elapsed_time(smoke):
 
 
 def test_results_md_has_every_section_with_the_claims_beside(smoke):
+    """RESULTS.md has every section, none failed, each with the seeds' claim quoted."""
     out, _, _ = smoke
     text = (out / 'RESULTS.md').read_text()
     sections = _sections(text)
@@ -55,6 +58,7 @@ def test_results_md_has_every_section_with_the_claims_beside(smoke):
 
 
 def test_figures_exist_are_small_pngs_and_are_linked(smoke):
+    """Every figure is a PNG of 5-200 kB, and RESULTS.md links it."""
     out, _, results = smoke
     text = (out / 'RESULTS.md').read_text()
     for key in FIGURES:
@@ -67,6 +71,10 @@ def test_figures_exist_are_small_pngs_and_are_linked(smoke):
 
 
 def test_numbers_come_from_the_run(smoke):
+    """The numbers in RESULTS.md are those of the run, and they are plausible.
+
+    IK latency, line and joint deviations, throughput, mirror error, singularity and foresight.
+    """
     out, _, results = smoke
     text = (out / 'RESULTS.md').read_text()
     ik = next(r for r in results['solvers']['rows'] if r['what'] == 'IK, one target')
@@ -93,6 +101,7 @@ def test_numbers_come_from_the_run(smoke):
 
 
 def test_update_readme_replaces_only_the_marked_block(tmp_path, smoke):
+    """``update_readme`` replaces only the marked block; a README without markers is kept."""
     _, _, results = smoke
     readme = tmp_path / 'README.md'
     readme.write_text(f'# x\n\nbefore\n{report.README_BEGIN}\nold\n{report.README_END}\nafter\n')
@@ -107,6 +116,7 @@ def test_update_readme_replaces_only_the_marked_block(tmp_path, smoke):
 
 
 def test_helpers():
+    """``fmt_seconds``, ``spread`` and ``md_table`` format as documented."""
     assert fmt_seconds(3.5e-6) == '3.5 µs' and fmt_seconds(0.0147) == '14.7 ms'
     s = spread([1.0, 2.0, 3.0, None, float('nan')])
     assert s['n'] == 3 and s['mean'] == 2.0 and s['std'] == 1.0
@@ -117,5 +127,6 @@ def test_helpers():
 @pytest.mark.parametrize('key', ['ik_latency', 'solver_latency', 'mirror_error', 'lag',
                                  'foresight', 'collision_risk', 'throughput', 'path_length'])
 def test_sentence_claims_are_verbatim_quotes(key):
+    """Each sentence claim is quoted verbatim from the seeds' design documents."""
     seeds = ' '.join(p.read_text().replace('**', '') for p in SEEDS.glob('0*.txt'))
     assert CLAIMS[key].quote in seeds

@@ -66,6 +66,7 @@ def _move(sim, robot, target, kind='line'):
 
 # --- holding and tracking -----------------------------------------------------------------
 def test_computed_torque_holds_tightly(cell):
+    """Computed torque holds both arms still for 2 s to within 1e-4 (rad or m)."""
     with _make(cell) as sim:
         q_left = _home(sim, LEFT, [3.0, -0.6, 0.4])
         q_right = _home(sim, RIGHT, [3.0, 0.6, 0.3])
@@ -91,6 +92,7 @@ def test_pid_hold_with_the_seed_gains_is_measured(cell):
 
 
 def test_joint_step_settles_with_computed_torque(cell):
+    """A 0.3 rad joint step settles to 1e-3 rad before 1.4 s under computed torque."""
     with _make(cell) as sim:
         q0 = _home(sim, LEFT, [3.0, -0.6, 0.4])
         goal = q0 + [0.3, 0.0, 0.0]
@@ -108,6 +110,7 @@ def test_joint_step_settles_with_computed_torque(cell):
 
 
 def test_executed_line_stays_within_a_millimetre(cell):
+    """An executed 1.5 m line stays within 1 mm of the segment and ends within 0.1 mm."""
     arm = cell.leader
     start, goal = np.array([3.2, -0.3, 0.4]), np.array([1.7, -0.3, 0.4])
     with _make(cell) as sim:
@@ -129,6 +132,7 @@ def test_executed_line_stays_within_a_millimetre(cell):
 
 # --- model agreement ----------------------------------------------------------------------
 def test_mass_matrix_matches_the_core_dynamics(cell):
+    """The mass matrix PyBullet computes for the loaded URDF is the core dynamics' M(q)."""
     rng = np.random.default_rng(3)
     with _make(cell) as sim:
         for arm in cell.arms:
@@ -161,6 +165,7 @@ def test_free_motion_follows_the_core_dynamics_with_friction_counted_once(cell):
 
 
 def test_tool_tip_is_the_core_fk(cell):
+    """The simulator's tool tip is the core FK at random joint states."""
     rng = np.random.default_rng(4)
     with _make(cell) as sim:
         for arm in cell.arms:
@@ -170,6 +175,7 @@ def test_tool_tip_is_the_core_fk(cell):
 
 
 def test_joint_state_order_and_efforts(cell):
+    """Joint states come in model order; the quill efforts hold m g upward."""
     with _make(cell) as sim:
         sim.step(5)
         names, pos, vel, eff = sim.joint_state()
@@ -191,6 +197,7 @@ def test_joint_state_order_and_efforts(cell):
     (lambda t, q: (t, q + [0.2, 0.0, 0.0]), 'starts 0.2000 away'),
 ])
 def test_bad_trajectories_are_refused_and_the_arm_holds(cell, make, reason):
+    """Each malformed or unsafe trajectory is refused with its reason; the arm holds."""
     with _make(cell) as sim:
         q0 = _home(sim, LEFT, [3.0, -0.6, 0.4])
         t = sim.time + np.array([0.0, 0.1, 0.2])
@@ -204,6 +211,7 @@ def test_bad_trajectories_are_refused_and_the_arm_holds(cell, make, reason):
 
 
 def test_unknown_robot_is_refused(cell):
+    """An unknown robot is refused by ``execute`` and by ``grasp``."""
     with _make(cell) as sim:
         with pytest.raises(TrajectoryError, match="unknown robot 'scara_middle'"):
             sim.execute('scara_middle', [0.0], [[0.0, 0.0, 0.0]])
@@ -211,6 +219,10 @@ def test_unknown_robot_is_refused(cell):
 
 
 def test_estop_brakes_both_arms_within_limits_and_refuses_trajectories(cell):
+    """The e-stop refuses trajectories and brakes both arms to rest within their limits.
+
+    The arms stop well short of their goals and stay put; clearing the stop lets moves run.
+    """
     with _make(cell) as sim:
         trajs = {}
         for robot, y in ((LEFT, -0.6), (RIGHT, 0.6)):
@@ -250,6 +262,7 @@ def test_estop_brakes_both_arms_within_limits_and_refuses_trajectories(cell):
 
 # --- belt and items -----------------------------------------------------------------------
 def test_belt_carries_items_at_belt_speed(cell):
+    """An item on the belt moves at the belt speed, in x only, and stays on the belt."""
     with _make(cell) as sim:
         item = sim.spawn_item('red', y=0.1)
         sim.step(200)  # settle
@@ -264,6 +277,7 @@ def test_belt_carries_items_at_belt_speed(cell):
 
 
 def test_item_reaching_the_belt_end_is_missed(cell):
+    """An item passing the belt end is removed with a ``missed`` event."""
     with _make(cell) as sim:
         item = sim.spawn_item('blue', x=cell.belt.x_end - 0.05)
         sim.step(500)
@@ -274,6 +288,7 @@ def test_item_reaching_the_belt_end_is_missed(cell):
 
 
 def test_spawn_refuses_items_off_the_belt(cell):
+    """Items off the belt and unknown item classes are refused."""
     with _make(cell) as sim:
         with pytest.raises(ValueError, match='off the belt'):
             sim.spawn_item('red', y=cell.belt.centre_y + cell.belt.width)
@@ -282,6 +297,7 @@ def test_spawn_refuses_items_off_the_belt(cell):
 
 
 def test_automatic_feed_mirror_pairs(cell):
+    """The mirror-pairs feed spawns same-class pairs mirrored across the belt centre."""
     with _make(cell, feed_interval=0.5, feed_pattern='mirror_pairs') as sim:
         sim.step(2050)  # 0.5 s per item: a pair every 1.0 s, as many items/min as 'random'
         items = sim.items()
@@ -296,6 +312,7 @@ def test_automatic_feed_mirror_pairs(cell):
 
 
 def test_automatic_feed_random(cell):
+    """The random feed spawns known classes within the jitter, and stops at interval 0."""
     jitter = load_config('simulation')['lateral_jitter']
     with _make(cell, feed_interval=0.5, feed_pattern='random') as sim:
         sim.step(1050)
@@ -310,12 +327,14 @@ def test_automatic_feed_random(cell):
 
 
 def test_simulation_rates_must_divide_the_physics_rate(cell):
+    """A servo rate that does not divide the physics rate is a ConfigError."""
     with pytest.raises(ConfigError, match='servo_rate'):
         _make(cell, servo_rate=300.0)
 
 
 # --- gripper ------------------------------------------------------------------------------
 def test_grasp_refuses_without_an_item_and_release_without_a_hold(cell):
+    """Grasping with no item under the tool and releasing with none held are refused."""
     with _make(cell) as sim:
         sim.spawn_item('red', x=2.5, y=0.0)
         ok, why = sim.grasp(LEFT)
@@ -341,6 +360,10 @@ def _pick(sim, robot, cls, xy):
 
 
 def test_grasp_lift_release(still_cell):
+    """A grasped item follows the tool and falls back onto the belt on release.
+
+    The events say ``spawned``, ``grasped``, ``released``, in that order.
+    """
     with _make(still_cell) as sim:
         item = _pick(sim, LEFT, 'red', (2.5, -0.2))
         it = sim.items()[0]
@@ -366,6 +389,7 @@ def test_grasp_lift_release(still_cell):
 @pytest.mark.parametrize('where, kind', [('own', 'sorted'), ('other', 'wrong_bin'),
                                          ('floor', 'dropped')])
 def test_dropping_an_item_gives_the_right_event(still_cell, where, kind):
+    """An item released over a bin or the floor gives ``sorted``, ``wrong_bin`` or ``dropped``."""
     with _make(still_cell) as sim:
         item = _pick(sim, LEFT, 'red', (2.5, -0.2))
         if where == 'floor':

@@ -56,6 +56,7 @@ HIDE_TOASTS = ("if (!document.getElementById('no-toasts')) { const s = document.
 # --- helpers ---------------------------------------------------------------------------------
 @pytest.fixture
 def graph():
+    """Yield a graph with a cell viewer on a free port, drawing at 50 Hz."""
     g = Graph()
     g.viewer = g.add(CellViewer(context=g.context, cli_args=params_args(
         overrides={'port': 0, 'update_rate': 50.0})))
@@ -64,6 +65,7 @@ def graph():
 
 
 def publish(g, msg_type, topic, msg, qos=10):
+    """Publish ``msg`` on ``topic`` once the viewer subscribes; return the publisher."""
     pub = g.probe.create_publisher(msg_type, topic, qos)
     assert g.spin_until(lambda: pub.get_subscription_count() > 0, 10)
     pub.publish(msg)
@@ -71,6 +73,7 @@ def publish(g, msg_type, topic, msg, qos=10):
 
 
 def joint_states(cell, q_left, q_right) -> JointState:
+    """Return a JointState of both arms, leader joints first."""
     names = cell.leader.joint_names + cell.follower.joint_names
     pos = list(q_left) + list(q_right)
     return conv.joint_state(1.0, names, pos, [0.0] * 6, [0.0] * 6)
@@ -84,11 +87,16 @@ def drawn(g, q_left, q_right):
 
 
 def rgb(colour) -> tuple:
+    """Return the first three channels of a colour as ints."""
     return tuple(int(v) for v in np.asarray(colour).ravel()[:3])
 
 
 # --- the scene from messages (no browser) ----------------------------------------------------
 def test_the_page_and_the_cell_are_served(graph):
+    """The page is served, and each arm has its URDF joints and three capsules.
+
+    The arms stay hidden until the first joint state.
+    """
     viewer = graph.viewer
     with DIRECT.open(f'http://127.0.0.1:{viewer.port}/', timeout=10) as r:
         assert r.status == 200 and b'Viser' in r.read()
@@ -105,6 +113,10 @@ def test_the_page_and_the_cell_are_served(graph):
     ((0.848, 0.0, 0.0), (-0.848, 0.0, 0.0), 1),     # mirrored, 0.15 m apart: inside 2 margins
 ])
 def test_joint_states_pose_the_arms_and_colour_the_capsules(graph, q_left, q_right, worst):
+    """Joint states pose the URDFs at the FK and colour the capsules by the margin.
+
+    The capsules lie on the collision module's axes; the gap label is the arm distance.
+    """
     drawn(graph, q_left, q_right)
     viewer, cell = graph.viewer, graph.viewer.cell
     scene = viewer.scene
@@ -132,6 +144,10 @@ def test_joint_states_pose_the_arms_and_colour_the_capsules(graph, q_left, q_rig
 
 
 def test_items_paths_estop_and_stats_are_shown(graph):
+    """Items, planned paths, the e-stop, the monitor distance and the job stats are shown.
+
+    Items are coloured by class and removed when gone.
+    """
     viewer, cell = graph.viewer, graph.viewer.cell
     scene = viewer.scene
     red, blue = cell.item_classes
@@ -165,6 +181,7 @@ def test_items_paths_estop_and_stats_are_shown(graph):
 
 
 def test_bad_messages_are_ignored_and_the_viewer_keeps_going(graph):
+    """Malformed states and paths draw nothing; a good state still draws."""
     viewer, cell = graph.viewer, graph.viewer.cell
     bad = joint_states(cell, (0.1, 0.2, 0.0), (0.0, 0.0, 0.0))
     bad.name = bad.name[:5]
@@ -182,6 +199,7 @@ def test_bad_messages_are_ignored_and_the_viewer_keeps_going(graph):
 
 
 def test_invalid_parameters_are_refused_with_the_name():
+    """An update rate of 0 and a port beyond 65535 are refused, naming the parameter."""
     g = Graph()
     try:
         with pytest.raises(ValueError, match='update_rate'):
@@ -198,6 +216,7 @@ class Chromium:
     """Headless Chromium driven over the DevTools protocol (websocket, one page)."""
 
     def __init__(self, exe: str, workdir: Path, size=SIZE):
+        """Start headless Chromium on a free DevTools port and connect to its page."""
         from websockets.sync.client import connect  # viser's own dependency
         profile = workdir / 'chromium-profile'
         profile.mkdir(parents=True, exist_ok=True)
@@ -236,6 +255,10 @@ class Chromium:
         raise TimeoutError(f'chromium did not open its DevTools port; see {self.log_path}')
 
     def send(self, method: str, timeout: float = 30.0, **params) -> dict:
+        """Send one DevTools command and return its result, skipping events.
+
+        :raises RuntimeError: the command failed.
+        """
         self._id += 1
         self.ws.send(json.dumps({'id': self._id, 'method': method, 'params': params}))
         end = time.monotonic() + timeout
@@ -247,10 +270,12 @@ class Chromium:
                 return msg.get('result', {})
 
     def evaluate(self, expression: str):
+        """Evaluate a JavaScript ``expression`` in the page and return its value."""
         res = self.send('Runtime.evaluate', expression=expression, returnByValue=True)
         return res.get('result', {}).get('value')
 
     def open(self, url: str) -> None:
+        """Navigate the page to ``url``."""
         self.send('Page.navigate', url=url)
 
     def screenshot(self) -> np.ndarray:
@@ -271,6 +296,7 @@ class Chromium:
         raise TimeoutError('the page did not settle')
 
     def close(self) -> None:
+        """Close the websocket and stop the browser (SIGTERM, then SIGKILL)."""
         ws = getattr(self, 'ws', None)
         if ws is not None:
             ws.close()
@@ -309,6 +335,10 @@ def window(img: np.ndarray, uv, half: int = 2) -> np.ndarray:
 @pytest.mark.skipif(CHROMIUM is None, reason='chromium is not installed (Debian: apt-get '
                     'install chromium; .ci/run installs it), so the page cannot be rendered')
 def test_the_page_shows_both_arms_in_headless_chromium(tmp_path):
+    """In headless Chromium the links show orange where the bridge's states put them.
+
+    Hiding the arms changes those pixels; the belt inlet and the items do not change.
+    """
     t0 = time.monotonic()
     from scara_collab.nodes.pybullet_bridge import PyBulletBridge
     g = Graph()

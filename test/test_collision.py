@@ -29,6 +29,7 @@ def brute_distance(p0, p1, q0, q1, n=801):
 
 
 def point_segment(p, a, b):
+    """Return the distance of point ``p`` from the segment ``a``-``b`` (test-local)."""
     ab = b - a
     denom = ab @ ab
     u = 0.0 if denom == 0.0 else np.clip((p - a) @ ab / denom, 0.0, 1.0)
@@ -69,6 +70,10 @@ CASES = {
 
 @pytest.mark.parametrize('name', sorted(CASES))
 def test_segment_distance_known_cases_and_brute_force(name):
+    """Each known case gives its exact distance and no more than brute force.
+
+    The closest points lie on the segments and are the distance apart.
+    """
     p0, p1, q0, q1, expected = CASES[name]
     d, s, t = segment_distance(p0, p1, q0, q1)
     assert d.shape == () and s.shape == () and t.shape == ()
@@ -83,6 +88,7 @@ def test_segment_distance_known_cases_and_brute_force(name):
 
 
 def test_crossing_segments_are_what_the_seeds_check_missed():
+    """Two crossing diagonals touch at their midpoints; the seeds' endpoint check says 0.71 m."""
     p0, p1, q0, q1 = (0, 0, 0), (1, 1, 0), (0, 1, 0), (1, 0, 0)
     d, s, t = segment_distance(p0, p1, q0, q1)
     assert float(d) == 0.0 and (float(s), float(t)) == (0.5, 0.5)
@@ -90,6 +96,7 @@ def test_crossing_segments_are_what_the_seeds_check_missed():
 
 
 def test_segment_distance_random_pairs_against_brute_force():
+    """Random segment pairs, many coplanar, agree with brute-force sampling within its bound."""
     rng = np.random.default_rng(7)
     for _ in range(40):
         p0, p1, q0, q1 = rng.uniform(-1.0, 1.0, (4, 3))
@@ -102,6 +109,7 @@ def test_segment_distance_random_pairs_against_brute_force():
 
 
 def test_segment_distance_broadcasts_and_matches_single_calls():
+    """Broadcast segment arrays give, element by element, the results of single calls."""
     rng = np.random.default_rng(1)
     p0 = rng.normal(size=(5, 1, 3))
     p1 = rng.normal(size=(5, 1, 3))
@@ -128,12 +136,14 @@ def _coal_capsule(p0, p1, radius):
 
 
 def coal_capsule_distance(p0, p1, rp, q0, q1, rq):
+    """Return the surface distance of two capsules as coal computes it."""
     cap_p, tf_p = _coal_capsule(p0, p1, rp)
     cap_q, tf_q = _coal_capsule(q0, q1, rq)
     return coal.distance(cap_p, tf_p, cap_q, tf_q, coal.DistanceRequest(), coal.DistanceResult())
 
 
 def test_capsule_distance_matches_coal():
+    """The capsule surface distance agrees with coal to 1e-6 m on 500 separate pairs."""
     rng = np.random.default_rng(11)
     errors = []
     while len(errors) < 500:
@@ -155,6 +165,10 @@ unit = st.floats(0.0, 1.0)
 @settings(max_examples=300, deadline=None)
 @given(coords, coords, coords, coords, unit, unit)
 def test_segment_distance_properties(p0, p1, q0, q1, u, v):
+    """The distance is symmetric and blind to segment direction (hypothesis).
+
+    Its closest points achieve it, and no other pair of points does better.
+    """
     d, s, t = segment_distance(p0, p1, q0, q1)
     assert d >= 0.0 and 0.0 <= s <= 1.0 and 0.0 <= t <= 1.0
     tol = 1e-10 * (1.0 + np.abs([p0, p1, q0, q1]).max())
@@ -180,11 +194,13 @@ def planar_ik(arm, xy, elbow=1.0):
 
 @pytest.fixture(scope='module')
 def arms():
+    """Return the cell's leader and follower."""
     cell = load_cell()
     return cell.leader, cell.follower
 
 
 def test_arm_capsules_geometry_with_translated_and_rotated_base(arms):
+    """Capsule ends sit where the link lengths and heights put them, also on a turned base."""
     left, _ = arms
     start, end, radii = arm_capsules(left, [0.0, 0.0, 0.25])
     bx, by, bz = left.base_position
@@ -205,6 +221,7 @@ def test_arm_capsules_geometry_with_translated_and_rotated_base(arms):
 
 
 def test_arm_capsules_agree_with_kinematics(arms):
+    """The capsule axes start at the kinematics' tool tip, shoulder and elbow."""
     kinematics = pytest.importorskip('scara_collab.core.kinematics')
     rng = np.random.default_rng(5)
     for arm in arms:
@@ -217,6 +234,7 @@ def test_arm_capsules_agree_with_kinematics(arms):
 
 
 def test_arms_at_home_are_far_apart(arms):
+    """At home the nearest capsules are the two link 1s, the base gap less two radii apart."""
     left, right = arms
     d = arm_distance(left, [-np.pi / 2, 0.0, 0.0], right, [np.pi / 2, 0.0, 0.0])
     # Nearest: the two link 1 capsules at the shoulders, 4 m apart at the same height.
@@ -226,6 +244,7 @@ def test_arms_at_home_are_far_apart(arms):
 
 
 def test_arms_reaching_the_same_belt_point_overlap(arms):
+    """Both arms at the same belt point overlap by two link radii, for either elbow."""
     left, right = arms
     for elbow in (1.0, -1.0):
         q_left = np.r_[planar_ik(left, BELT_POINT, elbow), 0.3]
@@ -241,6 +260,10 @@ def test_arms_reaching_the_same_belt_point_overlap(arms):
 
 @pytest.mark.parametrize('profile', ['slim', 'default', 'heavy'])
 def test_link_1_crossing_link_2_in_plan_view_is_detected(profile):
+    """Link 1 crossing link 2 in plan view breaks the margin, in every profile.
+
+    The seeds' endpoint-only check calls the same poses safe.
+    """
     cell = load_cell(profile)
     left, right = cell.leader, cell.follower
     # In the real cell the follower's link 2 cannot reach over the leader's link 1, so the
@@ -263,6 +286,7 @@ def test_link_1_crossing_link_2_in_plan_view_is_detected(profile):
 
 
 def test_arm_distance_vectorised_and_symmetric(arms):
+    """N state pairs give N single calls' distances, symmetric in the arms, and broadcast."""
     left, right = arms
     rng = np.random.default_rng(2)
     q_l = rng.uniform(left.lower, left.upper, (200, 3))
@@ -296,6 +320,7 @@ def hold_interp(t, ts, qs):
 
 
 def brute_min(left, t_a, q_a, right, t_b, q_b, start_b, dt=0.002):
+    """Return the smallest distance and its time by stepping both held trajectories by ``dt``."""
     t_b = t_b + start_b
     best = (np.inf, None)
     for t in np.arange(min(t_a[0], t_b[0]), max(t_a[-1], t_b[-1]) + dt, dt):
@@ -317,6 +342,11 @@ def belt_scenario(arms):
 
 
 def test_trajectory_min_distance_against_brute_loop(arms, belt_scenario):
+    """The trajectory minimum matches a brute-force time loop for several start delays.
+
+    Started after the leader is home again, the follower's whole path is checked against
+    that pose.
+    """
     left, right = arms
     t_a, q_a, t_b, q_b = belt_scenario
     # Joint speeds here are below 2 rad/s: a point moves < 2 * 2.6 m/s, two arms < 11 m/s.
@@ -337,6 +367,7 @@ def test_trajectory_min_distance_against_brute_loop(arms, belt_scenario):
 
 
 def test_trajectory_min_distance_holds_ends_and_rejects_bad_input(arms):
+    """One-point trajectories are held poses; bad times, lengths and NaN are refused."""
     left, right = arms
     q_l, q_r = np.array([[-1.0, 0.2, 0.0]]), np.array([[1.0, -0.2, 0.1]])
     d, t = trajectory_min_distance(left, [0.0], q_l, right, [0.0], q_r, start_b=2.0)
@@ -350,6 +381,7 @@ def test_trajectory_min_distance_holds_ends_and_rejects_bad_input(arms):
 
 
 def test_smallest_safe_delay_is_safe_and_tight(arms, belt_scenario):
+    """The delay found keeps the margin, one resolution step less does not."""
     left, right = arms
     t_a, q_a, t_b, q_b = belt_scenario
     margin = load_cell().safety_margin
@@ -365,6 +397,7 @@ def test_smallest_safe_delay_is_safe_and_tight(arms, belt_scenario):
 
 
 def test_smallest_safe_delay_zero_when_already_safe(arms, belt_scenario):
+    """Trajectories that never come near need no delay."""
     left, right = arms
     t_a, q_a, _, _ = belt_scenario
     t_b, q_b = joint_path([[0.0, np.pi / 2, 0.0, 0.0], [2.0, 2.0, -0.5, 0.3]])
@@ -372,6 +405,10 @@ def test_smallest_safe_delay_zero_when_already_safe(arms, belt_scenario):
 
 
 def test_smallest_safe_delay_none_when_impossible(arms, belt_scenario):
+    """No delay is found when none can help, or the one needed exceeds ``max_delay``.
+
+    The follower waits next to the working leader, or ends next to where the leader ends.
+    """
     left, right = arms
     t_a, q_a, t_b, q_b = belt_scenario
     margin = 0.10
@@ -389,6 +426,7 @@ def test_smallest_safe_delay_none_when_impossible(arms, belt_scenario):
 
 
 def test_smallest_safe_delay_when_safety_is_not_monotonic(arms):
+    """With two leader visits the first safe window is found, although later ones are not."""
     left, right = arms
     margin = 0.10
     home_l, home_r = [-np.pi / 2, 0.5, 0.0], [np.pi / 2, -0.5, 0.0]
@@ -407,6 +445,7 @@ def test_smallest_safe_delay_when_safety_is_not_monotonic(arms):
 
 
 def test_closest_points_are_on_the_closest_capsule_axes(cell):
+    """The closest points lie on the closest capsule pair's axes, the distance apart."""
     left, right = cell.arms
     rng = np.random.default_rng(4)
     for _ in range(20):

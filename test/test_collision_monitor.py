@@ -15,6 +15,7 @@ HOME = np.array([0.0, 1.5708, 0.0])
 
 @pytest.fixture
 def graph(cell):
+    """Yield a graph with the monitor on sim time and probe /clock and state publishers."""
     g = Graph()
     g.cell = cell
     g.monitor = g.add(CollisionMonitor(context=g.context, cli_args=params_args(
@@ -28,6 +29,7 @@ def graph(cell):
 
 
 def state(cell, t, q_left, q_right=None, nan=False):
+    """Return a JointState at ``t``, the follower mirrored unless given (``nan``: one NaN)."""
     names = list(cell.leader.joint_names) + list(cell.follower.joint_names)
     q_right = mirror_joints(q_left) if q_right is None else q_right
     pos = list(q_left) + list(q_right)
@@ -37,11 +39,13 @@ def state(cell, t, q_left, q_right=None, nan=False):
 
 
 def tick(g, t):
+    """Publish /clock at ``t`` and spin until the monitor's clock reads it."""
     g.clock.publish(Clock(clock=conv.to_time(t)))
     assert g.spin_until(lambda: abs(g.monitor._now() - t) < 1e-9)
 
 
 def test_a_state_before_the_first_clock_does_not_trip_the_watchdog(graph):
+    """A state heard before the first /clock does not stop the arms when sim time jumps."""
     g = graph
     g.states.publish(state(g.cell, 0.0, HOME))
     assert g.spin_until(lambda: g.monitor.last is not None)
@@ -51,6 +55,10 @@ def test_a_state_before_the_first_clock_does_not_trip_the_watchdog(graph):
 
 
 def test_fails_closed_on_a_nan_state_and_on_silence_then_clears(graph):
+    """A NaN state and then silence each stop the arms.
+
+    A fresh valid state in between lets the stop clear (idempotently).
+    """
     g = graph
     tick(g, 1.0)
     g.states.publish(state(g.cell, 1.0, HOME, nan=True))

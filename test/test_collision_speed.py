@@ -14,6 +14,7 @@ MARGIN = 0.10
 
 @pytest.fixture(scope='module')
 def arms():
+    """Return the cell's leader and follower (and check the cell's margin is the test's)."""
     cell = load_cell()
     assert cell.safety_margin == pytest.approx(MARGIN)
     return cell.leader, cell.follower
@@ -118,6 +119,10 @@ def brute_delay(left, t_a, q_a, right, t_b, q_b, margin, max_delay, resolution=0
 
 
 def test_pair_bounds_never_exceed_the_exact_distances(arms):
+    """The pair bounds never exceed the exact distances, also on a turned, tilted base.
+
+    The exact distances of a subset are the full computation's, bit for bit.
+    """
     left, right = arms
     rng = np.random.default_rng(21)
     cz, sz, cx, sx = np.cos(0.7), np.sin(0.7), np.cos(0.3), np.sin(0.3)
@@ -143,6 +148,7 @@ def test_pair_bounds_never_exceed_the_exact_distances(arms):
 
 @pytest.mark.parametrize('kind', ['near', 'apart'])
 def test_trajectory_min_distance_is_the_full_computation(arms, kind):
+    """The prefiltered trajectory minimum and its time equal the full computation's."""
     left, right = arms
     rng = np.random.default_rng(3 if kind == 'near' else 4)
     found = []
@@ -165,6 +171,7 @@ def test_trajectory_min_distance_is_the_full_computation(arms, kind):
 
 
 def test_trajectory_min_distance_returns_the_first_of_tied_minima(arms):
+    """Among tied minima the first grid time is returned."""
     left, right = arms
     rng = np.random.default_rng(5)
     q_l, q_r = random_pose(rng, left, 1.0, (-0.3, 0.0)), random_pose(rng, right, -1.0, (0, 0.3))
@@ -188,6 +195,7 @@ def test_trajectory_min_distance_returns_the_first_of_tied_minima(arms):
 
 
 def test_smallest_safe_delay_is_the_full_computation(arms):
+    """The prefiltered smallest safe delay equals the same search on the full computation."""
     left, right = arms
     rng = np.random.default_rng(8)
     delays = []

@@ -11,6 +11,7 @@ from scara_collab.core.paths import config_dir
 
 
 def test_all_files_load_with_spec_defaults():
+    """Every configuration file loads, with the SPEC's defaults."""
     cfg = load_all()
     cell, sim, ctl = cfg['cell'], cfg['simulation'], cfg['controllers']
     assert cell['joints']['revolute_velocity'] == 2.0
@@ -47,6 +48,7 @@ def _cell():
     (lambda c: c['arm'].update(link_density=float('nan')), 'arm.link_density must be'),
 ])
 def test_invalid_cell_values_are_refused_with_the_key(mutate, message):
+    """Each invalid cell value is refused with an error naming its key."""
     cfg = _cell()
     mutate(cfg)
     with pytest.raises(ConfigError, match=message.replace('(', r'\(')):
@@ -54,6 +56,7 @@ def test_invalid_cell_values_are_refused_with_the_key(mutate, message):
 
 
 def test_other_files_are_validated():
+    """Invalid simulation, controllers and automation values are refused."""
     sim = copy.deepcopy(load_config('simulation'))
     sim['physics_rate'] = 5.0
     with pytest.raises(ConfigError, match='physics_rate must be in'):
@@ -79,6 +82,7 @@ def test_other_files_are_validated():
 
 
 def test_unreadable_files_say_what_is_wrong(tmp_path):
+    """Missing, malformed, flat and unknown configuration files each say what is wrong."""
     with pytest.raises(ConfigError, match='no such configuration file'):
         load_config('cell', tmp_path / 'missing.yaml')
     bad = tmp_path / 'bad.yaml'

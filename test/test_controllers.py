@@ -9,6 +9,7 @@ from scara_collab.sim.controllers import (
 
 
 def test_gains_come_from_controllers_yaml():
+    """The PID gains per joint come from controllers.yaml."""
     ctl = load_config('controllers')
     npt.assert_array_equal(joint_gains(ctl['pid'], 'kp'), [15.0, 15.0, 10.0])
     npt.assert_array_equal(joint_gains(ctl['pid'], 'ki'), [0.5, 0.5, 0.1])
@@ -35,6 +36,7 @@ def test_computed_torque_on_the_reference_gives_the_reference_acceleration(cell)
 
 
 def test_computed_torque_feedback_is_mass_weighted(cell):
+    """The computed-torque feedback is M(q) times the PD term; no error, no feedback."""
     ct = ComputedTorqueController(cell.arms, kp=[400.0] * 3, kd=[40.0] * 3)
     q = np.zeros((2, 3))
     err = np.array([[1e-3, 0.0, 0.0], [0.0, 0.0, 0.0]])
@@ -44,6 +46,10 @@ def test_computed_torque_feedback_is_mass_weighted(cell):
 
 
 def test_pid_law_and_anti_windup():
+    """The PID law sums the P, I and D terms; the integral is clamped at the effort limit.
+
+    ``reset`` zeroes one arm's integral.
+    """
     pid = PidController([15.0, 15.0, 10.0], [0.5, 0.5, 0.1], [2.0, 2.0, 1.0],
                         max_effort=[400.0, 200.0, 300.0], arms=2)
     q, ref = np.zeros((2, 3)), np.full((2, 3), 0.1)
@@ -57,6 +63,7 @@ def test_pid_law_and_anti_windup():
 
 
 def test_smooth_friction_is_odd_and_tends_to_viscous_plus_coulomb():
+    """The smoothed friction is odd, zero at rest, and viscous plus Coulomb away from zero."""
     v, c = np.array([0.1, 0.1, 5.0]), np.array([0.2, 0.2, 1.0])
     qd = np.array([1.0, -1.0, 0.5])
     npt.assert_allclose(smooth_friction(v, c, qd, 0.01), v * qd + c * np.sign(qd), rtol=1e-9)

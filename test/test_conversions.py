@@ -9,6 +9,7 @@ from scara_collab.nodes import runner
 
 
 def test_non_finite_joint_states_are_refused(cell):
+    """A joint state with NaN or infinity is refused; a finite one reads back."""
     names = list(cell.leader.joint_names) + list(cell.follower.joint_names)
     q = [0.0, 1.5708, 0.0] + list(mirror_joints(np.array([0.0, 1.5708, 0.0])))
     ok = conv.joint_state(1.0, names, q, [0.0] * 6, [0.0] * 6)
@@ -21,6 +22,7 @@ def test_non_finite_joint_states_are_refused(cell):
 
 
 def test_absurdly_long_trajectories_are_refused(cell):
+    """A trajectory beyond ``MAX_TRAJECTORY_POINTS`` is refused; a short one reads back."""
     arm = cell.leader
     n = conv.MAX_TRAJECTORY_POINTS + 1
     t = np.arange(n) * 0.01
@@ -32,6 +34,7 @@ def test_absurdly_long_trajectories_are_refused(cell):
 
 
 def test_a_move_id_is_its_request_stamp_exactly():
+    """A move id carries its request stamp's nanoseconds exactly; a bad id is refused."""
     ns = 133_510_992_676
     stamp = conv.time_from_ns(ns)
     assert proto.stamp_ns(stamp) == ns
@@ -41,6 +44,7 @@ def test_a_move_id_is_its_request_stamp_exactly():
 
 
 def test_every_entry_point_keeps_discovery_on_this_host(monkeypatch):
+    """Every entry point keeps discovery on LOCALHOST unless the user chose a range."""
     monkeypatch.delenv(runner.DISCOVERY_ENV, raising=False)
     seen = {}
 
@@ -56,6 +60,7 @@ def test_every_entry_point_keeps_discovery_on_this_host(monkeypatch):
 
 
 def test_stamp_gate_lets_through_only_the_sim_clocks_states():
+    """The stamp gate lets through only finite, ordered stamps on the sim clock."""
     gate = conv.StampGate(tolerance=1.0)
     assert gate.check(0.01, 0.0) is None                 # before /clock: early stamps only
     assert 'before any /clock' in gate.check(5.0, 0.0)

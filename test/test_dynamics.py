@@ -46,6 +46,10 @@ def assert_close_rel(actual, desired, rtol=1e-9):
 @pytest.mark.parametrize('payload', PAYLOADS)
 @pytest.mark.parametrize('profile', PROFILES)
 def test_mass_matrix_is_symmetric_positive_definite(profile, payload):
+    """M(q) is symmetric positive definite in every profile and with every payload.
+
+    The theta-d3 coupling is exactly zero and M33 is the sliding mass.
+    """
     for arm in load_cell(profile).arms:
         q, _, _ = random_states(arm, 2000, seed=1)
         m = mass_matrix(arm, q, payload)
@@ -61,6 +65,7 @@ def test_mass_matrix_is_symmetric_positive_definite(profile, payload):
 @given(u=st.lists(st.floats(0.0, 1.0), min_size=9, max_size=9),
        payload=st.sampled_from(PAYLOADS), profile=st.sampled_from(PROFILES))
 def test_spd_and_round_trip_property(u, payload, profile):
+    """At any state within the limits M(q) is positive definite and FD inverts ID."""
     arm = load_cell(profile).leader
     u = np.reshape(u, (3, 3))
     q = arm.lower + u[0] * (arm.upper - arm.lower)
@@ -75,6 +80,7 @@ def test_spd_and_round_trip_property(u, payload, profile):
 @pytest.mark.parametrize('robot', ROBOTS)
 @pytest.mark.parametrize('profile', PROFILES)
 def test_agrees_with_pinocchio_on_the_same_urdf(profile, robot, payload):
+    """M, ID, gravity and FD agree with Pinocchio's CRBA, RNEA, gravity and ABA."""
     arm = load_cell(profile).arm(robot)
     model, data = pinocchio_arm(robot, profile, payload)
     assert model.nq == model.nv == 3
@@ -105,6 +111,11 @@ def smooth_trajectory(arm, t):
 
 @pytest.mark.parametrize('payload', PAYLOADS)
 def test_energy_balance_along_a_trajectory(cell, payload):
+    """Energy balances along a smooth path: dK/dt and dV/dt are the efforts' power.
+
+    The power of the ID efforts less gravity is dK/dt, that of gravity dV/dt, and K is
+    1/2 qd^T M qd.
+    """
     arm = cell.leader
     t, dt = np.linspace(0.0, 3.0, 601), 1e-5
     q, qd, qdd = smooth_trajectory(arm, t)
@@ -123,6 +134,7 @@ def test_energy_balance_along_a_trajectory(cell, payload):
 
 
 def test_coriolis_from_numerical_christoffel_symbols_and_skew_symmetry(cell):
+    """Coriolis forces follow from numerical Christoffel symbols; dM/dt - 2C is skew."""
     arm, h, payload = cell.follower, 1e-6, 1.0
     q, qd, _ = random_states(arm, 50, seed=4)
     # dm[n, k] = dM/dq_k at state n, by central differences of mass_matrix.
@@ -139,6 +151,7 @@ def test_coriolis_from_numerical_christoffel_symbols_and_skew_symmetry(cell):
 
 
 def test_free_motion_conserves_energy_and_friction_dissipates(cell):
+    """Free motion (RK4) conserves energy; with friction the energy falls at every step."""
     arm, payload, dt = cell.leader, 2.5, 1e-3
     state0 = np.array([[0.2, 1.0, 0.3], [1.5, -1.0, 0.2]])   # rows: q, qd
 
@@ -167,6 +180,7 @@ def test_free_motion_conserves_energy_and_friction_dissipates(cell):
 
 @pytest.mark.parametrize('payload', PAYLOADS)
 def test_forward_dynamics_inverts_inverse_dynamics_vectorised(cell, payload):
+    """FD inverts ID for 1000 states of both arms, with and without friction."""
     for arm in cell.arms:
         q, qd, qdd = random_states(arm, 1000, seed=5)
         for with_friction in (True, False):
@@ -177,6 +191,10 @@ def test_forward_dynamics_inverts_inverse_dynamics_vectorised(cell, payload):
 
 
 def test_vectorised_equals_per_row(cell):
+    """Every function gives for N states what it gives for each row alone.
+
+    A per-state payload array broadcasts like the states do.
+    """
     arm, payload = cell.follower, 1.0
     q, qd, qdd = random_states(arm, 20, seed=6)
     tau = inverse_dynamics(arm, q, qd, qdd, payload)
@@ -203,6 +221,7 @@ def test_vectorised_equals_per_row(cell):
 
 
 def test_friction_opposes_motion(cell):
+    """Friction has the sign of the velocity, never does negative work, and ID adds it."""
     arm = cell.leader
     _, qd, _ = random_states(arm, 500, seed=7)
     f = friction(arm, qd)
@@ -218,6 +237,10 @@ def test_friction_opposes_motion(cell):
 
 @pytest.mark.parametrize('payload', PAYLOADS)
 def test_gravity_acts_only_on_the_quill(cell, payload):
+    """Gravity acts only on the quill, m g upward, and holds it still.
+
+    ID at rest equals G, FD under G stands still, and V = -m g d3.
+    """
     for arm in cell.arms:
         q, _, _ = random_states(arm, 100, seed=9)
         grav = gravity(arm, q, payload)
@@ -234,6 +257,7 @@ def test_gravity_acts_only_on_the_quill(cell, payload):
 
 
 def test_bad_input_is_refused(cell):
+    """Wrong state shapes and a tilted base are refused."""
     arm = cell.leader
     with pytest.raises(ValueError, match='shape'):
         mass_matrix(arm, [0.0, 0.0])
@@ -246,6 +270,7 @@ def test_bad_input_is_refused(cell):
 
 
 def test_parameters_come_from_the_model(cell):
+    """Doubling the quill's mass in the model changes M and G accordingly."""
     arm = cell.leader
     quill = dataclasses.replace(arm.quill, mass=2 * arm.quill.mass)
     heavier = dataclasses.replace(arm, quill=quill)

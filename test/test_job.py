@@ -14,6 +14,7 @@ HOME = np.array([0.0, 1.5708, 0.0])
 
 
 def make_job(cell, mode='collaborative', **overrides):
+    """Return a SortingJob on ``cell`` with the automation config (``overrides`` on top)."""
     cfg = dict(load_config('automation'), **overrides)
     settings = JobSettings.from_config(cell, cfg, mode)
 
@@ -30,15 +31,18 @@ def make_job(cell, mode='collaborative', **overrides):
 
 
 def item_on_belt(cell, item_id=1, x=1.2, y=-0.2, stamp=0.0, cls=None):
+    """Return an item resting on the belt at ``(x, y)``, seen at ``stamp``."""
     z = cell.belt.top_z + cell.item_size / 2
     return SeenItem(item_id, cls or cell.item_classes[0], np.array([x, y, z]), stamp)
 
 
 def moves(cmds):
+    """Return the move commands among ``cmds``."""
     return [c for c in cmds if isinstance(c, MoveCommand)]
 
 
 def grips(cmds):
+    """Return the gripper commands among ``cmds``."""
     return [c for c in cmds if isinstance(c, GripCommand)]
 
 
@@ -72,11 +76,13 @@ def at_the_item(cell, **overrides):
 
 
 def test_items_per_minute_has_one_definition():
+    """The items-per-minute figure is one function, and zero for no time."""
     assert items_per_minute(30, 60.0) == 30.0
     assert items_per_minute(5, 0.0) == 0.0
 
 
 def test_a_lost_planner_answer_is_asked_again_with_the_same_request(cell):
+    """A planner answer that never comes is asked for again under the same request id."""
     job = make_job(cell)
     pick = first_pick(cell, job)
     s = job.s
@@ -93,6 +99,7 @@ def test_a_lost_planner_answer_is_asked_again_with_the_same_request(cell):
 
 
 def test_duplicated_and_stale_answers_change_nothing(cell):
+    """Answers that come twice, or for an old request, change nothing."""
     job = make_job(cell)
     pick = first_pick(cell, job)
     job.on_planner(pick.robot, pick.request, 'planned', pick.start, pick.start + 1.0)
@@ -106,6 +113,7 @@ def test_duplicated_and_stale_answers_change_nothing(cell):
 
 
 def test_every_waiting_phase_has_a_deadline(cell):
+    """A move that never arrives, or is never planned, is given up at its deadline."""
     # planned but never arrives (trajectory lost, tool not at the target): arrive_timeout
     job = make_job(cell)
     pick = first_pick(cell, job)
@@ -126,6 +134,7 @@ def test_every_waiting_phase_has_a_deadline(cell):
 
 
 def test_lost_gripper_answers_are_asked_again_then_fail(cell):
+    """A gripper call with no answer is made again (bounded), then the grasp has failed."""
     job, pick, t = at_the_item(cell)
     out = grips(job.tick(t))
     assert len(out) == 1 and out[0].grasp
@@ -148,6 +157,7 @@ def test_lost_gripper_answers_are_asked_again_then_fail(cell):
 
 
 def test_a_grasped_event_confirms_a_grasp_whose_answer_was_lost(cell):
+    """A grasped event from the bridge stands in for a lost gripper answer."""
     job, pick, t = at_the_item(cell)
     job.tick(t)
     job.on_item_event('grasped', 1, pick.robot)
@@ -155,6 +165,7 @@ def test_a_grasped_event_confirms_a_grasp_whose_answer_was_lost(cell):
 
 
 def test_a_grasped_item_is_lifted_only_when_it_would_sweep_the_belt(cell):
+    """A grasped item is lifted first only when carrying it straight would sweep the belt."""
     for neighbours, expected in (([], 'to_bin'), ([(0.0, 0.0)], 'lift'),
                                  ([(0.0, 0.35)], 'to_bin')):
         job = make_job(cell)
@@ -182,6 +193,7 @@ def test_a_grasped_item_is_lifted_only_when_it_would_sweep_the_belt(cell):
 
 
 def test_an_arm_holding_an_item_retries_its_bin_instead_of_dropping_it(cell):
+    """An arm holding an item tries its bin again when a move fails, never drops it off the bin."""
     job, pick, t = at_the_item(cell, lift_after_grasp=False)
     g = grips(job.tick(t))[0]
     job.on_grip(g.token, True, 'grasped')
@@ -194,6 +206,7 @@ def test_an_arm_holding_an_item_retries_its_bin_instead_of_dropping_it(cell):
 
 
 def test_mirrored_moves_are_one_request_for_both_arms(cell):
+    """In mirrored mode one request moves both arms, and the mirror image item is claimed."""
     job = make_job(cell, 'mirrored')
     lead, foll = cell.leader.name, cell.follower.name
     job.on_items([item_on_belt(cell, 1, y=-0.2), item_on_belt(cell, 2, y=0.2)])
@@ -215,6 +228,7 @@ def test_mirrored_moves_are_one_request_for_both_arms(cell):
 
 
 def test_mirrored_picks_keep_the_pair_apart(cell):
+    """Mirrored picks near the centre line are aimed off it, so the pair keeps its margin."""
     job = make_job(cell, 'mirrored')
     job.on_items([item_on_belt(cell, 1, y=-0.06), item_on_belt(cell, 2, y=0.06)])
     pick = moves(job.tick(0.0))[0]
@@ -222,6 +236,7 @@ def test_mirrored_picks_keep_the_pair_apart(cell):
 
 
 def test_estop_pauses_and_stop_is_idempotent(cell):
+    """The e-stop pauses the job, and stopping twice is the same as once."""
     job = make_job(cell)
     job.on_estop(True)
     job.on_items([item_on_belt(cell)])
@@ -233,6 +248,7 @@ def test_estop_pauses_and_stop_is_idempotent(cell):
 
 
 def test_an_arm_in_the_way_parks_and_a_deadlock_is_broken_by_the_follower(cell):
+    """An idle arm in the way parks; when both arms wait for each other the follower gives way."""
     lead, foll = cell.leader.name, cell.follower.name
     # the leader waits for the right arm, which stands idle in the way: the right arm parks
     job = make_job(cell)
@@ -427,12 +443,12 @@ def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):
     the arm's reach is chased at once (the planner holds the arm back if it must).
     """
     from scara_collab.core import job as job_module, planning
-    from scara_collab.core.sorting import reach_exit_x
+    from scara_collab.core.sorting import reach_span
     lead, foll = cell.leader, cell.follower
     job = make_job(cell)
     near = item_on_belt(cell, 98, x=2.5, y=0.0)
     ours = item_on_belt(cell, 97, x=2.7, y=0.05)  # beside it, downstream
-    exit_x = reach_exit_x(foll, ours.position[1], job.s.pick_z, 0.0, cell.belt.x_end)
+    exit_x = reach_span(foll, ours.position[1], job.s.pick_z, 0.0, cell.belt.x_end)[1]
     job.on_items([near, ours])
     busy = next(la for la in job.lanes if la.robot == lead.name)
     assert job._chase(busy, near, 0.0)

@@ -20,6 +20,10 @@ LEFT, RIGHT = CELL.leader, CELL.follower
 
 
 def test_seeds_worked_examples():
+    """The seeds' worked examples hold: FK and IK of (0, 90 deg) and case studies 1 and 2.
+
+    The 3 m target is refused with its reason, the 1.5 m one is reached.
+    """
     # FK: (0 deg, 90 deg) -> (1.5, 1.0) relative to the base
     assert_allclose(fk(LEFT, [0.0, np.pi / 2, 0.0], frame='base')[:2], [1.5, 1.0], atol=1e-12)
     # IK: (1.5, 1.0) -> (0 deg, 90 deg), elbow up by default
@@ -37,6 +41,7 @@ def test_seeds_worked_examples():
 
 @pytest.mark.parametrize('arm', [LEFT, RIGHT], ids=lambda a: a.name)
 def test_fk_matches_the_urdf_chain(arm):
+    """FK and the shoulder, elbow and tool points match the URDF's own kinematic chain."""
     urdf = parse_urdf(CELL.urdf)
     rng = np.random.default_rng(11)
     q = rng.uniform(arm.lower, arm.upper, (100, 3))
@@ -54,6 +59,10 @@ def test_fk_matches_the_urdf_chain(arm):
 
 @pytest.mark.parametrize('arm', [LEFT, RIGHT], ids=lambda a: a.name)
 def test_ik_round_trip_on_100k_random_targets(arm):
+    """IK solves exactly the reachable ones of 100k random FK targets.
+
+    Given the current state it returns those joints; without it, elbow up.
+    """
     rng = np.random.default_rng(5)
     q = rng.uniform(arm.lower, arm.upper, (100_000, 3))
     p = fk(arm, q)
@@ -77,6 +86,7 @@ annulus = st.tuples(st.floats(0.807, 2.45 - 1e-9), st.floats(-np.pi, np.pi), st.
 @settings(max_examples=300, deadline=None)
 @given(annulus)
 def test_ik_round_trip_scalar_property(target):
+    """Inside the reach annulus IK solves within limits, or refuses on the joint limit only."""
     r, phi, z = target
     base = LEFT.base_position
     p = np.array([base[0] + r * np.cos(phi), base[1] + r * np.sin(phi), z])
@@ -91,6 +101,7 @@ def test_ik_round_trip_scalar_property(target):
 
 
 def test_reach_edges_are_exact():
+    """The outer reach edge is exact to 1e-9 m; at the inner one the joint limit refuses."""
     base = LEFT.base_position
     at = np.array([base[0] + LEFT.reach_max, base[1], 0.3])
     assert ik(LEFT, at).code == kin.OK
@@ -112,6 +123,10 @@ def test_reach_edges_are_exact():
     ([-0.3, -2.0, 0.3], kin.JOINT_LIMIT),  # 2.3 m straight behind: theta1 ~ 180 deg
 ])
 def test_refusals_say_which_rule_failed(target, code):
+    """Each refused target names the rule that failed, also inside a batch.
+
+    The joints are NaN and the elbow 0; a batch's unwrap names the refused index.
+    """
     sol = ik(LEFT, target)
     assert sol.code == code and np.all(np.isnan(sol.q)) and sol.elbow == 0
     batch = ik(LEFT, np.array([target, [3.5, -1.0, 0.3]]))
@@ -121,6 +136,7 @@ def test_refusals_say_which_rule_failed(target, code):
 
 
 def test_least_displacement_choice_and_elbow_up_preference():
+    """Without a current state IK picks elbow up; with one, the elbow nearer to it."""
     p = fk(LEFT, [0.3, -1.2, 0.2])  # an elbow-down posture
     assert ik(LEFT, p).elbow == 1  # no current state: elbow up
     near_down = ik(LEFT, p, q_current=[0.3, -1.0, 0.0])
@@ -129,6 +145,7 @@ def test_least_displacement_choice_and_elbow_up_preference():
 
 
 def test_scalar_and_vector_paths_agree():
+    """The scalar and the vectorised IK give the same codes, joints and elbows."""
     rng = np.random.default_rng(2)
     p = np.c_[rng.uniform(-1, 5, 2000), rng.uniform(-5, 1, 2000), rng.uniform(0, 0.8, 2000)]
     qc = rng.uniform(LEFT.lower, LEFT.upper, (2000, 3))
@@ -143,6 +160,10 @@ def test_scalar_and_vector_paths_agree():
 
 
 def test_frames_and_homogeneous_transforms():
+    """Base and world frames convert both ways, and the homogeneous transforms agree.
+
+    Base-frame IK matches world-frame IK, and an unknown frame is refused.
+    """
     p = np.array([[3.0, -1.0, 0.4], [1.0, 2.5, 0.2]])
     for arm in (LEFT, RIGHT):
         assert_allclose(base_to_world(arm, world_to_base(arm, p)), p)
@@ -159,6 +180,7 @@ def test_frames_and_homogeneous_transforms():
 
 
 def test_jacobian_matches_finite_differences():
+    """The analytic Jacobian matches central finite differences of FK."""
     rng = np.random.default_rng(9)
     q = rng.uniform(LEFT.lower, LEFT.upper, (500, 3))
     jac = jacobian(LEFT, q)
@@ -176,6 +198,10 @@ def test_jacobian_matches_finite_differences():
 
 
 def test_dls_is_exact_away_from_singularity_and_bounded_near_it():
+    """DLS equals the exact inverse away from singularity and stays bounded near it.
+
+    The damping grows as the manipulability falls.
+    """
     w = np.linspace(0, 1, 101)
     lam = dls_damping(w, 0.5, 0.15)
     assert lam[0] == pytest.approx(0.15) and np.all(lam[w >= 0.5] == 0)

@@ -32,6 +32,7 @@ class Launch:
     """``launch_cell.py`` as a subprocess; its stdout lines are collected by a thread."""
 
     def __init__(self, *args: str):
+        """Start ``launch_cell.py args`` and a thread that collects its output lines."""
         env = dict(os.environ)  # the session's ROS_DOMAIN_ID (conftest.py)
         env['PYTHONUNBUFFERED'] = '1'
         self.proc = subprocess.Popen([sys.executable, str(LAUNCHER), *args], cwd=ROOT, env=env,
@@ -62,15 +63,18 @@ class Launch:
         pytest.fail(f'no line matching {pattern!r}; output:\n{self.output}')
 
     def wait(self, timeout: float = TIMEOUT) -> int:
+        """Wait for the launcher to exit and its output to be read; return the exit code."""
         code = self.proc.wait(timeout=timeout)
         self._reader.join(timeout=10)
         return code
 
     @property
     def output(self) -> str:
+        """Return the output so far, one string."""
         return '\n'.join(self.lines)
 
     def kill(self) -> None:
+        """Kill the launcher if it still runs (its children follow it)."""
         if self.proc.poll() is None:  # the children follow (PR_SET_PDEATHSIG)
             self.proc.kill()
             self.proc.wait(timeout=30)
@@ -78,6 +82,7 @@ class Launch:
 
 @pytest.fixture
 def launch():
+    """Yield ``start(*args)``, which launches; launchers still running are killed after."""
     made = []
 
     def start(*args):
@@ -90,6 +95,7 @@ def launch():
 
 
 def assert_complete_csv(path: Path, min_rows: int = 1) -> list:
+    """Assert that a CSV file ends in a newline and has no ragged row; return its rows."""
     text = path.read_text()
     assert text.endswith('\n'), f'{path} ends in the middle of a line'
     rows = list(csv.reader(text.splitlines()))
@@ -99,6 +105,7 @@ def assert_complete_csv(path: Path, min_rows: int = 1) -> list:
 
 
 def assert_children_gone(out: Path, names=NODES) -> dict:
+    """Assert that every process in ``pids.json`` is gone; return the pids."""
     pids = json.loads((out / 'pids.json').read_text())
     assert set(names) <= set(pids)
     for name, pid in pids.items():
@@ -108,6 +115,10 @@ def assert_children_gone(out: Path, names=NODES) -> dict:
 
 
 def test_idle_run_writes_report_and_files(launch, tmp_path):
+    """An idle run exits 0 with its report and every file.
+
+    Summary, CSVs, plots, node logs, CPU costs, the MCAP recording and the GIF.
+    """
     out = tmp_path / 'idle'
     la = launch('--mode', 'idle', '--duration', '3', '--rtf', '0', '--output', str(out),
                 '--record', '--animation')
@@ -194,6 +205,7 @@ def test_one_process_runs_every_node_on_one_executor(launch, tmp_path):
 
 
 def test_the_container_reads_one_entry_and_its_arguments_per_node():
+    """The container parses one entry and its arguments per ``--node``; every stage fits."""
     from scara_collab.run import container
     bridge = 'scara_collab.nodes.pybullet_bridge:main'
     left = 'scara_collab.nodes.planner:main_left'
@@ -215,6 +227,7 @@ def test_the_container_reads_one_entry_and_its_arguments_per_node():
 
 
 def test_the_cpu_meter_gives_cpu_seconds_per_sim_second_per_process():
+    """The CPU meter gives each process's CPU seconds per sim second, and their total."""
     from scara_collab.run.telemetry import CpuMeter, process_cpu_seconds
     own = process_cpu_seconds(os.getpid())
     assert own is not None and own > 0
@@ -279,6 +292,7 @@ def test_a_lost_start_answer_and_lost_gripper_answers_cost_a_retry(launch, tmp_p
 
 
 def test_a_dead_node_ends_the_run_with_its_name(launch, tmp_path):
+    """A node killed mid-run ends the run with exit 1, naming it and showing its log."""
     out = tmp_path / 'dead'
     la = launch('--mode', 'idle', '--duration', '600', '--rtf', '1', '--output', str(out),
                 '--no-plots')
@@ -409,6 +423,7 @@ def test_a_wall_clock_stamped_state_neither_ends_nor_enters_the_run(launch, tmp_
 
 
 def test_viewer_flag_adds_the_viewer_stage_last(monkeypatch):
+    """``--viewer`` adds the viewer stage last; a busy or zero port is refused."""
     import socket
     from scara_collab.run import launcher
     names = [s.name for s in launcher.stages(launcher.parse_args([]), True)]
@@ -433,6 +448,7 @@ def test_viewer_flag_adds_the_viewer_stage_last(monkeypatch):
 
 
 def test_the_lockstep_watch_names_only_a_node_that_leaves_a_clock_unanswered():
+    """The lockstep watch names only a node that left a newer clock unanswered too long."""
     from scara_collab.run import launcher
     watch = launcher.LockstepWatch(['/a', '/b'], limit=10.0)
     for name in ('/a', '/b', '/not_launched'):

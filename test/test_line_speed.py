@@ -84,6 +84,10 @@ def _singular_lines(arm, rng, count):
 
 @pytest.mark.parametrize('name', list(ARMS))
 def test_float_loop_matches_the_numpy_loop_near_singularities(name):
+    """Near singularities ``follow_line`` gives the numpy loop's results to 1e-10.
+
+    For both arms of the cell, a base turned about z and a tilted one.
+    """
     arm = ARMS[name]
     rng = np.random.default_rng(list(ARMS).index(name) + 11)
     damped = 0
@@ -99,6 +103,7 @@ def test_float_loop_matches_the_numpy_loop_near_singularities(name):
 
 
 def test_other_iteration_counts_and_damping_match_too():
+    """Other iteration counts, thresholds and damping limits give the numpy loop's results."""
     arm = CELL.follower
     rng = np.random.default_rng(7)
     # (iterations, threshold, max damping); a threshold of 0.9 damps the stretched starts too
@@ -112,6 +117,7 @@ def test_other_iteration_counts_and_damping_match_too():
 
 
 def test_the_scalar_damping_is_dls_damping():
+    """The scalar damping of the float loop equals :func:`dls_damping`."""
     for w in (0.0, 1e-9, 0.1, 0.25, 0.4999999, 0.5, 0.7, 2.5):
         for thr, lam in ((0.5, 0.15), (1.0, 0.3)):
             assert trajectory._scalar_damping(w, thr, lam) == pytest.approx(
@@ -126,6 +132,7 @@ def _outcome(fn):
 
 
 def test_fallbacks_give_the_numpy_loop_results():
+    """Where the float loop cannot go, the fallback gives (or raises) what numpy does."""
     arm = CELL.leader
     q0 = np.array([0.4, 0.0, 0.2])  # exactly stretched
     a = fk(arm, q0)
@@ -160,6 +167,7 @@ SEQUENTIAL_LINES = [
 
 @pytest.mark.parametrize('name, a, b', SEQUENTIAL_LINES)
 def test_line_move_is_unchanged_on_the_sequential_path(monkeypatch, name, a, b):
+    """``line_move`` gives the numpy loop's result on its sequential path."""
     arm = CELL.arm(name)
     q0 = ik(arm, base_to_world(arm, np.array(a))).unwrap()
     target = base_to_world(arm, np.array(b))

@@ -22,6 +22,7 @@ class Busy:
     """A participant that, once sim time passes ``after``, computes for ``seconds`` (wall)."""
 
     def __init__(self, g: Graph, after: float, seconds: float):
+        """Join ``g``'s lockstep on sim time and spin in a thread; work once past ``after``."""
         self.node = Node('busy', context=g.context,
                          parameter_overrides=[Parameter('use_sim_time', value=True)])
         self.part = lockstep.join(self.node)
@@ -46,6 +47,7 @@ class Busy:
             self.window = (t, self.bridge.sim.time)
 
     def close(self) -> None:
+        """Stop the spinning thread and destroy the node."""
         self.stop.set()
         self.thread.join(5.0)
         self.executor.shutdown()
@@ -53,6 +55,7 @@ class Busy:
 
 
 def make_graph(window: float, timeout: float = 5.0) -> Graph:
+    """Return a graph with an unthrottled bridge of this lockstep ``window`` and ``timeout``."""
     g = Graph()
     g.bridge = g.add(PyBulletBridge(context=g.context, cli_args=params_args(
         'simulation', 'controllers', overrides={
@@ -63,6 +66,7 @@ def make_graph(window: float, timeout: float = 5.0) -> Graph:
 
 @pytest.mark.parametrize('window', [0.02, 0.0])
 def test_sim_time_waits_for_a_busy_participant(window):
+    """With a window sim time waits for a busy participant; without one it runs on."""
     g = make_graph(window)
     busy = Busy(g, after=0.3, seconds=0.6)
     try:
@@ -83,6 +87,7 @@ def test_sim_time_waits_for_a_busy_participant(window):
 
 
 def test_a_silent_participant_is_dropped_and_rejoins():
+    """A participant silent beyond the timeout is dropped, and rejoins when it answers."""
     g = make_graph(0.02, timeout=0.3)
     busy = Busy(g, after=0.2, seconds=1.5)
     try:
@@ -99,6 +104,7 @@ def test_a_silent_participant_is_dropped_and_rejoins():
 
 
 def test_a_leaving_participant_is_no_longer_waited_for():
+    """A participant that leaves the lockstep frees the clock without a timeout."""
     g = make_graph(0.02, timeout=30.0)
     busy = Busy(g, after=1e9, seconds=0.0)  # never busy
     try:
@@ -116,6 +122,7 @@ def test_a_leaving_participant_is_no_longer_waited_for():
 
 
 def test_nodes_on_wall_time_or_opted_out_do_not_join():
+    """Nodes on wall time, or with ``lockstep`` false, do not join."""
     g = Graph()
     try:
         wall = Node('wall', context=g.context)
@@ -129,6 +136,7 @@ def test_nodes_on_wall_time_or_opted_out_do_not_join():
 
 
 def test_a_window_shorter_than_the_clock_period_is_refused():
+    """A lockstep window shorter than the clock period is refused when the bridge starts."""
     g = Graph()
     try:
         with pytest.raises(ValueError, match='clock could never advance'):
@@ -143,14 +151,17 @@ class Wall:
     """A wall clock the test sets by hand."""
 
     def __init__(self):
+        """Start at wall time 0."""
         self.now = 0.0
 
     def __call__(self) -> float:
+        """Return the wall time the test set."""
         return self.now
 
 
 @pytest.fixture
 def bare():
+    """Yield a graph with a plain node standing in for the bridge."""
     g = Graph()
     g.node = g.add(Node('bridge_stand_in', context=g.context))
     yield g
@@ -158,6 +169,7 @@ def bare():
 
 
 def answer(gate, name: str, t: float) -> None:
+    """Hand ``gate`` the lockstep answer of participant ``name`` at sim time ``t``."""
     gate.receive(Header(stamp=conv.to_time(t), frame_id=name))
 
 
@@ -196,6 +208,7 @@ def test_one_frozen_participant_is_dropped_and_the_others_are_not(bare):
 
 
 def test_per_node_timeouts_override_the_default(bare):
+    """Per-node timeouts drop each participant after its own wall seconds."""
     wall = Wall()
     timeouts = lockstep.parse_timeouts(['slow:20', '', '/quick:0.5'])
     assert timeouts == {'/slow': 20.0, '/quick': 0.5}
@@ -218,11 +231,16 @@ def test_per_node_timeouts_override_the_default(bare):
 
 @pytest.mark.parametrize('entry', ['monitor', 'monitor:0', ':2.0', 'monitor:soon', 'm:-1'])
 def test_a_malformed_timeout_is_refused(entry):
+    """A timeout entry without a name, or not a number > 0, is refused."""
     with pytest.raises(ValueError, match='expected <node>:<seconds > 0>'):
         lockstep.parse_timeouts([entry])
 
 
 def test_a_guard_holds_the_arms_before_it_is_dropped_and_clears_when_it_answers(bare):
+    """A silent guard holds the arms before it is dropped, and clears when it answers.
+
+    A plain participant's drop raises no guard event; a guard that leaves holds the arms.
+    """
     wall = Wall()
     events = []
 

@@ -86,6 +86,7 @@ def record_run(directory: Path, cell, seconds: float = 3.0) -> dict:
 
 @pytest.fixture(scope='module')
 def recorded(tmp_path_factory, cell):
+    """Record a short run once for the module; return what :func:`record_run` returns."""
     return record_run(tmp_path_factory.mktemp('mcap_run'), cell)
 
 
@@ -101,6 +102,10 @@ def read_all(path: Path):
 
 # --- schemas ---------------------------------------------------------------------------------
 def test_schema_text_is_the_main_msg_then_every_nested_type():
+    """The schema text is the main .msg, then every nested type in rosbag2's order.
+
+    An unknown type is refused.
+    """
     text = ros2msg_definition('geometry_msgs/msg/PointStamped')
 
     def block(name, msg):
@@ -123,6 +128,7 @@ def test_schema_text_is_the_main_msg_then_every_nested_type():
 
 @pytest.mark.parametrize('topic', run_topics(ROBOTS), ids=lambda t: t.name)
 def test_every_schema_parses_with_mcap_ros2_and_decodes_real_bytes(topic):
+    """Every recorded topic's schema parses with mcap_ros2 and decodes a message's bytes."""
     schema = Schema(id=1, name=topic.type, encoding='ros2msg',
                     data=ros2msg_definition(topic.type).encode())
     decode = DecoderFactory().decoder_for('cdr', schema)
@@ -134,6 +140,10 @@ def test_every_schema_parses_with_mcap_ros2_and_decodes_real_bytes(topic):
 
 # --- a recorded run --------------------------------------------------------------------------
 def test_the_recorded_run_reads_back_with_types_and_sim_timestamps(recorded):
+    """The recorded run reads back with its types, in CDR, on sim log times.
+
+    Log times never go backwards; mcap_ros2 and rclpy agree; the targets are as sent.
+    """
     header, summary, messages = read_all(recorded['mcap'])
     assert header.profile == 'ros2'
     assert summary is not None and summary.statistics.message_count == len(messages)
@@ -203,6 +213,7 @@ def test_the_recorded_run_reads_back_with_types_and_sim_timestamps(recorded):
 
 
 def test_read_mcap_script_summarises_and_dumps(recorded):
+    """``read_mcap.py`` prints the summary and dumps the asked topics' messages."""
     proc = subprocess.run([sys.executable, str(ROOT / 'scripts' / 'read_mcap.py'),
                            str(recorded['mcap']), '--dump', '1', '--topic', '/joint_states',
                            '--topic', '/collab/target'],
@@ -218,6 +229,10 @@ def test_read_mcap_script_summarises_and_dumps(recorded):
 
 
 def test_an_unclosed_recording_keeps_its_chunks_and_close_completes_it(tmp_path):
+    """An unclosed recording keeps its complete chunks; closing it completes the file.
+
+    The closed file holds every message, the cut file's first.
+    """
     path = tmp_path / 'cut.mcap'
     g = Graph()
     try:

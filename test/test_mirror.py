@@ -32,12 +32,17 @@ def test_seeds_case_study_3():
 @settings(max_examples=200, deadline=None)
 @given(st.tuples(coord, coord, coord))
 def test_mirroring_twice_is_the_identity(p):
+    """Mirroring a point there and back, or joints twice, is the identity (hypothesis)."""
     p = np.array(p)
     assert_allclose(mirror_point(RIGHT, LEFT, mirror_point(LEFT, RIGHT, p)), p, atol=1e-12)
     assert_allclose(mirror_joints(mirror_joints(p)), p)
 
 
 def test_joint_mirror_equals_point_mirror():
+    """The joint mirror maps through FK to the point mirror.
+
+    IK of a mirrored target from the mirrored state gives the mirrored joints.
+    """
     rng = np.random.default_rng(8)
     q = rng.uniform(LEFT.lower, LEFT.upper, (1000, 3))
     assert_allclose(fk(RIGHT, mirror_joints(q)), mirror_point(LEFT, RIGHT, fk(LEFT, q)),
@@ -51,6 +56,7 @@ def test_joint_mirror_equals_point_mirror():
 
 
 def test_mirror_of_a_belt_point_is_across_the_belt():
+    """A point on the left half of the belt mirrors to the same x on the right half."""
     p = np.array([2.5, -0.3, 0.3])  # on the left half of the belt
     m = mirror_point(LEFT, RIGHT, p)
     assert_allclose(m, [2.5, 0.3, 0.3])

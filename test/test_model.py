@@ -23,6 +23,7 @@ def spec_tool(base, q):
 
 @pytest.mark.parametrize('robot', sorted(BASES))
 def test_urdf_chain_puts_the_tool_where_the_spec_says(cell, robot):
+    """The cell URDF's chain puts the tool, elbow and link 1 where the SPEC says."""
     urdf = parse_urdf(cell.urdf)
     arm = cell.arm(robot)
     rng = np.random.default_rng(3)
@@ -39,6 +40,7 @@ def test_urdf_chain_puts_the_tool_where_the_spec_says(cell, robot):
 
 
 def test_typed_model_matches_spec(cell):
+    """The typed model has the SPEC's names, lengths, bases, limits, reach, margin and belt."""
     assert [a.name for a in cell.arms] == ['scara_left', 'scara_right']
     for arm in cell.arms:
         assert arm.joint_names == (f'{arm.name}_joint_1', f'{arm.name}_joint_2',
@@ -57,6 +59,7 @@ def test_typed_model_matches_spec(cell):
 
 @pytest.mark.parametrize('profile', sorted(THICKNESS))
 def test_profiles_set_thickness_and_mass_from_density(profile):
+    """Each profile sets the link radius; masses and inertias follow from the density."""
     cell = load_cell(profile)
     rho = load_config('cell')['arm']['link_density']
     r = THICKNESS[profile] / 2
@@ -72,6 +75,7 @@ def test_profiles_set_thickness_and_mass_from_density(profile):
 
 
 def test_profiles_differ_as_specified():
+    """Link mass grows with the cross-section (1 : 4 : 9) across the profiles."""
     slim, default, heavy = (load_cell(p).leader for p in ('slim', 'default', 'heavy'))
     # mass goes with the cross-section: (0.05 : 0.10 : 0.15)^2 = 1 : 4 : 9
     assert default.link_1.mass / slim.link_1.mass == pytest.approx(4.0)
@@ -82,6 +86,10 @@ def test_profiles_differ_as_specified():
 
 @pytest.mark.parametrize('profile', sorted(THICKNESS))
 def test_inertias_are_physically_valid(profile):
+    """Every inertia is physically valid and no mass or inertia is a placeholder.
+
+    Symmetric, positive definite and within the triangle inequality.
+    """
     for arm in load_cell(profile).arms:
         for link in (arm.link_1, arm.link_2, arm.quill):
             inertia = link.inertia
@@ -95,6 +103,7 @@ def test_inertias_are_physically_valid(profile):
 
 
 def test_bins_sit_on_each_arms_outer_side_within_reach(cell):
+    """Each arm's bins are on its outer side within its reach, mirrored across the belt."""
     for arm in cell.arms:
         base = arm.base_position
         for cls in cell.item_classes:
@@ -109,6 +118,7 @@ def test_bins_sit_on_each_arms_outer_side_within_reach(cell):
 
 
 def test_single_arm_xacro_matches_the_cell():
+    """The single-arm xacro has the same joint origins and link masses as the cell URDF."""
     for robot in BASES:
         arm = parse_urdf(expand_xacro('scara_arm.urdf.xacro', robot=robot, profile='heavy'))
         cell = parse_urdf(load_cell('heavy').urdf)

@@ -27,6 +27,11 @@ LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
 
 @pytest.fixture
 def cell():
+    """Yield the motion graph on sim time, its topics collected.
+
+    The bridge, both planners, the replication manager and the monitor, once both planners
+    have a state.
+    """
     g = Graph()
     ctx = g.context
     g.bridge = g.add(PyBulletBridge(context=ctx, cli_args=params_args(
@@ -52,16 +57,19 @@ def cell():
 
 
 def publish(g, topic, xyz, frame='world', stamp=0.0):
+    """Publish one target point on ``topic`` from the probe once a node subscribes."""
     pub = g.probe.create_publisher(PointStamped, topic, 10)
     assert g.spin_until(lambda: pub.get_subscription_count() > 0)
     pub.publish(conv.make_point_stamped(xyz, frame, stamp))
 
 
 def run_until(g, t):
+    """Spin until the simulator has passed sim time ``t`` (at most 120 s wall)."""
     assert g.spin_until(lambda: g.bridge.sim.time > t, timeout=120)
 
 
 def tool_paths(g, t0=0.0):
+    """Return the recorded states' stamps from ``t0`` on and both arms' tool tips."""
     left, right = g.bridge.cell.arms
     t, ql, qr = [], [], []
     for m in g.states:
@@ -74,12 +82,18 @@ def tool_paths(g, t0=0.0):
 
 
 def last_end(g, robot):
+    """Return the end time of ``robot``'s last planned move."""
     planned = [st for st in map(proto.PlannerStatus.from_msg, g.status[robot])
                if st.state == 'planned']
     return planned[-1].end
 
 
 def test_collab_target_moves_both_arms_mirrored_and_straight(cell):
+    """A collab target moves both arms mirrored and the leader straight.
+
+    Both trajectories carry the same start stamp; the follower's mirror error and the leader's
+    line deviation stay within 1 mm, and the margin holds.
+    """
     left, right = cell.bridge.cell.arms
     p0 = fk(left, cell.left.q)
     target = np.array([2.7, -0.7, 0.4])
@@ -108,6 +122,10 @@ def test_collab_target_moves_both_arms_mirrored_and_straight(cell):
 
 
 def test_meeting_on_the_belt_centre_line_makes_the_right_arm_wait(cell):
+    """Arms meeting on the belt centre line: the right arm waits until the left one leaves.
+
+    It then goes, delayed, to its target; the margin holds and no e-stop is raised.
+    """
     margin = cell.bridge.cell.safety_margin
     publish(cell, '/collab/target', [2.6, -0.03, 0.4])  # mirrors to (2.6, 0.03): they'd meet
     assert cell.spin_until(lambda: cell.status['scara_right'] and cell.status['scara_left'])
@@ -137,6 +155,7 @@ def test_meeting_on_the_belt_centre_line_makes_the_right_arm_wait(cell):
     ([3.0, -1.0, 0.4], 'map', 'unknown frame'),
 ])
 def test_bad_targets_are_refused_and_nothing_moves(cell, xyz, frame, reason):
+    """Each bad target is refused with its reason, and the arm does not move."""
     q0 = cell.left.q.copy()
     publish(cell, '/scara_left/target', xyz, frame)
     assert cell.spin_until(lambda: cell.status['scara_left'])
@@ -148,11 +167,16 @@ def test_bad_targets_are_refused_and_nothing_moves(cell, xyz, frame, reason):
 
 
 def listens_to_states(node) -> bool:
+    """Return True if ``node`` subscribes ``/joint_states``."""
     return any(t == '/joint_states' for t, _ in node.get_subscriber_names_and_types_by_node(
         node.get_name(), node.get_namespace()))
 
 
 def test_base_frame_targets_and_mirroring_off(cell):
+    """A base-frame target reaches its world point; mirroring off leaves the follower.
+
+    While off the manager does not take /joint_states; enabled again, it measures again.
+    """
     left = cell.bridge.cell.leader
     assert listens_to_states(cell.replicator)
     res = cell.call(SetBool, '/replication_manager/enable', SetBool.Request(data=False))

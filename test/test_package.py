@@ -26,6 +26,7 @@ def _console_scripts():
 
 @pytest.fixture(scope='module')
 def installed(tmp_path_factory):
+    """Build the package with colcon in a fresh workspace once; return its install prefix."""
     if not COLCON.exists():
         pytest.fail(f'colcon is not installed next to {sys.executable}; run ./scripts/bootstrap')
     ws = tmp_path_factory.mktemp('ws')
@@ -40,6 +41,7 @@ def installed(tmp_path_factory):
 
 
 def test_colcon_installs_share_files_and_marker(installed):
+    """A colcon build installs the marker, package.xml, xacro, configs and Python package."""
     share = installed / 'share' / 'scara_collab'
     assert (installed / 'share/ament_index/resource_index/packages/scara_collab').is_file()
     assert (share / 'package.xml').is_file()
@@ -52,12 +54,14 @@ def test_colcon_installs_share_files_and_marker(installed):
 
 
 def test_colcon_installs_every_executable_under_lib(installed):
+    """Every console script is installed as an executable under ``lib/scara_collab``."""
     for name in _console_scripts():
         exe = installed / 'lib' / 'scara_collab' / name
         assert exe.is_file() and os.access(exe, os.X_OK), f'ros2 run cannot find {name}'
 
 
 def test_setup_cfg_puts_scripts_where_ros2_run_looks():
+    """setup.cfg puts the scripts in ``$base/lib/scara_collab``, where ``ros2 run`` looks."""
     cfg = configparser.ConfigParser()
     cfg.read(ROOT / 'setup.cfg')
     assert cfg['develop']['script_dir'] == '$base/lib/scara_collab'
@@ -65,6 +69,7 @@ def test_setup_cfg_puts_scripts_where_ros2_run_looks():
 
 
 def test_xacro_expands_from_the_installed_share_directory(installed):
+    """The cell xacro expands from the installed share folder (4 revolute, 2 prismatic)."""
     import xacro
     share = installed / 'share' / 'scara_collab'
     xml = xacro.process_file(str(share / 'urdf' / 'scara_cell.urdf.xacro')).toxml()
@@ -72,6 +77,7 @@ def test_xacro_expands_from_the_installed_share_directory(installed):
 
 
 def test_package_xml_declares_what_the_code_imports():
+    """package.xml declares every ROS package, numpy, yaml and xacro the code imports."""
     root = ET.parse(ROOT / 'package.xml').getroot()
     assert root.get('format') == '3'
     assert root.findtext('export/build_type') == 'ament_python'

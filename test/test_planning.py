@@ -12,10 +12,12 @@ from scara_collab.core.sorting import drop_point
 
 @pytest.fixture(scope='module')
 def cell():
+    """Return the cell model."""
     return load_cell()
 
 
 def test_timeline_since_keeps_only_what_is_left():
+    """A timeline cut at a time keeps only the motion still to come, interpolated at the cut."""
     tl = Timeline(np.array([1.0, 2.0, 3.0]), np.array([[0.0, 0, 0], [1, 1, 1], [2, 2, 2]]))
     assert tl.since(0.5) is tl  # not started yet: all of it is still to come
     part = tl.since(1.5)

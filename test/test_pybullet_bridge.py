@@ -24,6 +24,7 @@ LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
 
 @pytest.fixture
 def graph():
+    """Yield a graph with an unthrottled bridge, its states and statuses collected."""
     g = Graph()
     g.bridge = g.add(PyBulletBridge(
         context=g.context,
@@ -37,16 +38,19 @@ def graph():
 
 
 def sim_time(g):
+    """Return the bridge's sim time, s."""
     return g.bridge.sim.time
 
 
 def left_q(g):
+    """Return the leader's joints from the newest collected joint state."""
     names, pos = g.states[-1].name, g.states[-1].position
     arm = g.bridge.cell.leader
     return np.array([pos[list(names).index(n)] for n in arm.joint_names])
 
 
 def test_clock_and_joint_states_in_sim_time(graph):
+    """/clock and /joint_states run on sim time: six joints, stamps 10 ms apart."""
     clocks = graph.collect(Clock, '/clock')
     assert graph.spin_until(lambda: len(graph.states) >= 30 and len(clocks) >= 10)
     names = list(graph.states[-1].name)
@@ -62,6 +66,7 @@ def test_clock_and_joint_states_in_sim_time(graph):
 
 
 def test_a_trajectory_is_tracked(graph):
+    """A raw joint trajectory is accepted (no id) and tracked within 5 mrad / 5 mm."""
     arm = graph.bridge.cell.leader
     assert graph.spin_until(lambda: len(graph.states) > 5)
     q0 = left_q(graph)
@@ -98,6 +103,7 @@ def test_a_trajectory_is_tracked(graph):
     (lambda m: m.points[1].positions.__setitem__(0, 3.0), 'limit'),
 ])
 def test_bad_trajectories_are_refused_and_nothing_moves(graph, mutate, reason):
+    """Each malformed or out-of-limits trajectory is refused; the arm does not move."""
     arm = graph.bridge.cell.leader
     assert graph.spin_until(lambda: len(graph.states) > 5)
     q0 = left_q(graph)
@@ -117,6 +123,7 @@ def test_bad_trajectories_are_refused_and_nothing_moves(graph, mutate, reason):
 
 
 def test_emergency_stop_holds_both_arms(graph):
+    """Under the e-stop a trajectory is refused and the arm holds its pose."""
     arm = graph.bridge.cell.leader
     assert graph.spin_until(lambda: len(graph.states) > 5)
     q0 = left_q(graph)
@@ -135,6 +142,10 @@ def test_emergency_stop_holds_both_arms(graph):
 
 
 def test_gripper_refuses_with_nothing_to_grasp_and_items_are_published(graph):
+    """A grasp with nothing under the tool is refused; a release while empty succeeds.
+
+    Spawned items are published on /conveyor/items.
+    """
     res = graph.call(SetBool, '/scara_left/gripper', SetBool.Request(data=True))
     assert not res.success and res.message
     res = graph.call(SetBool, '/scara_left/gripper', SetBool.Request(data=False))
@@ -146,6 +157,7 @@ def test_gripper_refuses_with_nothing_to_grasp_and_items_are_published(graph):
 
 
 def test_item_markers_read_back(cell):
+    """Item markers and planned paths read back to the ids, classes, stamps and points."""
     items = [SimpleNamespace(id=3, cls=cell.item_classes[0], position=np.array([1.0, 0.1, 0.3])),
              SimpleNamespace(id=7, cls=cell.item_classes[1], position=np.array([2.0, -0.2, 0.3]))]
     back = conv.item_positions(conv.item_markers(items, cell.item_classes, cell.item_size, 4.5))

@@ -30,6 +30,7 @@ SUMMARY_KEYS = ('mode', 'sim_seconds', 'wall_seconds', 'sorted', 'missed', 'wron
 
 @pytest.fixture
 def context():
+    """Yield an initialised rclpy context of its own; shut it down afterwards."""
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     yield ctx
@@ -38,6 +39,10 @@ def context():
 
 @pytest.fixture
 def make_recorder(context, tmp_path, cell):
+    """Yield ``make(mode, sub, **kwargs)``, a factory of recorders writing under ``tmp_path``.
+
+    Every recorder it made is destroyed afterwards.
+    """
     made = []
 
     def make(mode='collaborative', sub='run', **kwargs):
@@ -51,12 +56,14 @@ def make_recorder(context, tmp_path, cell):
 
 
 def random_joints(cell, n, seed=1):
+    """Return ``n`` random joint states ``(n, 3)`` within 90 % of the leader's limits."""
     rng = np.random.default_rng(seed)
     arm = cell.leader
     return rng.uniform(arm.lower * 0.9, arm.upper * 0.9, size=(n, 3))
 
 
 def state_msg(cell, t, q_lead, q_foll, reverse=False):
+    """Return a JointState of both arms at ``t`` (``reverse``: the joints in reverse order)."""
     names = list(cell.leader.joint_names) + list(cell.follower.joint_names)
     pos = list(q_lead) + list(q_foll)
     if reverse:  # any joint order must work
@@ -71,22 +78,30 @@ def feed(rec, msg):
 
 
 def event_msg(kind, t, item, cls='red', robot=''):
+    """Return an item event as the bridge publishes it."""
     return proto.ItemEvent(kind, item, cls, t, robot).to_msg()
 
 
 def read_csv(path):
+    """Return the header and the rows of a CSV file."""
     with open(path, newline='') as f:
         rows = list(csv.reader(f))
     return rows[0], rows[1:]
 
 
 def assert_png(path):
+    """Assert that ``path`` is a PNG file of a plausible size."""
     data = path.read_bytes()
     assert data.startswith(PNG), path
     assert len(data) > 5000, f'{path} is suspiciously small'
 
 
 def test_state_rows_match_the_core(make_recorder, cell):
+    """Each CSV row holds the state's time and joints and the core's figures, in any order.
+
+    The tool tips, mirror error and arm distance are those of FK, ``mirror_point`` and
+    ``arm_distance``.
+    """
     rec = make_recorder('collaborative', batch=7)
     ql = random_joints(cell, 25, seed=2)
     qf = random_joints(cell, 25, seed=3)
@@ -115,6 +130,7 @@ def test_state_rows_match_the_core(make_recorder, cell):
 
 
 def test_mirrored_states_have_zero_mirror_error(make_recorder, cell):
+    """Mirrored states give zero mirror error over the whole run; every plot is written."""
     rec = make_recorder('mirrored')
     q = random_joints(cell, 50, seed=4)
     for k in range(50):
@@ -132,6 +148,10 @@ def test_mirrored_states_have_zero_mirror_error(make_recorder, cell):
 
 
 def test_summary_plots_and_counts(make_recorder, cell):
+    """The summary counts the job window's events and takes the separation from the states.
+
+    It writes its plots (no mirror plot outside mirrored mode), the events CSV and a report.
+    """
     rec = make_recorder('collaborative')
     q = np.array([0.0, 1.5708, 0.0])
     for k in range(301):
@@ -168,6 +188,7 @@ def test_summary_plots_and_counts(make_recorder, cell):
 
 
 def test_each_figure_comes_from_its_one_source(make_recorder, cell):
+    """Counts come from the events, give-ups from the job, the separation from the monitor."""
     rec = make_recorder('single')
     q = np.array([0.3, 1.0, 0.1])
     feed(rec, state_msg(cell, 1.0, q, mirror_joints(q)))
@@ -185,6 +206,7 @@ def test_each_figure_comes_from_its_one_source(make_recorder, cell):
 
 
 def test_mirrored_summary_takes_the_replication_managers_in_step_error(make_recorder, cell):
+    """A mirrored summary reports the replication manager's in-step error."""
     rec = make_recorder('mirrored')
     q = np.array([0.3, 1.0, 0.1])
     feed(rec, state_msg(cell, 1.0, q, mirror_joints(q)))
@@ -201,6 +223,10 @@ def test_mirrored_summary_takes_the_replication_managers_in_step_error(make_reco
 
 
 def test_interrupted_recording_keeps_complete_files(make_recorder, cell):
+    """An interrupted recording keeps every complete row and a summary marked interrupted.
+
+    States that come after the close are ignored.
+    """
     rec = make_recorder('collaborative', batch=10)
     q = random_joints(cell, 37, seed=5)
     for k in range(37):  # 3 full batches on disk, 7 rows still queued
@@ -267,6 +293,7 @@ def test_recorder_hears_the_graph(make_recorder, context, cell):
 
 
 def test_parse_value_and_run_log_windows(tmp_path, cell):
+    """``parse_value`` reads booleans, numbers, NaN and text; event counts honour the window."""
     assert parse_value('true') is True and parse_value('False') is False
     assert parse_value('12') == 12 and parse_value('0.5') == 0.5
     assert parse_value('nan') is None and parse_value('') is None
@@ -280,6 +307,7 @@ def test_parse_value_and_run_log_windows(tmp_path, cell):
 
 
 def test_lost_joint_states_are_counted(make_recorder, cell):
+    """Gaps in the state stamps are counted as missing states, with the largest gap."""
     rec = make_recorder('idle', batch=4)
     q = np.zeros(3)
     stamps = [0.0, 0.01, 0.02, 0.06, 0.07, 0.08, 0.09, 0.10, 0.30]  # 3 + 19 missing

@@ -19,6 +19,10 @@ def _check(t, q, qd=None, qdd=None):
        st.integers(0, 2 ** 31 - 1))
 @settings(max_examples=50, deadline=None)
 def test_spline_passes_through_points_with_their_velocities(steps, seed):
+    """The spline passes through every point with its velocity (hypothesis).
+
+    Its acceleration is the derivative of its velocity.
+    """
     rng = np.random.default_rng(seed)
     t = 10.0 + np.concatenate(([0.0], np.cumsum(steps)))
     q = rng.uniform(-1.0, 1.0, size=(len(t), 3))
@@ -36,6 +40,7 @@ def test_spline_passes_through_points_with_their_velocities(steps, seed):
 
 
 def test_before_and_after_the_trajectory_it_holds_at_rest():
+    """Before the first point and after the last the reference holds those points at rest."""
     t, q = [1.0, 2.0], [[0.0, 0.0, 0.1], [0.5, -0.5, 0.2]]
     ref = HermiteReference(*_check(t, q)[:3])
     for time, expect in ((0.0, q[0]), (5.0, q[1])):
@@ -45,6 +50,7 @@ def test_before_and_after_the_trajectory_it_holds_at_rest():
 
 
 def test_default_velocities_are_central_differences_and_zero_at_the_ends():
+    """Without given velocities the inner ones are central differences, the end ones zero."""
     t = np.array([0.0, 1.0, 2.0, 4.0])
     q = np.array([[0.0, 0, 0], [0.5, 0, 0], [1.0, 0, 0], [1.2, 0, 0]])
     _, _, qd, _ = _check(t, q)
@@ -52,6 +58,7 @@ def test_default_velocities_are_central_differences_and_zero_at_the_ends():
 
 
 def test_peak_speed_finds_the_maximum_inside_a_segment():
+    """The peak speed inside a segment is found (1.5x the mean for a smoothstep)."""
     t = np.array([0.0, 1.0])
     q = np.array([[0.0, 0, 0], [1.0, 0, 0]])
     qd = np.zeros((2, 3))  # smoothstep: peak 1.5 x the mean speed at mid-segment
@@ -69,11 +76,13 @@ def test_peak_speed_finds_the_maximum_inside_a_segment():
     ([0.0, 0.5], [[0, 0, 0], [0.9, 0, 0]], 'velocity of joint 1 reaches 2.7'),
 ])
 def test_refusals_say_why(t, q, reason):
+    """Each malformed or out-of-limits trajectory is refused, saying why and where."""
     with pytest.raises(TrajectoryError, match=reason):
         _check(t, q)
 
 
 def test_given_velocities_above_the_limit_are_refused():
+    """Given velocities above the limit, and non-finite accelerations, are refused."""
     with pytest.raises(TrajectoryError, match='velocity of joint 3'):
         _check([0.0, 1.0], np.zeros((2, 3)), qd=[[0, 0, 0], [0, 0, 0.6]])
     with pytest.raises(TrajectoryError, match='accelerations has a non-finite'):

@@ -13,10 +13,15 @@ from scara_collab.core.trajectory import joint_move
 
 @pytest.fixture(scope='module')
 def cell():
+    """Return the cell model, loaded once for the module."""
     return load_cell()
 
 
 def test_braking_stops_every_joint_at_its_limit_and_no_further(cell):
+    """Braking stops every joint at its acceleration limit, v^2 / 2a on; at rest, a hold.
+
+    It lasts the stopping time and its positions integrate its velocities.
+    """
     arm = cell.leader
     q, qd = np.array([0.3, -1.0, 0.1]), np.array([1.8, -0.9, 0.4])
     t, pos, vel, acc = safety.braking(arm, q, qd, dt=0.001)
@@ -32,6 +37,10 @@ def test_braking_stops_every_joint_at_its_limit_and_no_further(cell):
 
 
 def test_first_breach_is_the_first_sample_within_the_margin(cell):
+    """The predicted breach is the first sample within the margin, to a prediction step.
+
+    A hold gives none; the stop is due exactly when stopping and latency reach the breach.
+    """
     left, right = cell.arms
     q_left = ik(left, [1.8, -0.2, 0.4]).q
     q_right = ik(right, [3.0, 1.2, 0.4]).q
@@ -50,6 +59,7 @@ def test_first_breach_is_the_first_sample_within_the_margin(cell):
 
 
 def test_only_a_move_away_from_the_other_arm_is_separating(cell):
+    """Only a move that takes the arm away from the other one is separating."""
     left, right = cell.arms
     q_left = ik(left, [1.8, -0.2, 0.4]).q
     q_right = ik(right, [2.1, 0.05, 0.4]).q

@@ -14,14 +14,17 @@ LEFT = CELL.leader
 
 
 def plan(q0, target):
+    """Plan the left arm's move from ``q0`` to ``target`` as the planners do."""
     return plan_path(LEFT, q0, target, mode='line_or_joint')
 
 
 def home_q():
+    """Return the left arm's joints above its first bin."""
     return ik(LEFT, drop_point(CELL, LEFT.name, CELL.item_classes[0], 0.1)).unwrap()
 
 
 def test_intercept_meets_the_item_where_it_will_be():
+    """The intercept meets the item where the belt will have carried it, at pick height."""
     z = pick_height(CELL, 0.04)
     item = SeenItem(7, 'red', np.array([1.2, -0.2, 0.25]), stamp=10.0)
     hit = intercept(CELL, LEFT, home_q(), item, t_start=10.5, z=z, plan=plan)
@@ -34,6 +37,7 @@ def test_intercept_meets_the_item_where_it_will_be():
 
 
 def test_items_out_of_reach_are_not_intercepted_and_upstream_ones_are_met_later():
+    """Items past reach are not intercepted; upstream ones are met once they come into reach."""
     z = pick_height(CELL, 0.04)
     gone = SeenItem(1, 'red', np.array([4.4, 0.3, 0.25]), stamp=0.0)
     assert intercept(CELL, LEFT, home_q(), gone, 0.0, z, plan) is None
@@ -45,6 +49,7 @@ def test_items_out_of_reach_are_not_intercepted_and_upstream_ones_are_met_later(
 
 
 def test_drop_points_are_over_the_bins_above_the_walls():
+    """Drop points are over the bins' centres, above the walls, and reachable."""
     for (robot, cls), floor in CELL.bins.items():
         p = drop_point(CELL, robot, cls, 0.1)
         assert_allclose(p[:2], floor[:2])
@@ -54,6 +59,7 @@ def test_drop_points_are_over_the_bins_above_the_walls():
 
 
 def test_urgent_items_first_and_own_half_preferred():
+    """Candidates come most urgent first, the arm's own half before the other's."""
     z = pick_height(CELL, 0.04)
     a = SeenItem(1, 'red', np.array([3.0, -0.2, 0.25]), 0.0)   # downstream, left half
     b = SeenItem(2, 'red', np.array([1.0, -0.2, 0.25]), 0.0)   # upstream, left half
@@ -87,6 +93,7 @@ def test_an_item_the_busy_other_arm_would_miss_comes_before_the_arms_own():
 
 
 def test_joint_time_is_a_lower_bound_of_planned_moves():
+    """The joint-space time bound never exceeds a planned move's duration."""
     q0 = home_q()
     target = np.array([2.5, -0.2, 0.34])
     traj = plan(q0, target)
@@ -94,6 +101,7 @@ def test_joint_time_is_a_lower_bound_of_planned_moves():
 
 
 def test_mirror_partner():
+    """An item's mirror partner is the same class at the mirrored y, or None."""
     item = SeenItem(1, 'red', np.array([1.0, -0.2, 0.25]), 5.0)
     twin = SeenItem(2, 'red', np.array([1.0, 0.2, 0.25]), 5.0)
     other = SeenItem(3, 'blue', np.array([1.0, 0.2, 0.25]), 5.0)

@@ -28,6 +28,10 @@ def _well_formed(traj, dt=0.01):
 
 
 def test_seeds_move_is_straight_to_1e6_and_joint_interpolation_is_not():
+    """The seeds' 1.5 m move as a line stays within 1e-6 m of the segment.
+
+    Joint interpolation between the same ends arcs more than 5 cm off and is longer.
+    """
     p0, p1 = SEEDS_MOVE
     assert np.linalg.norm(p1 - p0) == pytest.approx(1.5)
     q0 = ik(ARM, p0).unwrap()
@@ -50,6 +54,7 @@ def test_seeds_move_is_straight_to_1e6_and_joint_interpolation_is_not():
 
 
 def test_time_optimal_joint_move_matches_the_trapezoid_bound():
+    """A joint move takes the trapezoid bound of its longest joint; all joints move in step."""
     q0, q1 = np.array([0.0, 1.0, 0.0]), np.array([1.5, 0.5, 0.3])
     traj = joint_move(ARM, q0, q1)
     delta, v, a = 1.5, ARM.max_velocity[0], ARM.max_acceleration[0]
@@ -62,6 +67,7 @@ def test_time_optimal_joint_move_matches_the_trapezoid_bound():
 
 
 def test_line_moves_saturate_a_limit():
+    """A time-optimal line move drives some joint to within 5 % of a limit."""
     p0, p1 = SEEDS_MOVE
     traj = line_move(ARM, ik(ARM, p0).unwrap(), p1)
     ratio = max(np.max(np.abs(traj.qd) / ARM.max_velocity),
@@ -70,6 +76,7 @@ def test_line_moves_saturate_a_limit():
 
 
 def test_random_line_moves_stay_straight_and_within_limits():
+    """Random line moves stay straight to 1e-6 m and within the limits, or are refused."""
     rng = np.random.default_rng(4)
     done = 0
     while done < 25:
@@ -90,6 +97,7 @@ def test_random_line_moves_stay_straight_and_within_limits():
 
 
 def test_bad_targets_are_refused_with_reasons():
+    """Unreachable, non-finite, inner-hole and out-of-limit moves are refused with reasons."""
     q0 = ik(ARM, SEEDS_MOVE[0]).unwrap()
     with pytest.raises(IKError, match='beyond the outer reach'):
         line_move(ARM, q0, [6.0, -2.0, 0.3])
@@ -106,12 +114,14 @@ def test_bad_targets_are_refused_with_reasons():
 
 
 def test_zero_length_move_is_a_hold():
+    """A move to where the tool already is holds the joints."""
     q0 = ik(ARM, SEEDS_MOVE[0]).unwrap()
     traj = line_move(ARM, q0, SEEDS_MOVE[0])
     assert_allclose(traj.q, np.broadcast_to(q0, traj.q.shape), atol=1e-12)
 
 
 def test_segment_deviation():
+    """Point-to-segment distances are right inside the segment and beyond its ends."""
     a, b = np.zeros(3), np.array([1.0, 0, 0])
     pts = np.array([[0.5, 0.2, 0], [-1.0, 0, 0], [2.0, 0, 0.5]])
     assert_allclose(segment_deviation(pts, a, b), [0.2, 1.0, np.hypot(1.0, 0.5)])
@@ -129,6 +139,7 @@ def _radial_study(max_damping):
 
 
 def test_dls_keeps_joint_speed_bounded_into_a_singularity():
+    """Into the outer singularity pinv asks over 3x the speed limit; DLS stays under it."""
     plain = np.abs(_radial_study(0.0)).max()
     damped = np.abs(_radial_study(0.15)).max()
     assert plain > 3 * ARM.max_velocity[0], 'the pseudo-inverse asks for huge speeds'

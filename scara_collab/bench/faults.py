@@ -45,6 +45,14 @@ class Run:
 
     def __init__(self, out: Path, duration: float, flags: Sequence[str], domain: int,
                  mode: str = 'collaborative'):
+        """Start the launcher for ``duration`` sim seconds and collect its output in a thread.
+
+        :param out: the run folder (``--output``).
+        :param duration: sim seconds of the run.
+        :param flags: more launcher arguments (``--fault ...``, ``--feed-interval ...``).
+        :param domain: ``ROS_DOMAIN_ID`` of the launched graph (this process joins it too).
+        :param mode: the launcher's ``--mode``.
+        """
         env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
                    ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
         os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
@@ -98,6 +106,7 @@ class Probe:
     """A node in this process that talks to the launched graph (publish, listen)."""
 
     def __init__(self):
+        """Join the graph with a node of its own context that keeps the newest /joint_states."""
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from sensor_msgs.msg import JointState
@@ -115,6 +124,7 @@ class Probe:
         self.state = msg
 
     def spin(self, seconds: float) -> None:
+        """Spin the probe node for ``seconds`` of wall time."""
         end = time.monotonic() + seconds
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.01)
@@ -129,6 +139,11 @@ class Probe:
         return self.state
 
     def publisher(self, msg_type, topic: str):
+        """Return a publisher on ``topic``, once a subscriber has matched (at most 10 s).
+
+        :param msg_type: the message class.
+        :param topic: the fully qualified topic name.
+        """
         pub = self.node.create_publisher(msg_type, topic, 10)
         end = time.monotonic() + 10.0
         while pub.get_subscription_count() == 0 and time.monotonic() < end:
@@ -136,6 +151,7 @@ class Probe:
         return pub
 
     def close(self) -> None:
+        """Shut down the probe's executor, node and context."""
         self.executor.shutdown()
         self.node.destroy_node()
         self.rclpy.try_shutdown(context=self.ctx)
@@ -272,7 +288,7 @@ def _log(out: Path, node: str) -> str:
     return path.read_text(errors='replace') if path.is_file() else ''
 
 
-def _alive(s: Summary) -> List[str]:
+def _died(s: Summary) -> List[str]:
     """Return the nodes that did not end with the run (died)."""
     return [n for n, v in (s.get('nodes') or {}).items() if v.get('exit_code') not in (0, None)]
 
@@ -283,13 +299,15 @@ def _sep(s: Summary) -> float:
 
 
 def judge_nan(s: Summary, out: Path) -> Tuple[bool, str]:
+    """Pass if a NaN state e-stopped the graph, the run exited 0 and no node died."""
     reason = str(s.get('emergency_stop_reason') or '')
-    ok = s.get('exit_code') == 0 and 'unusable joint state' in reason and not _alive(s)
+    ok = s.get('exit_code') == 0 and 'unusable joint state' in reason and not _died(s)
     return ok, (f'exit {s.get("exit_code")}, e-stop: {reason[:60] or "none"}, died: '
-                f'{_alive(s) or "none"}')
+                f'{_died(s) or "none"}')
 
 
 def judge_wall_clock(s: Summary, out: Path) -> Tuple[bool, str]:
+    """Pass if the run went its full length, states were refused and no e-stop was raised."""
     ok = s.get('exit_code') == 0 and s.get('exit_reason') == 'duration reached' \
         and (s.get('joint_states_refused') or 0) > 0 and not s.get('emergency_stops')
     return ok, (f'exit {s.get("exit_code")} ({s.get("exit_reason")}), sim '
@@ -298,25 +316,29 @@ def judge_wall_clock(s: Summary, out: Path) -> Tuple[bool, str]:
 
 
 def judge_crossing(s: Summary, out: Path) -> Tuple[bool, str]:
+    """Pass if the run exited 0 on a predicted e-stop with the arms at least 0.1 m apart."""
     reason = str(s.get('emergency_stop_reason') or '')
     ok = s.get('exit_code') == 0 and reason.startswith('predicted') and _sep(s) >= 0.1
     return ok, f'e-stop: {reason[:40] or "none"}..., min separation {_sep(s):.3f} m'
 
 
 def judge_rogue(s: Summary, out: Path) -> Tuple[bool, str]:
+    """Pass if the bridge refused both bad trajectories, no node died and the arms stayed apart."""
     bridge = _log(out, 'pybullet_bridge')
     refused = 'do not match this arm' in bridge and '100001 points; at most' in bridge
-    ok = s.get('exit_code') == 0 and not _alive(s) and refused and _sep(s) >= 0.1
-    return ok, (f'exit {s.get("exit_code")}, died: {_alive(s) or "none"}, bridge refused the '
+    ok = s.get('exit_code') == 0 and not _died(s) and refused and _sep(s) >= 0.1
+    return ok, (f'exit {s.get("exit_code")}, died: {_died(s) or "none"}, bridge refused the '
                 f'malformed and oversized trajectories: {refused}')
 
 
 def judge_lost(s: Summary, out: Path) -> Tuple[bool, str]:
+    """Pass if the lost answers were retried: exit 0, items sorted and none missed."""
     ok = s.get('exit_code') == 0 and s.get('missed') == 0 and (s.get('sorted') or 0) > 0
     return ok, f'exit {s.get("exit_code")}, sorted {s.get("sorted")}, missed {s.get("missed")}'
 
 
 def judge_saturated(s: Summary, out: Path) -> Tuple[bool, str]:
+    """Pass if the overfed run kept the arms 0.1 m apart without an e-stop."""
     ok = s.get('exit_code') == 0 and _sep(s) >= 0.1 and not s.get('emergency_stops')
     return ok, (f'exit {s.get("exit_code")}, sorted {s.get("sorted")} ({s.get("missed")} '
                 f'missed: feed beyond capacity), min separation {_sep(s):.3f} m, '
@@ -324,6 +346,7 @@ def judge_saturated(s: Summary, out: Path) -> Tuple[bool, str]:
 
 
 def judge_sigstop(s: Summary, out: Path) -> Tuple[bool, str]:
+    """Pass if the run ended non-zero naming the frozen monitor while the bridge held."""
     reason = str(s.get('exit_reason') or '')
     bridge = _log(out, 'pybullet_bridge')
     ok = s.get('exit_code') not in (0, None) and 'collision_monitor' in reason \
@@ -332,6 +355,7 @@ def judge_sigstop(s: Summary, out: Path) -> Tuple[bool, str]:
 
 
 def judge_sigkill(s: Summary, out: Path) -> Tuple[bool, str]:
+    """Pass if the run ended with exit 1 naming the killed left planner."""
     reason = str(s.get('exit_reason') or '')
     ok = s.get('exit_code') == 1 and 'left_planner' in reason
     return ok, f'exit {s.get("exit_code")}: {reason[:80]}'

@@ -48,17 +48,19 @@ def stderr_log(msg: str) -> None:
 class Progress:
     """Progress lines with the elapsed wall time: one per section, plus notes inside it.
 
-    Example::
+    Example (on stdout here; the default stream is stderr)::
 
-        >>> progress = Progress()
+        >>> import sys
+        >>> progress = Progress(sys.stdout)
         >>> with progress.section('payload response'):
         ...     progress.note('0 kg, PID')
-        [    0.0 s] payload response ...
-        [    0.0 s]    0 kg, PID
-        [    1.2 s] payload response done in 1.2 s
+        [    ... s] payload response ...
+        [    ... s]    0 kg, PID
+        [    ... s] payload response done in ... s
     """
 
     def __init__(self, stream: Optional[TextIO] = None):
+        """Start the clock now; lines go to ``stream`` (default stderr)."""
         self.stream = stream if stream is not None else sys.stderr
         self.start = time.monotonic()
         self.sections: Dict[str, float] = {}

@@ -126,6 +126,12 @@ def capsule_distance(p0: ArrayLike, p1: ArrayLike, radius_p: ArrayLike, q0: Arra
     :param q1: (..., 3) second capsule's axis end, m.
     :param radius_q: (...) second capsule's radius, m.
     :return: (...) surface distance, m; negative = the capsules overlap by that much.
+
+    Two capsules of radius 0.1 m whose axes cross 0.15 m apart overlap by 5 cm:
+
+    >>> d = capsule_distance([0, 0, 0], [1, 0, 0], 0.1, [0.5, -1, 0.15], [0.5, 1, 0.15], 0.1)
+    >>> round(float(d), 6)
+    -0.05
     """
     dist, _, _ = segment_distance(p0, p1, q0, q1)
     return dist - np.asarray(radius_p, dtype=float) - np.asarray(radius_q, dtype=float)

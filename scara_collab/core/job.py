@@ -231,6 +231,7 @@ class SortingJob:
 
     def __init__(self, cell: CellModel, settings: JobSettings, plan: PlanFn,
                  log: Callable[[str, str], None] = lambda level, text: None):
+        """Set up one lane per arm that moves on its own (one for a mirrored pair); not started."""
         self.cell, self.s, self.plan, self.log = cell, settings, plan, log
         lead, foll = cell.leader, cell.follower
         robots = {'single': [(lead.name, (lead.name,))],

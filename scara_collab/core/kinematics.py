@@ -15,9 +15,10 @@ the scalar case is the same code, not a copy.
 
 Example::
 
+    >>> from scara_collab.core.model import load_cell
     >>> cell = load_cell(); left = cell.leader
-    >>> sol = ik(left, [3.5, -1.0, 0.3])           # world frame, no current state
-    >>> np.degrees(sol.q[:2]).round(6), sol.q[2]   # the seeds' worked example
+    >>> sol = ik(left, [3.5, -1.0, 0.3])                  # world frame, no current state
+    >>> np.degrees(sol.q[:2]).round(6), float(sol.q[2])   # the seeds' worked example
     (array([ 0., 90.]), 0.4)
 """
 import math
@@ -45,6 +46,7 @@ class IKError(ValueError):
     """A target was refused. ``code`` is one of the module's codes, ``reason`` says why."""
 
     def __init__(self, code: int, detail: str = ''):
+        """Make the error for result ``code``; ``detail`` is appended to its reason."""
         self.code = int(code)
         self.reason = REASONS[self.code]
         super().__init__(self.reason + (f' ({detail})' if detail else ''))
@@ -235,13 +237,27 @@ def ik_both(arm: ArmModel, target: ArrayLike, frame: str = 'world') -> np.ndarra
 
 
 def world_to_base(arm: ArmModel, p: ArrayLike) -> np.ndarray:
-    """World point(s) ``(..., 3)`` into the arm's base frame: ``R^T (p - b)``."""
+    """World point(s) ``(..., 3)`` into the arm's base frame: ``R^T (p - b)``.
+
+    The leader's base is at (2, -2, 0.2), not rotated::
+
+        >>> from scara_collab.core.model import load_cell
+        >>> world_to_base(load_cell().leader, [3.5, -1.0, 0.3])
+        array([1.5, 1. , 0.1])
+    """
     p = np.asarray(p, dtype=float)
     return (p - arm.base[:3, 3]) @ arm.base[:3, :3]
 
 
 def base_to_world(arm: ArmModel, p: ArrayLike) -> np.ndarray:
-    """Base-frame point(s) ``(..., 3)`` into world: ``R p + b``."""
+    """Base-frame point(s) ``(..., 3)`` into world: ``R p + b``.
+
+    The inverse of :func:`world_to_base`::
+
+        >>> from scara_collab.core.model import load_cell
+        >>> base_to_world(load_cell().leader, [1.5, 1.0, 0.1])
+        array([ 3.5, -1. ,  0.3])
+    """
     p = np.asarray(p, dtype=float)
     return p @ arm.base[:3, :3].T + arm.base[:3, 3]
 
@@ -321,6 +337,9 @@ def dls_damping(w: ArrayLike, threshold: float, max_damping: float) -> np.ndarra
     Hanafusa's variable damping), so the DLS inverse equals the exact inverse away from
     singularities and lambda reaches ``max_damping`` at ``w = 0``; lambda and its slope in
     ``w`` are continuous at the threshold.
+
+    >>> dls_damping([0.0, 0.25, 0.5, 1.0], threshold=0.5, max_damping=0.15)
+    array([0.15 , 0.075, 0.   , 0.   ])
     """
     w = np.asarray(w, dtype=float)
     ratio = np.clip(1.0 - w / threshold, 0.0, 1.0)

@@ -78,6 +78,14 @@ def stop_due(now: float, breach: Optional[float], stopping: float, latency: floa
     :param stopping: the longer of the arms' :func:`stopping_time`, s.
     :param latency: s from a measured state to the bridge acting on the stop it causes (the
         state period plus the monitor's and the message's delays).
+
+    With 0.2 s to stop and 0.05 s of latency, a breach 0.2 s ahead needs the stop now; one
+    0.3 s ahead, or none, does not yet:
+
+    >>> stop_due(1.0, 1.2, stopping=0.2, latency=0.05)
+    True
+    >>> stop_due(1.0, 1.3, stopping=0.2, latency=0.05), stop_due(1.0, None, 0.2, 0.05)
+    (False, False)
     """
     return breach is not None and breach <= now + stopping + latency
 

@@ -9,7 +9,7 @@ moves at 0.2 m/s and a move's duration changes by well under 1 s per metre, the 
 a contraction and converges in a few steps.
 """
 from dataclasses import dataclass
-from typing import Callable, Dict, Iterable, List, Optional, Sequence
+from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -99,7 +99,7 @@ def intercept(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: 
     """
     speed = max(cell.belt.speed, 1e-9)
     p0 = predict(cell, item, t_start)
-    x_in = reach_entry_x(arm, p0[1], z, p0[0], cell.belt.x_end)
+    x_in = reach_span(arm, p0[1], z, p0[0], cell.belt.x_end)[0]
     if not np.isfinite(x_in):
         return None
     arrive = max(t_start, t_start + (x_in - p0[0]) / speed)
@@ -128,20 +128,18 @@ def intercept(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: 
     return None
 
 
-def reach_entry_x(arm: ArmModel, y: float, z: float, x_from: float, x_to: float,
-                  step: float = 0.02) -> float:
-    """Return the smallest x on ``[x_from, x_to]`` (lateral ``y``, height ``z``) in reach."""
+def reach_span(arm: ArmModel, y: float, z: float, x_from: float, x_to: float,
+               step: float = 0.02) -> Tuple[float, float]:
+    """Return where the arm's reach begins and ends along x (lateral ``y``, height ``z``).
+
+    The smallest and the largest x on ``[x_from, x_to]``, sampled every ``step``, that the arm
+    reaches; ``(inf, -inf)`` if no sample is in reach.
+    """
     xs = np.arange(x_from, x_to + step, step)
     ok = ik(arm, np.stack([xs, np.full_like(xs, y), np.full_like(xs, z)], axis=1)).ok
-    return float(xs[ok].min()) if np.any(ok) else float('inf')
-
-
-def reach_exit_x(arm: ArmModel, y: float, z: float, x_from: float, x_to: float,
-                 step: float = 0.02) -> float:
-    """Return the largest x on ``[x_from, x_to]`` (lateral ``y``, height ``z``) in reach."""
-    xs = np.arange(x_from, x_to + step, step)
-    ok = ik(arm, np.stack([xs, np.full_like(xs, y), np.full_like(xs, z)], axis=1)).ok
-    return float(xs[ok].max()) if np.any(ok) else float('-inf')
+    if not np.any(ok):
+        return float('inf'), float('-inf')
+    return float(xs[ok].min()), float(xs[ok].max())
 
 
 def time_in_reach(cell: CellModel, arm: ArmModel, p: np.ndarray, z: float) -> float:
@@ -149,7 +147,7 @@ def time_in_reach(cell: CellModel, arm: ArmModel, p: np.ndarray, z: float) -> fl
 
     At tool height ``z``; 0 or less once it is past the arm (or never in its reach).
     """
-    exit_x = reach_exit_x(arm, p[1], z, p[0], cell.belt.x_end)
+    exit_x = reach_span(arm, p[1], z, p[0], cell.belt.x_end)[1]
     return max(exit_x - p[0], -1.0) / max(cell.belt.speed, 1e-9)
 
 
@@ -183,8 +181,7 @@ def order_candidates(cell: CellModel, arm: ArmModel, items: Iterable[SeenItem], 
     others = [a for a in cell.arms if a.name != arm.name]
     if other_cycle is not None and own_side is not None and others:
         # the other arm's time left for each item of its half (its own reach), in its order
-        theirs = sorted(((reach_exit_x(others[0], e[3][1], z, e[3][0], cell.belt.x_end)
-                          - e[3][0]) / max(cell.belt.speed, 1e-9), k)
+        theirs = sorted((time_in_reach(cell, others[0], e[3], z), k)
                         for k, e in enumerate(out) if e[0] == 1)
         for ahead, (left, k) in enumerate(theirs):
             if (1 + ahead) * other_cycle > left:

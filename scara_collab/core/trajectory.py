@@ -16,6 +16,9 @@ controller period.
 
 Example::
 
+    >>> from scara_collab.core.model import load_cell
+    >>> arm = load_cell().leader
+    >>> q0, target = np.array([0.0, np.pi / 2, 0.4]), [3.0, -2.5, 0.3]   # from (3.5, -1, 0.3)
     >>> traj = line_move(arm, q0, target)            # world-frame target
     >>> path_metrics(traj, fk(arm, q0), target).max_deviation < 1e-9
     True
@@ -88,7 +91,13 @@ class PathMetrics:
 
 
 def segment_deviation(p: ArrayLike, a: ArrayLike, b: ArrayLike) -> np.ndarray:
-    """Distance of point(s) ``p`` ``(..., 3)`` from the segment ``a``-``b``, m."""
+    """Distance of point(s) ``p`` ``(..., 3)`` from the segment ``a``-``b``, m.
+
+    Beyond an end it is the distance from that end::
+
+        >>> segment_deviation([[0.5, 0.2, 0.0], [-1.0, 0.0, 0.0]], [0, 0, 0], [1, 0, 0])
+        array([0.2, 1. ])
+    """
     p, a, b = (np.asarray(x, dtype=float) for x in (p, a, b))
     ab = b - a
     denom = float(ab @ ab)

@@ -49,6 +49,11 @@ class AutomationManager(Node):
     """Run the sorting job (see the module docstring)."""
 
     def __init__(self, **kwargs):
+        """Declare the parameters, build the job and create its topics, clients and timers.
+
+        :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``).
+        :raises ValueError: a configuration the job refuses.
+        """
         super().__init__('automation_manager', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         cfg = declare_config(self, ('automation', 'controllers'))

@@ -141,6 +141,7 @@ class CellScene:
     """
 
     def __init__(self, server: viser.ViserServer, cell: CellModel):
+        """Add the grid, the fixed cell and one posable URDF, capsules and path per arm."""
         self.server, self.cell = server, cell
         scene = server.scene
         scene.set_up_direction('+z')
@@ -311,6 +312,11 @@ class CellViewer(Node):
     """Serve the live 3D view; ``scene`` is the :class:`CellScene`, ``server`` its server."""
 
     def __init__(self, **kwargs):
+        """Declare and check the parameters, start the viser server and subscribe.
+
+        :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``).
+        :raises ValueError: a port, update rate or camera vector out of range.
+        """
         super().__init__('cell_viewer', **kwargs)
         ro = ParameterDescriptor(read_only=True)
         self.declare_parameter('port', 8080, ro)
@@ -436,6 +442,7 @@ class CellViewer(Node):
         self.scene.set_status(sim, self.estop, self.monitor)
 
     def destroy_node(self):
+        """Stop the viser server, then destroy the node."""
         self.server.stop()
         return super().destroy_node()
 

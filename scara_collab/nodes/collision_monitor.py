@@ -46,6 +46,11 @@ class CollisionMonitor(Node):
     """Watch the arm-to-arm distance and stop both arms if the margin is broken."""
 
     def __init__(self, **kwargs):
+        """Declare and check the parameters, load the cell and create the watch.
+
+        :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``).
+        :raises ValueError: a marker rate, stale time or margin out of range.
+        """
         super().__init__('collision_monitor', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         self.declare_parameter('profile', '')

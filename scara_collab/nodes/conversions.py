@@ -99,6 +99,7 @@ class StampGate:
     """
 
     def __init__(self, tolerance: float = STAMP_TOLERANCE):
+        """Let the first finite stamp through; ``tolerance`` is in seconds."""
         self.tolerance = float(tolerance)
         self.last: Optional[float] = None
         self.refused = 0

@@ -68,6 +68,7 @@ class FaultPlan:
     """The faults one node injects; :meth:`next` says what happens to the next message."""
 
     def __init__(self, specs: Sequence[str] = ()):
+        """Parse ``specs`` (see :func:`parse_faults`); nothing is injected yet."""
         self.faults = parse_faults(specs)
         self.injected: Dict[str, int] = {}
 
@@ -126,6 +127,7 @@ class FaultyPublisher:
     """A publisher whose messages go through the node's fault plan (same ``publish`` API)."""
 
     def __init__(self, node: Node, plan: FaultPlan, publisher):
+        """Wrap ``publisher`` of ``node``; its topic name selects the plan entries."""
         self.node, self.plan, self.publisher = node, plan, publisher
         self.name = publisher.topic_name
 

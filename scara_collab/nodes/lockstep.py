@@ -87,6 +87,7 @@ class LockstepParticipant:
     """Answer ``/clock`` on ``/sim/lockstep`` for ``node``; see the module docstring."""
 
     def __init__(self, node: Node):
+        """Answer every forward step of ``node``'s sim clock on ``/sim/lockstep``."""
         self.node = node
         self.name = node.get_fully_qualified_name()
         self._pub = node.create_publisher(Header, TOPIC, QOS)
@@ -153,6 +154,7 @@ class LockstepGate:
                  timeouts: Optional[Dict[str, float]] = None, guards: Iterable[str] = (),
                  on_guard: Optional[Callable[[str, bool, str], None]] = None,
                  wall_clock: Callable[[], float] = time.monotonic):
+        """Store the settings; with a window, subscribe ``/sim/lockstep``."""
         self.node = node
         self.window = float(window)
         self.timeout = float(timeout)
@@ -172,6 +174,7 @@ class LockstepGate:
 
     @property
     def enabled(self) -> bool:
+        """Return True if the gate holds physics back (``window > 0``)."""
         return self.window > 0
 
     def timeout_of(self, name: str) -> float:

@@ -54,6 +54,13 @@ class Planner(Node):
     """Motion planner of one arm."""
 
     def __init__(self, robot: str = 'scara_left', node_name: Optional[str] = None, **kwargs):
+        """Declare and check the parameters, load the cell and create the topics of ``robot``.
+
+        :param robot: the arm this planner plans for (the ``robot`` parameter's default).
+        :param node_name: default ``<left|right>_planner`` from ``robot``.
+        :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``).
+        :raises ValueError: an unknown robot or mode, or a time parameter that is not > 0.
+        """
         super().__init__(node_name or f'{robot.split("_")[-1]}_planner', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         cfg = declare_config(self, ('controllers',))['controllers']

@@ -204,9 +204,11 @@ class PlannerStatus(_Status):
     CHOICES: ClassVar[Tuple[str, tuple]] = ('state', PLANNER_STATES)
 
     def name(self) -> str:
+        """Return ``'<robot>/planner'``."""
         return f'{self.robot}/planner'
 
     def level(self) -> str:
+        """Return ``'ERROR'`` if refused, ``'WARN'`` if waiting, superseded or delayed."""
         if self.state == 'refused':
             return 'ERROR'
         if self.state in ('waiting', 'superseded') or self.delay > 0:
@@ -214,6 +216,7 @@ class PlannerStatus(_Status):
         return 'OK'
 
     def text(self) -> str:
+        """Return the move, its kind and time window (planned) or its state and reason."""
         if self.state == 'planned':
             late = (f'; delayed by {self.delay:.2f} s for the other arm' if self.delay > 0
                     else '')
@@ -251,12 +254,15 @@ class ExecutionStatus(_Status):
     CHOICES: ClassVar[Tuple[str, tuple]] = ('state', EXECUTION_STATES)
 
     def name(self) -> str:
+        """Return ``'<robot>/execution'``."""
         return f'{self.robot}/execution'
 
     def level(self) -> str:
+        """Return ``'ERROR'`` if refused, ``'WARN'`` if held, else ``'OK'``."""
         return {'refused': 'ERROR', 'held': 'WARN'}.get(self.state, 'OK')
 
     def text(self) -> str:
+        """Return the move, its state and time, its run window if accepted, and the reason."""
         what = f'move {self.move or "(no id)"} {self.state} at t={self.time:.3f} s'
         if self.state == 'accepted':
             what += f': runs t={self.start:.3f}..{self.end:.3f} s'
@@ -293,12 +299,15 @@ class ItemEvent(_Status):
     CHOICES: ClassVar[Tuple[str, tuple]] = ('kind', ITEM_EVENTS)
 
     def name(self) -> str:
+        """Return the event's kind (``'sorted'``, ``'missed'``, ...)."""
         return self.kind
 
     def level(self) -> str:
+        """Return ``'WARN'`` for a missed, dropped or wrong-bin item, else ``'OK'``."""
         return 'WARN' if self.kind in ('missed', 'dropped', 'wrong_bin') else 'OK'
 
     def text(self) -> str:
+        """Return the item, its class, the event, the robot and the cause."""
         by = f' by {self.robot}' if self.robot else ''
         return f'item {self.item} ({self.cls}) {self.kind}{by}' + (
             f': {self.cause}' if self.cause else '')
@@ -328,6 +337,7 @@ class JobStats(_Status):
     KIND: ClassVar[str] = 'automation_manager'
 
     def text(self) -> str:
+        """Return the sorted, missed and dropped counts, the rate and the give-ups."""
         c = self.counts
         return (f'{c.get("sorted", 0)} sorted, {c.get("missed", 0)} missed, '
                 f'{c.get("dropped", 0)} dropped, {self.items_per_minute:.1f}/min, '
@@ -356,6 +366,7 @@ class MirrorStatus(_Status):
     KIND: ClassVar[str] = 'replication_manager'
 
     def text(self) -> str:
+        """Return whether mirroring is on, the in-step error maximum and the step counts."""
         mx = 'n/a' if self.error_max is None else f'{self.error_max * 1e3:.3f} mm'
         return (f'mirroring {"on" if self.enabled else "off"}: in-step error max {mx} over '
                 f'{self.in_step_moves} moves, {self.not_in_step} not in step')
@@ -381,9 +392,11 @@ class MonitorStatus(_Status):
     KIND: ClassVar[str] = 'collision_monitor'
 
     def level(self) -> str:
+        """Return ``'ERROR'`` while the emergency stop is latched, else ``'OK'``."""
         return 'ERROR' if self.stopped else 'OK'
 
     def text(self) -> str:
+        """Return the stop's reason, or the arms' distance and the margin."""
         if self.stopped:
             return f'emergency stop: {self.reason}'
         d = 'n/a' if self.distance is None else f'{self.distance:.3f} m'

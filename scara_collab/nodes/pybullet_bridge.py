@@ -65,6 +65,12 @@ class PyBulletBridge(Node):
     """The simulator node. ``sim`` is the :class:`CellSim` it owns."""
 
     def __init__(self, **kwargs):
+        """Declare and check the parameters, build the simulator and its topics and services.
+
+        :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``).
+        :raises ValueError: a home pose outside the joint limits or a lockstep window shorter
+            than the clock period.
+        """
         super().__init__('pybullet_bridge', **kwargs)
         cfg = declare_config(self, ('simulation', 'controllers'),
                              dynamic=('real_time_factor', 'feed_interval'),

@@ -44,6 +44,11 @@ class ReplicationManager(Node):
     """Mirror the leader's targets onto the follower; measure the in-step mirror error."""
 
     def __init__(self, **kwargs):
+        """Declare and check the parameters, load the cell and create the topics and service.
+
+        :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``).
+        :raises ValueError: a ``collab_lead`` that is not > 0.
+        """
         super().__init__('replication_manager', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         self.declare_parameter('profile', '')

@@ -18,9 +18,9 @@ The GIF is a time-lapse of the job window (``summary.json``): ``fps`` frames per
 GIF, at most ``max_seconds`` of GIF (so a 120 s run at 10 fps and 30 s plays 4x fast), every
 frame on one palette (Pillow) so only the changed pixels are stored.
 
-Example::
+Usage (a sketch, not a doctest: it needs a run folder)::
 
-    >>> render_gif('runs/20261122-053435_collaborative')   # -> .../run.gif
+    render_gif('runs/20261122-053435_collaborative')   # -> .../run.gif
 """
 import argparse
 import math
@@ -59,6 +59,7 @@ class Camera:
 
     def __init__(self, target=(2.0, 0.0, 0.2), distance: float = 5.6, yaw: float = -60.0,
                  pitch: float = -40.0, fov: float = 45.0):
+        """Store the view (see the class docstring for the units)."""
         self.target = [float(v) for v in target]
         self.distance, self.yaw, self.pitch, self.fov = float(distance), float(yaw), \
             float(pitch), float(fov)
@@ -75,6 +76,7 @@ class CellScene:
 
     def __init__(self, cell: Optional[CellModel] = None, width: int = 640, height: int = 360,
                  camera: Optional[Camera] = None):
+        """Build the cell in a DIRECT client: the cell body only, a floor and the camera."""
         self.cell = cell if cell is not None else load_cell()
         self.width, self.height = int(width), int(height)
         self.camera = camera or Camera()
@@ -156,9 +158,11 @@ class CellScene:
         self.sim.close()
 
     def __enter__(self) -> 'CellScene':
+        """Return the scene itself."""
         return self
 
     def __exit__(self, *exc) -> None:
+        """Disconnect the client."""
         self.close()
 
 

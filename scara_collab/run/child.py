@@ -18,6 +18,10 @@ _PR_SET_PDEATHSIG = 1
 
 
 def die_with_parent(parent: int) -> None:
+    """Ask Linux to send this process SIGTERM when ``parent`` dies (elsewhere: nothing).
+
+    :param parent: the launcher's pid; if it is gone already, SIGTERM is sent at once.
+    """
     if not sys.platform.startswith('linux'):
         return
     try:

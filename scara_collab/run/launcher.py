@@ -131,6 +131,7 @@ class RunEnd(Exception):
     """The run ends early: ``reason`` for the summary, ``code`` for the exit status."""
 
     def __init__(self, reason: str, code: int = EXIT_FAILED, details: str = ''):
+        """Keep ``reason``, the exit ``code`` and optional ``details`` for the summary."""
         super().__init__(reason)
         self.reason, self.code, self.details = reason, code, details
 
@@ -148,6 +149,7 @@ class LockstepWatch:
     """
 
     def __init__(self, names: Iterable[str], limit: float):
+        """Watch the nodes ``names``; a participant is silent after ``limit`` wall seconds."""
         self.names = frozenset(names)
         self.limit = float(limit)
         self.reached: Dict[str, float] = {}  # participant -> newest sim time it answered
@@ -390,6 +392,7 @@ class Console:
     """Stage lines and progress on stdout (and in ``launch.log``); errors always shown."""
 
     def __init__(self, log_path: Path, quiet: bool):
+        """Append the lines to ``log_path``; ``quiet`` shows errors only on stdout."""
         self.quiet = quiet
         self.tty = sys.stdout.isatty()
         self.log = open(log_path, 'a', encoding='utf-8')
@@ -402,6 +405,7 @@ class Console:
             self._live = False
 
     def say(self, text: str, error: bool = False) -> None:
+        """Log ``text`` and print it unless quiet (an ``error`` is always printed)."""
         self.log.write(f'{time.monotonic() - self._t0:7.2f} {text}\n')
         self.log.flush()
         if self.quiet and not error:
@@ -410,6 +414,7 @@ class Console:
         print(text, flush=True)
 
     def progress(self, text: str) -> None:
+        """Show ``text`` as the live line on a terminal, else as a logged line."""
         if self.quiet:
             return
         if self.tty:
@@ -420,6 +425,7 @@ class Console:
             self.say(text)
 
     def close(self) -> None:
+        """End the live line and close the log file."""
         self._clear_live()
         self.log.close()
 
@@ -428,6 +434,12 @@ class Launcher:
     """Start the stages, supervise the run, stop everything; see the module docstring."""
 
     def __init__(self, args: argparse.Namespace, output: Path, console: Console):
+        """Plan the stages and set up the recorder, its executor and the lockstep watch.
+
+        :param args: the parsed command line.
+        :param output: the run folder.
+        :param console: where stage lines and progress go.
+        """
         self.args = args
         self.output = output
         self.console = console
@@ -476,6 +488,7 @@ class Launcher:
 
     # --- signals ---------------------------------------------------------------------------
     def on_signal(self, signum, _frame) -> None:
+        """Handle SIGINT / SIGTERM: record it; at the second, say the nodes are killed now."""
         self.signals.append(signal.Signals(signum).name)
         if len(self.signals) == 2:
             self.console.say(f'[launch] {self.signals[-1]} again: killing the nodes now',
@@ -563,6 +576,7 @@ class Launcher:
             self.executor.spin_once(timeout_sec=min(0.02, max(until - time.monotonic(), 0.0)))
 
     def client(self, srv_type, name: str):
+        """Return the client of service ``name``, created on first use."""
         if name not in self._clients:
             self._clients[name] = self.node.create_client(srv_type, name)
         return self._clients[name]
@@ -630,12 +644,14 @@ class Launcher:
 
     # --- processes -------------------------------------------------------------------------
     def env(self) -> Dict[str, str]:
+        """Return the nodes' environment: unbuffered, uncoloured, with the launcher's pid."""
         env = dict(os.environ)
         env.update(PYTHONUNBUFFERED='1', RCUTILS_COLORIZED_OUTPUT='0',
                    SCARA_LAUNCHER_PID=str(os.getpid()))
         return env
 
     def start(self, stage: Stage) -> Child:
+        """Start ``stage`` in its own session, its output in ``logs/<name>.log``."""
         logs = self.output / 'logs'
         logs.mkdir(parents=True, exist_ok=True)
         log_path = logs / f'{stage.name}.log'
@@ -656,6 +672,7 @@ class Launcher:
                      or any(m.name == node for m in c.stage.members)), None)
 
     def write_pids(self) -> None:
+        """Write ``pids.json`` (stage name -> pid) atomically."""
         pids = {c.stage.name: c.proc.pid for c in self.children}
         tmp = self.output / 'pids.json.tmp'
         tmp.write_text(json.dumps(pids, indent=2) + '\n', encoding='utf-8')
@@ -881,6 +898,7 @@ class Launcher:
             for c in self.children}
 
     def close(self) -> None:
+        """Shut down the executors, destroy the nodes and shut down the context."""
         self.executor.shutdown(timeout_sec=1.0)
         self._watch_executor.shutdown(timeout_sec=1.0)
         self._watch_node.destroy_node()

@@ -28,12 +28,13 @@ flushed at least every ``flush_period`` wall seconds, so a run that is killed wi
 :func:`iter_messages` (and ``mcap recover``) still read it. :meth:`McapLog.close` (the run
 recorder calls it when the run ends) writes the summary and the footer.
 
-Example::
+Usage (a sketch, not a doctest: it needs a running node, e.g. the launcher's run
+recorder)::
 
-    >>> log = McapLog(node, 'runs/x/run.mcap', run_topics(('scara_left', 'scara_right')))
-    >>> ...                                   # spin the node: its timer drains the topics
-    >>> log.close()                           # {'mcap': {'file': ..., 'messages': ...}}
-    >>> for topic, type_name, log_time, data in iter_messages('runs/x/run.mcap'): ...
+    log = McapLog(node, 'runs/x/run.mcap', run_topics(('scara_left', 'scara_right')))
+    ...                                   # spin the node: its timer drains the topics
+    log.close()                           # {'mcap': {'file': ..., 'messages': ...}}
+    for topic, type_name, log_time, data in iter_messages('runs/x/run.mcap'): ...
 """
 from functools import lru_cache
 import importlib
@@ -243,6 +244,7 @@ class McapLog:
                  robots: Sequence[str] = ('scara_left', 'scara_right'),
                  chunk_size: int = 256 * 1024, compression: str = 'zstd',
                  period: float = 0.05, flush_period: float = 2.0):
+        """Open the file, register the schemas and channels, subscribe and start the timer."""
         self.node = node
         self.path = Path(path)
         self.topics = list(run_topics(robots) if topics is None else topics)
@@ -383,6 +385,7 @@ class Reading:
     """What :func:`iter_messages` found: ``complete`` is False for a file without a footer."""
 
     def __init__(self):
+        """Start as complete, with no error."""
         self.complete = True
         self.error = ''
 

@@ -70,6 +70,7 @@ class RunRecorder(Node):
     def __init__(self, directory: Union[str, Path], mode: str = 'idle',
                  cell: Optional[CellModel] = None, profile: Optional[str] = None,
                  batch: int = 200, **kwargs):
+        """Create the node on sim time, open the run log and subscribe the topics it records."""
         overrides = list(kwargs.pop('parameter_overrides', []))
         overrides.append(Parameter('use_sim_time', Parameter.Type.BOOL, True))
         super().__init__('run_recorder', parameter_overrides=overrides, **kwargs)

@@ -15,9 +15,14 @@ that is interrupted keeps every complete row it recorded. Events are flushed one
 
 Example::
 
-    >>> log = RunLog('runs/x', load_cell())
-    >>> log.add_state(0.01, [0.0, 1.57, 0.0], [0.0, -1.57, 0.0])
-    >>> log.flush(); log.min_distance, log.max_mirror_error
+    >>> import tempfile
+    >>> from scara_collab.core.model import load_cell
+    >>> folder = tempfile.TemporaryDirectory()         # a run folder, e.g. runs/<run>
+    >>> log = RunLog(folder.name, load_cell())
+    >>> log.add_state(0.01, [0.0, 1.57, 0.0], [0.0, -1.57, 0.0])   # mirrored poses
+    >>> log.flush(); round(log.min_distance, 3), round(log.max_mirror_error, 6)
+    (1.9, 0.0)
+    >>> log.close(); folder.cleanup()
 """
 import csv
 import math
@@ -132,6 +137,7 @@ class RunLog:
 
     def __init__(self, directory: Union[str, Path], cell: CellModel, batch: int = 200,
                  state_period: float = 0.01):
+        """Create the folder, open the CSV files with their headers and zero the aggregates."""
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
         self.cell = cell
@@ -254,6 +260,7 @@ class CpuMeter:
     """
 
     def __init__(self):
+        """Start with no window marked."""
         self._start: Dict[str, Tuple[float, float]] = {}
         self.result: Dict[str, float] = {}
 

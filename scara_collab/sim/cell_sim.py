@@ -33,9 +33,11 @@ removed; the event names the bin's robot), ``dropped`` (at rest on the floor, re
 Example::
 
     >>> with CellSim() as sim:                 # defaults from config/ and the model
-    ...     sim.spawn_item('red', y=0.1)
+    ...     item = sim.spawn_item('red', y=0.1)
     ...     sim.step(1000)                     # 1 s of sim time
     ...     names, q, qd, effort = sim.joint_state()
+    ...     round(sim.time, 6), names[0], sim.items()[0].state
+    (1.0, 'scara_left_joint_1', 'belt')
 """
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -178,6 +180,7 @@ class CellSim:
     def __init__(self, cell: Optional[CellModel] = None, sim_cfg: Optional[dict] = None,
                  ctl_cfg: Optional[dict] = None, gui: bool = False,
                  control_mode: Optional[str] = None, seed: Optional[int] = None):
+        """Check the settings, make the controllers and build the PyBullet scene."""
         self.cell = cell if cell is not None else load_cell()
         self.sim_cfg = sim_cfg if sim_cfg is not None else load_config('simulation')
         self.ctl_cfg = ctl_cfg if ctl_cfg is not None else load_config('controllers')
@@ -791,7 +794,9 @@ class CellSim:
             self._pb = None
 
     def __enter__(self) -> 'CellSim':
+        """Return the simulator itself."""
         return self
 
     def __exit__(self, *exc) -> None:
+        """Disconnect the PyBullet client."""
         self.close()

@@ -12,10 +12,17 @@ theta2, d3``), so one servo tick of the whole cell is one numpy evaluation. No P
   applies (:func:`smooth_friction`), so with an exact model the error obeys
   ``e'' + Kd e' + Kp e = 0``.
 
-Example::
+Example: both arms at rest on their references, the follower holding 0.5 kg; the torque is
+what holds the quills up (``G``, negative: upward)::
 
+    >>> from scara_collab.core.model import load_cell
+    >>> cell = load_cell()
     >>> ct = ComputedTorqueController(cell.arms, kp=[400] * 3, kd=[40] * 3)
-    >>> tau = ct(q, qd, q_ref, qd_ref, qdd_ref, payload=[0.0, 0.5])   # (2, 3)
+    >>> q = qd = q_ref = qd_ref = qdd_ref = np.zeros((2, 3))
+    >>> tau = ct(q, qd, q_ref, qd_ref, qdd_ref, payload=np.array([0.0, 0.5]))   # (2, 3)
+    >>> tau.round(2)
+    array([[  0. ,   0. , -23.3],
+           [  0. ,   0. , -28.2]])
 """
 from typing import Dict, Sequence
 
@@ -64,6 +71,7 @@ class PidController:
 
     def __init__(self, kp: ArrayLike, ki: ArrayLike, kd: ArrayLike, max_effort: ArrayLike,
                  arms: int = 2):
+        """Broadcast the gains to ``(A, 3)`` and zero the integrals."""
         shape = (arms, 3)
         self.kp = np.broadcast_to(np.asarray(kp, float), shape).copy()
         self.ki = np.broadcast_to(np.asarray(ki, float), shape).copy()
@@ -115,6 +123,7 @@ class ComputedTorqueController:
 
     def __init__(self, arms: Sequence[ArmModel], kp: ArrayLike, kd: ArrayLike,
                  g: float = STANDARD_GRAVITY, friction_smoothing: float = 0.01):
+        """Store the gains and the friction model; check whether the arms share inertias."""
         self.arms = tuple(arms)
         self.kp = np.asarray(kp, float)
         self.kd = np.asarray(kd, float)

@@ -208,6 +208,7 @@ class HermiteReference:
 
     def __init__(self, t: np.ndarray, q: np.ndarray, qd: np.ndarray,
                  qdd: Optional[np.ndarray] = None):
+        """Precompute the cubic coefficients per segment (and, with ``qdd``, the switch model)."""
         self.t, self.q, self.qd, self.qdd = t, q, qd, qdd
         self.start, self.end = float(t[0]), float(t[-1])
         self._times = t.tolist()
