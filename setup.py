@@ -1,21 +1,26 @@
 """ament_python package setup for scara_collab."""
 from glob import glob
+import importlib.util
 import os
+import sys
 
 from setuptools import find_packages, setup
 
 package_name = 'scara_collab'
 
-# One entry per executable of SPEC section 3; each is added by the change that builds its node.
-console_scripts = [
-    'pybullet_bridge = scara_collab.nodes.pybullet_bridge:main',
-    'left_planner = scara_collab.nodes.planner:main_left',
-    'right_planner = scara_collab.nodes.planner:main_right',
-    'replication_manager = scara_collab.nodes.replication_manager:main',
-    'collision_monitor = scara_collab.nodes.collision_monitor:main',
-    'automation_manager = scara_collab.nodes.automation_manager:main',
-    'cell_viewer = scara_collab.nodes.cell_viewer:main',
-]
+
+def node_executables():
+    """Return the console scripts: one per node of ``scara_collab/graph.py``, named like it.
+
+    The graph's description is read alone (it needs only the standard library), so the
+    package need not be importable while it is being built.
+    """
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), package_name, 'graph.py')
+    spec = importlib.util.spec_from_file_location('_scara_collab_graph', path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while being built
+    spec.loader.exec_module(module)
+    return module.console_scripts()
 
 
 def share(subdir: str, pattern: str = '*'):
@@ -40,5 +45,5 @@ setup(
     maintainer_email='maintainers@scara-collab.invalid',
     description='Collaborative dual-SCARA sorting cell on ROS 2 Jazzy with a PyBullet bridge',
     license='Apache-2.0',
-    entry_points={'console_scripts': console_scripts},
+    entry_points={'console_scripts': node_executables()},
 )

@@ -10,17 +10,15 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
+from scara_collab import graph
+from scara_collab.graph import ros_args
+
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
 
 def params_args(*names: str, overrides: dict = None) -> List[str]:
     """``--ros-args`` loading the real ``config/<name>.yaml`` files, plus ``-p`` overrides."""
-    args = ['--ros-args']
-    for n in names:
-        args += ['--params-file', str(CONFIG / f'{n}.yaml')]
-    for k, v in (overrides or {}).items():
-        args += ['-p', f'{k}:={v}']
-    return args
+    return ros_args(names, overrides, config_dir=CONFIG)
 
 
 class Graph:
@@ -39,6 +37,15 @@ class Graph:
         self.nodes.append(node)
         self.executor.add_node(node)
         return node
+
+    def add_node_of(self, name: str, **overrides) -> Node:
+        """Build the graph's node ``name`` (:mod:`scara_collab.graph`) with its configs, add it.
+
+        ``overrides`` are its ``-p`` parameters, set after the config files.
+        """
+        spec = graph.node(name)
+        return self.add(spec.build(context=self.context,
+                                   cli_args=params_args(*spec.configs, overrides=overrides)))
 
     def spin_until(self, predicate: Callable[[], bool], timeout: float = 20.0) -> bool:
         """Spin until ``predicate()`` is true; False if ``timeout`` wall seconds pass first."""

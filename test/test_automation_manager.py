@@ -73,11 +73,11 @@ def test_the_node_logs_the_jobs_decisions_at_both_levels():
     import rclpy
 
     from scara_collab.nodes.automation_manager import AutomationManager
-    from scara_collab.nodes.params import ros_args
+    from scara_collab.graph import ros_args
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     try:
-        node = AutomationManager(context=ctx, cli_args=ros_args('automation', 'controllers'))
+        node = AutomationManager(context=ctx, cli_args=ros_args(('automation', 'controllers')))
         for level in ('info', 'warn', 'info', 'warn'):
             node._log(level, f'a {level} decision')
         node.destroy_node()
@@ -96,11 +96,11 @@ def test_the_job_starts_only_once_every_endpoint_it_uses_is_matched():
     from std_srvs.srv import Trigger
 
     from scara_collab.nodes.automation_manager import AutomationManager
-    from scara_collab.nodes.params import ros_args
+    from scara_collab.graph import ros_args
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     try:
-        node = AutomationManager(context=ctx, cli_args=ros_args('automation', 'controllers'))
+        node = AutomationManager(context=ctx, cli_args=ros_args(('automation', 'controllers')))
         res = node._on_start(Trigger.Request(), Trigger.Response())
         assert not res.success and not node.job.running
         assert '/scara_left/target (no subscriber)' in res.message

@@ -8,11 +8,7 @@ import rclpy
 from ros_harness import params_args
 from std_srvs.srv import SetBool, Trigger
 
-from scara_collab.nodes.automation_manager import AutomationManager
-from scara_collab.nodes.collision_monitor import CollisionMonitor
-from scara_collab.nodes.planner import Planner
-from scara_collab.nodes.pybullet_bridge import PyBulletBridge
-from scara_collab.nodes.replication_manager import ReplicationManager
+from scara_collab import graph
 from scara_collab.run.recorder import RunRecorder
 
 SIM = {'use_sim_time': 'true'}
@@ -28,17 +24,11 @@ def test_every_callback_survives_a_garbage_message(tmp_path):
     rclpy.init(context=ctx)
     nodes = []
     try:
-        nodes = [
-            PyBulletBridge(context=ctx, cli_args=params_args(
-                'simulation', 'controllers', overrides={'feed_interval': 0.0, **SIM})),
-            Planner('scara_left', 'left_planner', context=ctx,
-                    cli_args=params_args('controllers', overrides=SIM)),
-            Planner('scara_right', 'right_planner', context=ctx,
-                    cli_args=params_args('controllers', overrides=SIM)),
-            ReplicationManager(context=ctx, cli_args=params_args(overrides=SIM)),
-            CollisionMonitor(context=ctx, cli_args=params_args(overrides=SIM)),
-            AutomationManager(context=ctx, cli_args=params_args('automation', 'controllers',
-                                                                overrides=SIM)),
+        own = {'pybullet_bridge': {'feed_interval': 0.0}}
+        nodes = [spec.build(context=ctx, cli_args=params_args(
+                     *spec.configs, overrides=dict(SIM, **own.get(spec.name, {}))))
+                 for spec in graph.job_nodes()]
+        nodes += [
             RunRecorder(tmp_path / 'run', 'collaborative', context=ctx),
         ]
         called, escaped = 0, []

@@ -4,6 +4,7 @@ The launcher is run as a subprocess with the session's ROS_DOMAIN_ID (conftest.p
 collaborative job itself (items sorted, throughput) is tested with the automation manager.
 """
 import csv
+import importlib
 import importlib.util
 import json
 import os
@@ -215,12 +216,18 @@ def test_the_container_reads_one_entry_and_its_arguments_per_node():
                       (['--node'], 'needs an entry'), (['--node', 'os:system'], 'unknown node')):
         with pytest.raises(ValueError, match=why):
             container.parse(argv)
-    # every stage the launcher can start is a component the container can build
+    # every node of the graph has the executable and the class it names
+    from scara_collab import graph
+    for spec in graph.NODES:
+        module, func = spec.entry.split(':')
+        assert callable(getattr(importlib.import_module(module), func)), spec.entry
+        module, cls = spec.component.split(':')
+        assert isinstance(getattr(importlib.import_module(module), cls), type), spec.component
     from scara_collab.run import launcher
     args = launcher.parse_args(['--one-process'])
     assert args.one_process
     stages = launcher.stages(args, True)
-    assert {s.entry for s in stages} <= set(container.COMPONENTS)
+    assert [s.name for s in stages] == [n.name for n in graph.job_nodes()]
     cmd = launcher.command(launcher.one_process(stages), Path('/cfg'))
     assert container.parse(cmd[3:])[0] == (stages[0].entry, launcher.node_args(stages[0],
                                                                                Path('/cfg')))

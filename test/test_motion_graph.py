@@ -4,7 +4,7 @@ from geometry_msgs.msg import PointStamped
 import numpy as np
 import pytest
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from ros_harness import Graph, params_args
+from ros_harness import Graph
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 from std_srvs.srv import SetBool
@@ -15,10 +15,6 @@ from scara_collab.core.mirror import mirror_point
 from scara_collab.core.trajectory import segment_deviation
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
-from scara_collab.nodes.collision_monitor import CollisionMonitor
-from scara_collab.nodes.planner import Planner
-from scara_collab.nodes.pybullet_bridge import PyBulletBridge
-from scara_collab.nodes.replication_manager import ReplicationManager
 
 SIM = {'use_sim_time': 'true'}
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
@@ -33,16 +29,9 @@ def cell():
     have a state.
     """
     g = Graph()
-    ctx = g.context
-    g.bridge = g.add(PyBulletBridge(context=ctx, cli_args=params_args(
-        'simulation', 'controllers', overrides={'real_time_factor': 0.0, 'feed_interval': 0.0,
-                                                **SIM})))
-    g.left = g.add(Planner('scara_left', 'left_planner', context=ctx,
-                           cli_args=params_args('controllers', overrides=SIM)))
-    g.right = g.add(Planner('scara_right', 'right_planner', context=ctx,
-                            cli_args=params_args('controllers', overrides=SIM)))
-    g.replicator = g.add(ReplicationManager(context=ctx, cli_args=params_args(overrides=SIM)))
-    g.monitor = g.add(CollisionMonitor(context=ctx, cli_args=params_args(overrides=SIM)))
+    g.bridge = g.add_node_of('pybullet_bridge', real_time_factor=0.0, feed_interval=0.0, **SIM)
+    names = ('left_planner', 'right_planner', 'replication_manager', 'collision_monitor')
+    g.left, g.right, g.replicator, g.monitor = (g.add_node_of(n, **SIM) for n in names)
     g.states = g.collect(JointState, '/joint_states')
     g.status = {n: g.collect(DiagnosticStatus, f'/{n}/planner_status')
                 for n in ('scara_left', 'scara_right')}

@@ -26,6 +26,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
+from scara_collab import graph
 from scara_collab.bench.util import Log
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.mirror import mirror_point
@@ -34,10 +35,6 @@ from scara_collab.core.planning import plan_path
 from scara_collab.core.trajectory import segment_deviation
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
-from scara_collab.nodes.params import ros_args
-from scara_collab.nodes.planner import Planner
-from scara_collab.nodes.pybullet_bridge import PyBulletBridge
-from scara_collab.nodes.replication_manager import ReplicationManager
 from scara_collab.nodes.runner import close_graph
 
 ROBOTS = ('scara_left', 'scara_right')
@@ -88,16 +85,12 @@ def measure(mode: str = 'line', targets: Optional[Sequence[np.ndarray]] = None,
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     ex = SingleThreadedExecutor(context=ctx)
-    nodes = [
-        PyBulletBridge(context=ctx, cli_args=ros_args(
-            'simulation', 'controllers', real_time_factor=0.0, feed_interval=0.0)),
-        Planner('scara_left', 'left_planner', context=ctx,
-                cli_args=ros_args('controllers', mode=mode)),
-        Planner('scara_right', 'right_planner', context=ctx,
-                cli_args=ros_args('controllers', mode=mode)),
-        ReplicationManager(context=ctx, cli_args=ros_args()),
-        Node('bench', context=ctx),
-    ]
+    own = {'pybullet_bridge': {'real_time_factor': 0.0, 'feed_interval': 0.0},
+           'left_planner': {'mode': mode}, 'right_planner': {'mode': mode}}
+    nodes = [spec.build(context=ctx, cli_args=graph.ros_args(spec.configs, own.get(spec.name)))
+             for spec in map(graph.node, ('pybullet_bridge', 'left_planner', 'right_planner',
+                                          'replication_manager'))]
+    nodes.append(Node('bench', context=ctx))
     bridge, left_pl, right_pl, _, probe = nodes
     for n in nodes:
         ex.add_node(n)

@@ -23,13 +23,11 @@ from typing import Dict, Optional, Sequence
 
 import rclpy
 
+from scara_collab import graph
 from scara_collab.bench.util import Log
 from scara_collab.core.config import load_config
 from scara_collab.nodes.automation_manager import AutomationManager
 from scara_collab.nodes.collision_monitor import CollisionMonitor
-from scara_collab.nodes.params import ros_args
-from scara_collab.nodes.planner import Planner
-from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 from scara_collab.nodes.replication_manager import ReplicationManager
 from scara_collab.nodes.runner import close_graph, make_executor
 
@@ -60,24 +58,17 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     ex = make_executor(context=ctx)  # the executables' executor ($SCARA_COLLAB_EXECUTOR)
-    pattern = 'mirror_pairs' if mode == 'mirrored' else 'random'
-    extra = {'faults': list(faults)} if faults else {}
-    bridge = PyBulletBridge(context=ctx, cli_args=ros_args(
-        'simulation', 'controllers', real_time_factor=0.0, feed_interval=feed,
-        feed_pattern=pattern, item_seed=seed, **extra))
-    replication = ReplicationManager(context=ctx, cli_args=ros_args(
-        enabled=str(mode == 'mirrored').lower()))  # as the launcher starts it
-    monitor = CollisionMonitor(context=ctx, cli_args=ros_args())
-    nodes = [bridge,
-             Planner('scara_left', 'left_planner', context=ctx,
-                     cli_args=ros_args('controllers', **extra)),
-             Planner('scara_right', 'right_planner', context=ctx,
-                     cli_args=ros_args('controllers', **extra)),
-             replication, monitor]
-    job = AutomationManager(context=ctx, cli_args=ros_args('automation', 'controllers',
-                                                           mode=mode, auto_start='true',
-                                                           **extra))
-    nodes.append(job)
+    params = graph.job_params(mode)  # as the launcher starts them
+    params['pybullet_bridge'].update(real_time_factor=0.0, feed_interval=feed, item_seed=seed)
+    params['automation_manager']['auto_start'] = 'true'
+    built: Dict[str, object] = {}
+    for spec in graph.job_nodes():
+        own = dict(params[spec.name], **({'faults': list(faults)} if faults else {}))
+        built[spec.name] = spec.build(context=ctx,
+                                      cli_args=graph.ros_args(spec.configs, own))
+    nodes = list(built.values())
+    bridge, job = built['pybullet_bridge'], built['automation_manager']
+    replication, monitor = built['replication_manager'], built['collision_monitor']
     for n in nodes:
         ex.add_node(n)
     wall = time.monotonic()

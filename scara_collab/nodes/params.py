@@ -9,13 +9,12 @@ with the file's error message. Later changes go through the same validation in a
 on-set-parameters callback and are refused unless the key is listed as dynamic.
 """
 import copy
-from typing import Callable, Dict, Iterable, List, Optional, Sequence
+from typing import Callable, Dict, Iterable, Optional, Sequence
 
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 
 from scara_collab.core.config import ConfigError, load_config, validate
-from scara_collab.core.paths import config_dir
 
 
 def flatten(tree: dict, prefix: str = '') -> Dict[str, object]:
@@ -99,19 +98,3 @@ def declare_config(node: Node, names: Sequence[str], dynamic: Iterable[str] = ()
 
     node.add_on_set_parameters_callback(check)
     return trees
-
-
-def ros_args(*files: str, sim_time: bool = True, **params) -> List[str]:
-    """Return ``--ros-args`` that load the package's ``config/<file>.yaml`` and set ``params``.
-
-    Example: ``ros_args('controllers', mode='joint')`` for a node built in-process with
-    ``Node(..., cli_args=...)``.
-    """
-    out = ['--ros-args', '-p', f'use_sim_time:={"true" if sim_time else "false"}']
-    for f in files:
-        out += ['--params-file', str(config_dir() / f'{f}.yaml')]
-    for key, value in params.items():
-        if isinstance(value, (list, tuple)):  # a string array parameter
-            value = '[' + ','.join(f"'{v}'" for v in value) + ']'
-        out += ['-p', f'{key}:={value}']
-    return out

@@ -13,35 +13,17 @@ scheduled, and the process pays one executor and one interpreter instead of six.
 Like :mod:`scara_collab.run.child`, the container asks for SIGTERM when the launcher dies.
 """
 import functools
-import importlib
 import os
 import signal
 import sys
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, List, Optional, Sequence, Tuple
 
 from rclpy.node import Node
 
+from scara_collab import graph
 from scara_collab.nodes.runner import run_nodes
 from scara_collab.run.child import die_with_parent
 
-#: entry point of an executable -> (module, callable that builds its node, fixed kwargs)
-COMPONENTS: Dict[str, Tuple[str, str, Dict[str, str]]] = {
-    'scara_collab.nodes.pybullet_bridge:main': ('scara_collab.nodes.pybullet_bridge',
-                                                'PyBulletBridge', {}),
-    'scara_collab.nodes.planner:main_left': ('scara_collab.nodes.planner', 'Planner',
-                                             {'robot': 'scara_left',
-                                              'node_name': 'left_planner'}),
-    'scara_collab.nodes.planner:main_right': ('scara_collab.nodes.planner', 'Planner',
-                                              {'robot': 'scara_right',
-                                               'node_name': 'right_planner'}),
-    'scara_collab.nodes.replication_manager:main': ('scara_collab.nodes.replication_manager',
-                                                    'ReplicationManager', {}),
-    'scara_collab.nodes.collision_monitor:main': ('scara_collab.nodes.collision_monitor',
-                                                  'CollisionMonitor', {}),
-    'scara_collab.nodes.automation_manager:main': ('scara_collab.nodes.automation_manager',
-                                                   'AutomationManager', {}),
-    'scara_collab.nodes.cell_viewer:main': ('scara_collab.nodes.cell_viewer', 'CellViewer', {}),
-}
 FLAG = '--node'
 
 
@@ -49,7 +31,7 @@ def parse(argv: Sequence[str]) -> List[Tuple[str, List[str]]]:
     """Split ``--node ENTRY args... --node ENTRY args...`` into ``[(entry, args), ...]``.
 
     :raises ValueError: no node, an argument before the first ``--node``, or an entry point
-        that is not one of :data:`COMPONENTS`.
+        that is not a node of :mod:`scara_collab.graph`.
     """
     out: List[Tuple[str, List[str]]] = []
     it = iter(argv)
@@ -58,8 +40,8 @@ def parse(argv: Sequence[str]) -> List[Tuple[str, List[str]]]:
             entry = next(it, None)
             if entry is None:
                 raise ValueError(f'{FLAG} needs an entry point')
-            if entry not in COMPONENTS:
-                raise ValueError(f'unknown node {entry!r}; one of: {", ".join(COMPONENTS)}')
+            if entry not in graph.BY_ENTRY:
+                raise ValueError(f'unknown node {entry!r}; one of: {", ".join(graph.BY_ENTRY)}')
             out.append((entry, []))
         elif not out:
             raise ValueError(f'expected {FLAG} ENTRY first, got {token!r}')
@@ -72,9 +54,7 @@ def parse(argv: Sequence[str]) -> List[Tuple[str, List[str]]]:
 
 def factory(entry: str, args: Sequence[str]) -> Callable[[], Node]:
     """Return a callable that builds the node of ``entry`` with its own ``cli_args``."""
-    module, name, fixed = COMPONENTS[entry]
-    build = getattr(importlib.import_module(module), name)
-    return functools.partial(build, cli_args=list(args), **fixed)
+    return functools.partial(graph.BY_ENTRY[entry].build, cli_args=list(args))
 
 
 def main(argv: Optional[List[str]] = None) -> None:

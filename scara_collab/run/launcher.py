@@ -1,22 +1,14 @@
 """Launch the whole cell on sim time, run the job, record it, report it (``launch_cell.py``).
 
-Stages, in order, each a separate process (``python -m scara_collab.run.child
-<module>:<function> --ros-args -p use_sim_time:=true --params-file config/<file>.yaml ...``),
-each started only when the previous one is *ready* on the graph:
-
-=====================  ==================================================================
-pybullet_bridge        ``/clock`` messages arrive (sim time advances)
-left_planner           node ``left_planner`` listed, subscribed to ``/scara_left/target``
-right_planner          node ``right_planner`` listed, subscribed to ``/scara_right/target``
-replication_manager    service ``/replication_manager/enable`` available
-collision_monitor      service ``/collision_monitor/clear`` available
-automation_manager     service ``/automation_manager/start`` available; then ``start`` is
-                       called (not in ``--mode idle``), again every 0.5 s while the
-                       manager refuses it because an endpoint it uses is not matched yet
-cell_viewer            ``--viewer [PORT]`` only: node ``cell_viewer`` subscribed to
-                       ``/joint_states`` and http://localhost:PORT answering (the URL is
-                       printed; a port in use is refused at the command line)
-=====================  ==================================================================
+Stages, in order, are the nodes of :mod:`scara_collab.graph`, each a separate process
+(``python -m scara_collab.run.child <module>:<function> --ros-args -p use_sim_time:=true
+--params-file config/<file>.yaml ...``), each started only when the previous one is *ready* on
+the graph as the graph's description says (``/clock`` runs, the planner subscribes to its
+target topic, the manager's service answers, ...). Once the automation manager is ready its
+``start`` is called (not in ``--mode idle``), again every 0.5 s while the manager refuses it
+because an endpoint it uses is not matched yet. The viewer is started with ``--viewer
+[PORT]`` only (http://localhost:PORT must answer; a port in use is refused at the command
+line).
 
 Every wait has a timeout that ends the launch with an error naming the stage, and a node
 process that dies ends it at once (its name, exit code and the tail of its log are printed).
@@ -79,6 +71,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Header
 from std_srvs.srv import SetBool, Trigger
 
+from scara_collab import graph
 from scara_collab.core.config import load_config
 from scara_collab.core.paths import config_dir
 from scara_collab.nodes import lockstep
@@ -89,7 +82,8 @@ from scara_collab.run.report import format_progress, format_report
 from scara_collab.run.telemetry import CpuMeter, process_cpu_seconds
 
 RUN_MODES = ('idle', 'single', 'collaborative', 'mirrored')
-AUTOMATION_MODULE = 'scara_collab.nodes.automation_manager'
+AUTOMATION_MODULE = graph.node('automation_manager').entry.split(':')[0]
+SERVICE_TYPES = {'std_srvs/srv/SetBool': SetBool, 'std_srvs/srv/Trigger': Trigger}
 EXIT_FAILED = 1
 EXIT_USAGE = 2
 FAST_CHUNK = 0.02  # s: with the bridge's 2 ms tick, up to 10x real time
@@ -317,58 +311,39 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
 
 
 def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
-    """Return the graph for ``args``, in launch order."""
+    """Return the graph for ``args``, in launch order (the nodes of :mod:`scara_collab.graph`)."""
     common = {} if args.profile is None else {'profile': args.profile}
-    bridge = dict(common, real_time_factor=repr(float(args.launch_rtf)))
+    by_mode = graph.job_params(args.mode)
+    own: Dict[str, Dict[str, str]] = {
+        'pybullet_bridge': {'real_time_factor': repr(float(args.launch_rtf)),
+                            # the belt feeds from when the job starts (Launcher.start_job)
+                            'feed_interval': '0.0'},
+        'automation_manager': {'auto_start': 'false'},  # the launcher starts the job
+    }
+    bridge = own['pybullet_bridge']
     if args.step_chunk is not None:
         bridge['step_chunk'] = repr(float(args.step_chunk))
     if args.gui:
         bridge['gui'] = 'true'
     if args.seed is not None:
         bridge['item_seed'] = str(args.seed)
-    if args.mode == 'mirrored':  # items must arrive in mirror pairs
-        bridge['feed_pattern'] = 'mirror_pairs'
-    # the belt feeds from when the job starts (Launcher.start_job), not while the graph starts
-    bridge['feed_interval'] = '0.0'
-    out = [
-        Stage('pybullet_bridge', 'scara_collab.nodes.pybullet_bridge:main',
-              ('simulation', 'controllers'), '/clock messages', bridge),
-        Stage('left_planner', 'scara_collab.nodes.planner:main_left', ('controllers',),
-              'node left_planner subscribed to /scara_left/target', dict(common)),
-        Stage('right_planner', 'scara_collab.nodes.planner:main_right', ('controllers',),
-              'node right_planner subscribed to /scara_right/target', dict(common)),
-        Stage('replication_manager', 'scara_collab.nodes.replication_manager:main', (),
-              'service /replication_manager/enable',
-              dict(common, enabled=str(args.mode in ('mirrored', 'idle')).lower())),
-        Stage('collision_monitor', 'scara_collab.nodes.collision_monitor:main', (),
-              'service /collision_monitor/clear', dict(common)),
-    ]
-    if with_automation:
-        auto = dict(common, auto_start='false')
-        if args.mode != 'idle':
-            auto['mode'] = args.mode
-        out.append(Stage('automation_manager', f'{AUTOMATION_MODULE}:main', ('automation',),
-                         'service /automation_manager/start', auto))
-    faults = getattr(args, 'fault', [])
-    if faults:  # every node applies the entries naming its own publishers and clients
-        for stage in out:
-            stage.params['faults'] = '[' + ','.join(f"'{f}'" for f in faults) + ']'
     port = getattr(args, 'viewer', None)
     if port is not None:
-        out.append(Stage('cell_viewer', 'scara_collab.nodes.cell_viewer:main', (),
-                         f'node cell_viewer subscribed to /joint_states, live 3D view on '
-                         f'http://localhost:{port}', dict(common, port=str(port))))
+        own['cell_viewer'] = {'port': str(port)}
+    faults = getattr(args, 'fault', [])
+    out = []
+    for spec in graph.job_nodes(automation=with_automation, viewer=port is not None):
+        params = dict(common, **by_mode[spec.name], **own.get(spec.name, {}))
+        if faults:  # every node applies the entries naming its own publishers and clients
+            params['faults'] = graph.param_value(faults)
+        out.append(Stage(spec.name, spec.entry, spec.configs,
+                         spec.ready.describe(spec.name, params), params))
     return out
 
 
 def node_args(stage: Stage, config_dir: Path) -> List[str]:
     """Return the ``--ros-args`` of one stage's node."""
-    out = ['--ros-args', '-p', 'use_sim_time:=true']
-    for name in stage.configs:
-        out += ['--params-file', str(config_dir / f'{name}.yaml')]
-    for key, value in stage.params.items():
-        out += ['-p', f'{key}:={value}']
-    return out
+    return graph.ros_args(stage.configs, stage.params, config_dir=config_dir)
 
 
 def command(stage: Stage, config_dir: Path) -> List[str]:
@@ -624,23 +599,18 @@ class Launcher:
         return cli.service_is_ready
 
     def ready_check(self, stage: Stage) -> Callable[[], bool]:
-        """Return the readiness predicate of a stage (see the module docstring)."""
-        name = stage.name
-        if name == 'pybullet_bridge':
+        """Return the readiness predicate of a stage (from :mod:`scara_collab.graph`)."""
+        name, ready = stage.name, graph.node(stage.name).ready
+        if ready.kind == 'clock':
             return lambda: self.node.get_clock().now().nanoseconds > 0
-        if name.endswith('_planner'):
-            robot = f'scara_{name.split("_")[0]}'
-            return lambda: self._subscribed(name, f'/{robot}/target')
-        if name == 'replication_manager':
-            return self._service_ready(SetBool, '/replication_manager/enable')
-        if name == 'collision_monitor':
-            return self._service_ready(Trigger, '/collision_monitor/clear')
-        if name == 'automation_manager':
-            return self._service_ready(Trigger, '/automation_manager/start')
-        if name == 'cell_viewer':  # on the graph, and its page answers
+        if ready.kind == 'subscribed':
+            return lambda: self._subscribed(name, ready.name)
+        if ready.kind == 'service':
+            return self._service_ready(SERVICE_TYPES[ready.srv_type], ready.name)
+        if ready.kind == 'page':  # on the graph, and its page answers
             url = f'http://127.0.0.1:{stage.params["port"]}/'
-            return lambda: self._subscribed(name, '/joint_states') and http_ok(url)
-        raise ValueError(f'no readiness check for {name}')
+            return lambda: self._subscribed(name, ready.name) and http_ok(url)
+        raise ValueError(f'no readiness check of kind {ready.kind!r} ({name})')
 
     # --- processes -------------------------------------------------------------------------
     def env(self) -> Dict[str, str]:

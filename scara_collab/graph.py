@@ -1,0 +1,179 @@
+"""The cell's ROS graph, described once, as data (no rclpy here).
+
+Every node of the cell is one :class:`NodeSpec`: its name (the node name, the console script
+and the log file), the entry point of its executable, the class that builds it (for running
+several nodes in one process), the ``config/*.yaml`` files whose keys it declares as
+parameters, and what "ready" means for it on the graph. :func:`job_params` says what a job
+mode sets on which node, :func:`ros_args` is the one ``--ros-args`` builder.
+
+Everything that starts the graph reads this module: the launcher (one process per node, or
+all in one container), ``setup.py`` (the console scripts, so ``ros2 run`` has the same
+names), the in-process graph of the benchmarks (:func:`scara_collab.bench.job.run_job`) and
+the tests' graphs (``test/ros_harness.py``). In launch order::
+
+    pybullet_bridge      clock, /joint_states, trajectories, belt, gripper   ready: /clock runs
+    left_planner         /scara_left/target -> trajectory                    ready: subscribed
+    right_planner        /scara_right/target -> trajectory                   ready: subscribed
+    replication_manager  /collab/target -> both arms, mirrored               ready: service
+    collision_monitor    arm-to-arm distance, e-stop                         ready: service
+    automation_manager   the sorting job                                     ready: service
+    cell_viewer          live 3D view (optional)                             ready: page answers
+
+>>> [n.name for n in job_nodes()][:3]
+['pybullet_bridge', 'left_planner', 'right_planner']
+>>> job_params('mirrored')['replication_manager']
+{'enabled': 'true'}
+>>> ros_args((), {'mode': 'joint'}, config_dir=Path('/cfg'))
+['--ros-args', '-p', 'use_sim_time:=true', '-p', 'mode:=joint']
+"""
+from dataclasses import dataclass, field
+import importlib
+from pathlib import Path
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+
+PACKAGE = 'scara_collab'
+JOB_MODES = ('single', 'collaborative', 'mirrored')
+LAUNCH_MODES = ('idle',) + JOB_MODES  # idle: the graph without the sorting job
+
+
+@dataclass(frozen=True)
+class Readiness:
+    """What a node shows on the graph once it is ready.
+
+    ``kind``: ``'clock'`` (sim time runs: ``/clock`` is published), ``'subscribed'`` (the node
+    subscribes to the topic ``name``), ``'service'`` (the service ``name`` of type
+    ``srv_type``, ``'package/srv/Type'``, answers), ``'page'`` (subscribed to ``name`` and its
+    web page answers on the node's ``port`` parameter).
+    """
+
+    kind: str
+    name: str = ''
+    srv_type: str = ''
+
+    def describe(self, node: str, params: Mapping[str, str]) -> str:
+        """Return what the launcher waits for, in words (for its console lines)."""
+        if self.kind == 'clock':
+            return '/clock messages'
+        if self.kind == 'subscribed':
+            return f'node {node} subscribed to {self.name}'
+        if self.kind == 'service':
+            return f'service {self.name}'
+        return (f'node {node} subscribed to {self.name}, live 3D view on '
+                f'http://localhost:{params.get("port", "?")}')
+
+
+@dataclass(frozen=True)
+class NodeSpec:
+    """One node of the cell (see the module docstring)."""
+
+    name: str                  # node name = console script = log file name
+    entry: str                 # the executable: 'module:function'
+    component: str             # the class that builds the node in-process: 'module:Class'
+    configs: Tuple[str, ...]   # config/<name>.yaml files whose keys it declares
+    ready: Readiness
+    fixed: Mapping[str, str] = field(default_factory=dict)  # the class's own keywords
+    optional: bool = False     # started only when asked for (the viewer)
+
+    def build(self, **kwargs):
+        """Build the node in this process: ``Class(**fixed, **kwargs)`` (``context``, ...)."""
+        module, cls = self.component.split(':')
+        return getattr(importlib.import_module(module), cls)(**self.fixed, **kwargs)
+
+
+def _n(module: str) -> str:
+    return f'{PACKAGE}.nodes.{module}'
+
+
+NODES: Tuple[NodeSpec, ...] = (
+    NodeSpec('pybullet_bridge', _n('pybullet_bridge:main'), _n('pybullet_bridge:PyBulletBridge'),
+             ('simulation', 'controllers'), Readiness('clock')),
+    NodeSpec('left_planner', _n('planner:main_left'), _n('planner:Planner'), ('controllers',),
+             Readiness('subscribed', '/scara_left/target'),
+             {'robot': 'scara_left', 'node_name': 'left_planner'}),
+    NodeSpec('right_planner', _n('planner:main_right'), _n('planner:Planner'), ('controllers',),
+             Readiness('subscribed', '/scara_right/target'),
+             {'robot': 'scara_right', 'node_name': 'right_planner'}),
+    NodeSpec('replication_manager', _n('replication_manager:main'),
+             _n('replication_manager:ReplicationManager'), (),
+             Readiness('service', '/replication_manager/enable', 'std_srvs/srv/SetBool')),
+    NodeSpec('collision_monitor', _n('collision_monitor:main'),
+             _n('collision_monitor:CollisionMonitor'), (),
+             Readiness('service', '/collision_monitor/clear', 'std_srvs/srv/Trigger')),
+    NodeSpec('automation_manager', _n('automation_manager:main'),
+             _n('automation_manager:AutomationManager'), ('automation', 'controllers'),
+             Readiness('service', '/automation_manager/start', 'std_srvs/srv/Trigger')),
+    NodeSpec('cell_viewer', _n('cell_viewer:main'), _n('cell_viewer:CellViewer'), (),
+             Readiness('page', '/joint_states'), optional=True),
+)
+BY_NAME: Dict[str, NodeSpec] = {n.name: n for n in NODES}
+BY_ENTRY: Dict[str, NodeSpec] = {n.entry: n for n in NODES}
+
+
+def node(name: str) -> NodeSpec:
+    """Return the node called ``name``.
+
+    :raises KeyError: with the known names, if there is none.
+    """
+    try:
+        return BY_NAME[name]
+    except KeyError:
+        raise KeyError(f'no node {name!r} in the graph; one of: {", ".join(BY_NAME)}') from None
+
+
+def job_nodes(automation: bool = True, viewer: bool = False) -> List[NodeSpec]:
+    """Return the nodes a run starts, in launch order (with the job, with the viewer)."""
+    return [n for n in NODES if (automation or n.name != 'automation_manager')
+            and (viewer or not n.optional)]
+
+
+def job_params(mode: str) -> Dict[str, Dict[str, str]]:
+    """Return the parameters a launch mode sets, per node name (string values).
+
+    Mirrored mode feeds items in mirror pairs; the replication manager follows
+    ``/joint_states`` only where mirrored moves are asked for (mirrored mode, and the idle
+    graph a user drives by hand); the automation manager runs the mode's job.
+
+    :raises ValueError: for a mode not in :data:`LAUNCH_MODES`.
+    """
+    if mode not in LAUNCH_MODES:
+        raise ValueError(f'mode must be one of {", ".join(LAUNCH_MODES)}, got {mode!r}')
+    out: Dict[str, Dict[str, str]] = {n.name: {} for n in NODES}
+    if mode == 'mirrored':
+        out['pybullet_bridge']['feed_pattern'] = 'mirror_pairs'
+    out['replication_manager']['enabled'] = str(mode in ('mirrored', 'idle')).lower()
+    if mode != 'idle':
+        out['automation_manager']['mode'] = mode
+    return out
+
+
+def param_value(value) -> str:
+    """Return ``value`` as a ``-p key:=value`` string (lists as a string array)."""
+    if isinstance(value, (list, tuple)):
+        return '[' + ','.join(f"'{v}'" for v in value) + ']'
+    if isinstance(value, bool):
+        return str(value).lower()
+    return str(value)
+
+
+def ros_args(configs: Sequence[str] = (), params: Optional[Mapping[str, object]] = None,
+             sim_time: bool = True, config_dir: Optional[Path] = None) -> List[str]:
+    """Return a node's ``--ros-args``: sim time, ``--params-file`` per config, ``-p`` per param.
+
+    :param configs: ``config/<name>.yaml`` files, in order (later ones override).
+    :param params: single parameters, set after the files.
+    :param config_dir: where the files are (default: the package's config folder).
+    """
+    if config_dir is None and configs:
+        from scara_collab.core.paths import config_dir as package_config_dir
+        config_dir = package_config_dir()
+    out = ['--ros-args', '-p', f'use_sim_time:={"true" if sim_time else "false"}']
+    for name in configs:
+        out += ['--params-file', str(Path(config_dir) / f'{name}.yaml')]
+    for key, value in (params or {}).items():
+        out += ['-p', f'{key}:={param_value(value)}']
+    return out
+
+
+def console_scripts() -> List[str]:
+    """Return the ``setup.py`` console scripts: one executable per node, named like it."""
+    return [f'{n.name} = {n.entry}' for n in NODES]
