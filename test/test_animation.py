@@ -19,8 +19,8 @@ from test_mcap_log import record_run
 
 from scara_collab.run import report
 from scara_collab.run.animation import (
-    CAPTION_HEIGHT, CellScene, decode_items, frame_times, load_items, render_after_run,
-    render_gif)
+    CAPTION_HEIGHT, decode_items, frame_times, load_items, render_after_run, render_gif,
+    RenderScene)
 
 ROOT = Path(__file__).resolve().parents[1]
 FPS = 3.0
@@ -52,7 +52,7 @@ def gif_frames(path: Path):
     return frames, durations
 
 
-def arm_links(scene: CellScene):
+def arm_links(scene: RenderScene):
     """Return the scene's arm link indices, each mapped to its robot."""
     pb, body = scene.pb, scene.cell_body
     names = {pb.getJointInfo(body, j)[12].decode(): j for j in range(pb.getNumJoints(body))}
@@ -60,7 +60,7 @@ def arm_links(scene: CellScene):
     return {j: wanted[n] for n, j in names.items() if n in wanted}
 
 
-def segmentation(scene: CellScene) -> np.ndarray:
+def segmentation(scene: RenderScene) -> np.ndarray:
     """Return PyBullet's segmentation mask (object and link index) of the scene's camera."""
     _, _, _, _, seg = scene.pb.getCameraImage(
         scene.width, scene.height, scene.view_matrix, scene.projection_matrix,
@@ -96,7 +96,7 @@ def test_the_gif_shows_the_moving_arms_and_the_items(run_dir, gif, cell):
     item_t, item_data, reading = load_items(run_dir / 'run.mcap')
     assert reading.complete and len(item_data) > 5
     masks = []
-    with CellScene(cell) as scene:
+    with RenderScene(cell) as scene:
         links = arm_links(scene)
         assert sorted(set(links.values())) == sorted(a.name for a in cell.arms)
         for k in (0, len(frames) - 1):

@@ -41,14 +41,12 @@ import yourdfpy
 
 from scara_collab.core import collision
 from scara_collab.core.model import CellModel, load_cell
+from scara_collab.core.palette import class_colour_255
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.qos import LATCHED
 from scara_collab.nodes.runner import run_node
 
-#: Item class colours, by the class's index in ``cell.item_classes`` (RGB 0-255).
-CLASS_COLOURS = ((217, 38, 38), (38, 89, 230), (51, 191, 51), (230, 204, 26))
-UNKNOWN_CLASS = (128, 128, 128)
 #: Planned-path colour per arm, by the arm's index in ``cell.arms``.
 PATH_COLOURS = ((230, 120, 20), (20, 160, 200))
 #: Capsule colours: apart (>= 2 margins), close (>= 1 margin), margin broken.
@@ -58,10 +56,8 @@ CAPSULE_PARTS = ('link 1', 'link 2', 'quill')
 
 # --- presentation helpers (numpy, no rclpy) ------------------------------------------------
 def class_colour(cls: str, classes: Sequence[str]) -> Tuple[int, int, int]:
-    """RGB colour of an item class: by its index in ``classes``, grey if unknown."""
-    if cls not in classes:
-        return UNKNOWN_CLASS
-    return CLASS_COLOURS[list(classes).index(cls) % len(CLASS_COLOURS)]
+    """RGB colour (0-255) of an item class (:mod:`scara_collab.core.palette`)."""
+    return class_colour_255(cls, classes)
 
 
 def margin_colour(distance: float, margin: float) -> Tuple[int, int, int]:
@@ -129,7 +125,7 @@ def stats_markdown(status: Optional[Tuple[str, Dict[str, str]]]) -> str:
     return f'**{message}**\n\n| | |\n|---|---|\n{rows}'
 
 
-class CellScene:
+class ViserScene:
     """The viser scene of the cell; knows nothing of ROS (arrays in, scene out).
 
     :ivar server: the viser server.
@@ -309,7 +305,7 @@ class CellScene:
 
 
 class CellViewer(Node):
-    """Serve the live 3D view; ``scene`` is the :class:`CellScene`, ``server`` its server."""
+    """Serve the live 3D view; ``scene`` is the :class:`ViserScene`, ``server`` its server."""
 
     def __init__(self, **kwargs):
         """Declare and check the parameters, start the viser server and subscribe.
@@ -337,7 +333,7 @@ class CellViewer(Node):
             if v.shape != (3,) or not np.all(np.isfinite(v)):
                 raise ValueError(f'cell_viewer: {name} must be 3 finite numbers, got {v}')
         self.cell = load_cell(self.get_parameter('profile').value or None)
-        self.scene: Optional[CellScene] = None
+        self.scene: Optional[ViserScene] = None
         self.q: Dict[str, np.ndarray] = {}
         self.items: Optional[Dict[int, Tuple[str, np.ndarray]]] = None
         self.paths: Dict[str, np.ndarray] = {}
@@ -365,7 +361,7 @@ class CellViewer(Node):
         self.server = viser.ViserServer(host=str(self.get_parameter('host').value), port=port,
                                         label='scara_collab cell', verbose=False)
         try:
-            self.scene = CellScene(self.server, self.cell)
+            self.scene = ViserScene(self.server, self.cell)
             self.scene.set_camera(*camera)
         except BaseException:
             self.server.stop()

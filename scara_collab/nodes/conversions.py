@@ -15,6 +15,8 @@ from std_msgs.msg import ColorRGBA, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
 
+from scara_collab.core.palette import class_colour
+
 
 class MessageError(ValueError):
     """A message was refused; the text says why."""
@@ -237,9 +239,6 @@ def path_msg(points: np.ndarray, stamp: float, frame_id: str = 'world') -> Path:
     return msg
 
 
-_COLOURS = [(0.85, 0.15, 0.15), (0.15, 0.35, 0.9), (0.2, 0.75, 0.2), (0.9, 0.8, 0.1)]
-
-
 def item_markers(items: List, classes: Sequence[str], size: float, stamp: float,
                  frame_id: str = 'world') -> MarkerArray:
     """Items -> ``MarkerArray``: a DELETEALL, then one CUBE per item (``ns`` = class).
@@ -250,8 +249,7 @@ def item_markers(items: List, classes: Sequence[str], size: float, stamp: float,
     out = MarkerArray()
     out.markers.append(Marker(header=header, action=Marker.DELETEALL))
     for it in items:
-        r, g, b = _COLOURS[list(classes).index(it.cls) % len(_COLOURS)] if it.cls in classes \
-            else (0.5, 0.5, 0.5)
+        r, g, b = class_colour(it.cls, classes)
         m = Marker(header=header, ns=it.cls, id=int(it.id), type=Marker.CUBE,
                    action=Marker.ADD, text=it.cls)
         m.pose = Pose()

@@ -65,7 +65,7 @@ class Camera:
             float(pitch), float(fov)
 
 
-class CellScene:
+class RenderScene:
     """The cell in a DIRECT PyBullet client, posed and photographed frame by frame.
 
     :param cell: the cell model (default :func:`load_cell`).
@@ -82,9 +82,7 @@ class CellScene:
         self.camera = camera or Camera()
         sim_cfg = dict(load_config('simulation'), feed_interval=0.0, gui=False)
         self.sim = CellSim(self.cell, sim_cfg)
-        # CellSim keeps its client private; the renderer needs it for its own bodies and the
-        # camera (the simulation is never stepped)
-        self.pb = self.sim._pb
+        self.pb = self.sim.client  # for its own bodies and the camera (never stepped)
         pb = self.pb
         # the cell URDF is the one body with joints; the others are the simulator's
         # collision-only bodies (the belt's rigid box, the floor plane), drawn as grey or
@@ -157,7 +155,7 @@ class CellScene:
         """Disconnect the client."""
         self.sim.close()
 
-    def __enter__(self) -> 'CellScene':
+    def __enter__(self) -> 'RenderScene':
         """Return the scene itself."""
         return self
 
@@ -295,7 +293,7 @@ def render_gif(run_dir: Union[str, Path], out: Optional[Union[str, Path]] = None
     palette = None
     started = time.monotonic()
     next_note = started + 5.0
-    with CellScene(cell, width, height, camera) as scene:
+    with RenderScene(cell, width, height, camera) as scene:
         for k, ft in enumerate(times):
             if stop is not None and stop():
                 say(f'[animation] stopped after {k} of {len(times)} frames')

@@ -1,8 +1,9 @@
-"""The simulation layer: the PyBullet cell (:class:`CellSim`), its servo laws and references.
+"""The simulation layer: the PyBullet cell (:class:`CellSim`), conveyor, servo laws, references.
 
 No rclpy here; the ``pybullet_bridge`` node wraps :class:`CellSim` in topics and services.
 """
-from scara_collab.sim.cell_sim import CellSim, Item, JointStateSample, SimEvent
+from scara_collab.sim.cell_sim import CellSim, JointStateSample
+from scara_collab.sim.conveyor import Conveyor, Item, SimEvent
 from scara_collab.sim.reference import TrajectoryError
 
-__all__ = ['CellSim', 'Item', 'JointStateSample', 'SimEvent', 'TrajectoryError']
+__all__ = ['CellSim', 'Conveyor', 'Item', 'JointStateSample', 'SimEvent', 'TrajectoryError']

@@ -1,0 +1,322 @@
+"""The simulated conveyor: the belt, the item feed, the items, the bins and the item events.
+
+:class:`Conveyor` lives in the PyBullet world of a :class:`~scara_collab.sim.cell_sim.CellSim`
+(same client, same clock) and knows nothing of the arms but their body (to name what knocked
+an item off the belt). The belt is a frictionless static box with the URDF conveyor's
+geometry (the URDF link keeps its visual and loses its collision): an item on it keeps its
+velocity exactly, and :meth:`Conveyor.update` re-imposes the belt velocity ``(speed, 0, 0)``
+on every item resting on the belt (after a push, a release onto the belt, a collision).
+
+Events, checked at every update: ``missed`` (an item on the belt passes ``x_end``, removed),
+``sorted`` / ``wrong_bin`` (an item at rest inside a bin, removed; the event names the bin's
+robot), ``dropped`` (at rest on the floor, removed), plus ``spawned`` as it happens; the
+gripper adds ``grasped`` and ``released`` (:meth:`Conveyor.event`).
+"""
+from dataclasses import dataclass
+import math
+from typing import Callable, Dict, List, NamedTuple, Optional
+
+import numpy as np
+import pybullet
+
+from scara_collab.core.config import ConfigError
+from scara_collab.core.model import CellModel
+from scara_collab.core.palette import class_colour
+from scara_collab.core.sorting import at_belt_height
+
+FEED_PATTERNS = ('random', 'mirror_pairs')
+EVENT_KINDS = ('spawned', 'grasped', 'released', 'sorted', 'wrong_bin', 'missed', 'dropped')
+PAYLOAD_CLASS = 'payload'
+"""Class of the test bodies hung on a tool (:meth:`CellSim.attach_payload`), not sortable."""
+
+_LOST_Z = -1.0  # m, an item below this fell through something: dropped
+
+
+@dataclass(frozen=True)
+class Item:
+    """One item as :meth:`Conveyor.items` reports it.
+
+    :ivar id: item id (unique over the run); :ivar cls: item class;
+    :ivar position: ``(3,)`` centre in world, m; :ivar velocity: ``(3,)`` m/s;
+    :ivar state: ``'belt'`` (resting on the belt, carried), ``'held'`` (in a gripper) or
+        ``'free'`` (anything else: falling, in a bin, on the floor).
+    """
+
+    id: int
+    cls: str
+    position: np.ndarray
+    velocity: np.ndarray
+    state: str
+
+
+@dataclass(frozen=True)
+class SimEvent:
+    """Something that happened to an item.
+
+    :ivar time: sim time, s; :ivar kind: one of :data:`EVENT_KINDS`; :ivar item: item id;
+    :ivar cls: item class; :ivar robot: the arm involved (gripper, bin, last holder of a
+        dropped item) or ``''``; :ivar cause: for an item that left the belt without a
+        grasp (``dropped``, ``missed`` after a push), what touched it last, else ``''``.
+    """
+
+    time: float
+    kind: str
+    item: int
+    cls: str
+    robot: str = ''
+    cause: str = ''
+
+
+class Bin(NamedTuple):
+    """A bin's opening: who it belongs to, what it takes, and the box an item rests in."""
+
+    robot: str
+    cls: str
+    x: float          # centre, world, m
+    y: float
+    half_x: float     # half the inner size, m
+    half_y: float
+    top: float        # an item below this height (its centre) is inside, m
+
+
+class ItemRecord:
+    """Mutable bookkeeping of one item: its body, state and who holds or held it."""
+
+    __slots__ = ('id', 'body', 'cls', 'mass', 'state', 'holder', 'constraint', 'last_robot',
+                 'cause')
+
+    def __init__(self, item_id: int, body: int, cls: str, mass: float, state: str):
+        """Record item ``item_id`` (PyBullet ``body``) of class ``cls`` in ``state``."""
+        self.id, self.body, self.cls, self.mass, self.state = item_id, body, cls, mass, state
+        self.holder: Optional[str] = None      # the robot holding it
+        self.constraint: Optional[int] = None  # the gripper's fixed constraint
+        self.last_robot = ''
+        self.cause = ''  # what knocked it off the belt (it was never grasped)
+
+
+class Conveyor:
+    """The belt, its feed, the items on it and the bins, in a PyBullet world.
+
+    :param pb: the simulator's PyBullet client.
+    :param cell: the cell model (belt, item size, classes, bins).
+    :param sim_cfg: ``simulation.yaml`` (feed, jitter, inlet margin, rest speed).
+    :param clock: returns the sim time, s.
+    :param cell_body: the cell's URDF body (the arms), whose links are named by ``link_names``.
+    :param belt_link: the URDF's conveyor link, replaced by a frictionless box.
+    :param seed: the item RNG seed (classes, lateral offsets).
+    :raises ConfigError: if ``lateral_jitter`` puts items off the belt.
+    """
+
+    def __init__(self, pb, cell: CellModel, sim_cfg: dict, clock: Callable[[], float],
+                 cell_body: int, belt_link: int, link_names: Dict[int, str], seed: int):
+        """Build the belt box and the item shape; no items, the feed as configured."""
+        belt, size = cell.belt, cell.item_size
+        self._half_free = belt.width / 2.0 - size / 2.0
+        if float(sim_cfg['lateral_jitter']) > self._half_free + 1e-9:
+            raise ConfigError(f'simulation.yaml: lateral_jitter {sim_cfg["lateral_jitter"]} m '
+                              f'puts items off the {belt.width} m belt (at most '
+                              f'{self._half_free} m)')
+        self._pb, self.cell, self.cfg, self._clock = pb, cell, sim_cfg, clock
+        self._cell_body, self._link_names = cell_body, link_names
+        self._rng = np.random.default_rng(int(seed))
+        self._build_belt(belt_link)
+        self._item_shape = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[size / 2] * 3)
+        self._item_visual: Dict[str, int] = {}
+        inner = cell.config['bins']['size']
+        self.bins = [Bin(robot, cls, float(p[0]), float(p[1]), inner[0] / 2.0, inner[1] / 2.0,
+                         float(p[2]) + inner[2] + size)
+                     for (robot, cls), p in cell.bins.items()]
+        self.records: Dict[int, ItemRecord] = {}
+        self._next_id = 1
+        self._events: List[SimEvent] = []
+        self._get_pose = pb.getBasePositionAndOrientation
+        self._get_vel = pb.getBaseVelocity
+        self._set_vel = pb.resetBaseVelocity
+        self.set_feed(float(sim_cfg['feed_interval']), sim_cfg['feed_pattern'])
+
+    def _build_belt(self, link: int) -> None:
+        """Replace the URDF conveyor's collision by a static, frictionless rigid box."""
+        pb = self._pb
+        shape = pb.getCollisionShapeData(self._cell_body, link)[0]
+        half = [float(v) / 2.0 for v in shape[3]]
+        state = pb.getLinkState(self._cell_body, link, computeForwardKinematics=True)
+        pos, orn = pb.multiplyTransforms(state[0], state[1], shape[5], shape[6])
+        pb.setCollisionFilterGroupMask(self._cell_body, link, 0, 0)
+        box = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
+        self.belt_body = pb.createMultiBody(0.0, box, -1, pos, orn, useMaximalCoordinates=True)
+        pb.changeDynamics(self.belt_body, -1, lateralFriction=0.0, rollingFriction=0.0,
+                          spinningFriction=0.0)
+
+    # --- the feed -------------------------------------------------------------------------
+    def set_feed(self, interval: Optional[float] = None, pattern: Optional[str] = None) -> None:
+        """Change the automatic feed; the next item comes one ``interval`` from now.
+
+        :param interval: s of sim time between feeds, ``0`` = no automatic feed.
+        :param pattern: ``'random'`` (one item, random class and lateral offset) or
+            ``'mirror_pairs'`` (two items of one class at ``y`` and ``-y`` about the belt
+            centre line, same ``x``).
+        :raises ValueError: for a negative or non-finite interval or an unknown pattern.
+        """
+        if interval is not None:
+            if not (math.isfinite(interval) and interval >= 0):
+                raise ValueError(f'feed interval must be a number >= 0, got {interval!r}')
+            self.feed_interval = float(interval)
+        if pattern is not None:
+            if pattern not in FEED_PATTERNS:
+                raise ValueError(f'feed pattern must be one of {FEED_PATTERNS}, got {pattern!r}')
+            self.feed_pattern = pattern
+        self._next_feed = self._clock() + self.feed_period
+
+    @property
+    def feed_period(self) -> float:
+        """Return the seconds between feeds.
+
+        ``feed_interval`` is per item, so mirror pairs (two items) come every two intervals
+        and every pattern delivers the same items per minute.
+        """
+        return self.feed_interval * (2.0 if self.feed_pattern == 'mirror_pairs' else 1.0)
+
+    def _feed(self) -> None:
+        if self.feed_pattern == 'random':
+            self.spawn_item()
+            return
+        classes = self.cell.item_classes
+        cls = classes[int(self._rng.integers(len(classes)))]
+        size = self.cell.item_size
+        off = self._rng.uniform(size, max(size, float(self.cfg['lateral_jitter'])))
+        cy = self.cell.belt.centre_y
+        self.spawn_item(cls, cy + off)
+        self.spawn_item(cls, cy - off)
+
+    # --- items ----------------------------------------------------------------------------
+    def create_item(self, cls: str, pos, mass: float, state: str,
+                    size: Optional[float] = None) -> ItemRecord:
+        """Create an item body (the item size unless ``size``) at ``pos`` and record it."""
+        pb = self._pb
+        colour = (*class_colour(cls, self.cell.item_classes), 1.0)
+        if size is None:
+            shape = self._item_shape
+            if cls not in self._item_visual:
+                self._item_visual[cls] = pb.createVisualShape(
+                    pybullet.GEOM_BOX, halfExtents=[self.cell.item_size / 2] * 3,
+                    rgbaColor=colour)
+            visual = self._item_visual[cls]
+        else:
+            shape = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[size / 2] * 3)
+            visual = pb.createVisualShape(pybullet.GEOM_BOX, halfExtents=[size / 2] * 3,
+                                          rgbaColor=colour)
+        body = pb.createMultiBody(mass, shape, visual, [float(v) for v in pos],
+                                  useMaximalCoordinates=True)
+        pb.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0)
+        rec = ItemRecord(self._next_id, body, cls, mass, state)
+        self._next_id += 1
+        self.records[rec.id] = rec
+        return rec
+
+    def spawn_item(self, cls: Optional[str] = None, y: Optional[float] = None,
+                   x: Optional[float] = None) -> int:
+        """Put an item on the belt, moving at belt speed; return its id.
+
+        :param cls: item class; default: random (seeded).
+        :param y: lateral position (world); default: belt centre + uniform jitter.
+        :param x: position along the belt; default: the inlet, ``x_start + inlet_margin``.
+        :raises ValueError: unknown class, or a position off the belt.
+        """
+        belt = self.cell.belt
+        classes = self.cell.item_classes
+        if cls is None:
+            cls = classes[int(self._rng.integers(len(classes)))]
+        if cls not in classes:
+            raise ValueError(f'unknown item class {cls!r}; the cell sorts {list(classes)}')
+        jitter = float(self.cfg['lateral_jitter'])
+        y = belt.centre_y + self._rng.uniform(-jitter, jitter) if y is None else float(y)
+        x = belt.x_start + float(self.cfg['inlet_margin']) if x is None else float(x)
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise ValueError(f'item position must be finite, got x={x}, y={y}')
+        if abs(y - belt.centre_y) > self._half_free + 1e-9:
+            raise ValueError(f'y={y:.3f} puts the item off the belt (|y - {belt.centre_y}| '
+                             f'<= {self._half_free:.3f})')
+        if not belt.x_start <= x < belt.x_end:
+            raise ValueError(f'x={x:.3f} is not on the belt [{belt.x_start}, {belt.x_end})')
+        z = belt.top_z + self.cell.item_size / 2.0
+        rec = self.create_item(cls, (x, y, z), self.cell.item_mass, 'belt')
+        self._set_vel(rec.body, [belt.speed, 0.0, 0.0], [0.0, 0.0, 0.0])
+        self.event('spawned', rec)
+        return rec.id
+
+    def _remove(self, rec: ItemRecord, kind: str, robot: str = '') -> None:
+        if rec.constraint is not None:
+            self._pb.removeConstraint(rec.constraint)
+        self._pb.removeBody(rec.body)
+        del self.records[rec.id]
+        self.event(kind, rec, robot, rec.cause if kind in ('dropped', 'missed') else '')
+
+    def update(self) -> None:
+        """Feed, carry items on the belt, detect missed / sorted / wrong_bin / dropped."""
+        if self.feed_interval > 0 and self._clock() >= self._next_feed - 1e-9:
+            self._next_feed += self.feed_period
+            self._feed()
+        belt = self.cell.belt
+        half_w = belt.width / 2.0
+        carry = [belt.speed, 0.0, 0.0]
+        zero = [0.0, 0.0, 0.0]
+        rest_speed_sq = float(self.cfg['rest_speed']) ** 2
+        for rec in list(self.records.values()):
+            if rec.state == 'held':
+                continue
+            x, y, z = self._get_pose(rec.body)[0]
+            if x > belt.x_end and rec.state == 'belt':  # carried off the end (maybe tipping)
+                self._remove(rec, 'missed')
+                continue
+            if (at_belt_height(self.cell, z) and abs(y - belt.centre_y) <= half_w
+                    and belt.x_start <= x <= belt.x_end):
+                rec.state = 'belt'
+                self._set_vel(rec.body, carry, zero)
+                continue
+            if rec.state == 'belt' and not rec.cause:  # it left the belt without a grasp
+                rec.cause = self._touching(rec)
+            rec.state = 'free'
+            if z < _LOST_Z:
+                self._remove(rec, 'dropped', rec.last_robot)
+                continue
+            v = self._get_vel(rec.body)[0]
+            if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] > rest_speed_sq:
+                continue
+            for b in self.bins:
+                if abs(x - b.x) < b.half_x and abs(y - b.y) < b.half_y and z < b.top:
+                    self._remove(rec, 'sorted' if b.cls == rec.cls else 'wrong_bin', b.robot)
+                    break
+            else:
+                if z < self.cell.item_size:
+                    self._remove(rec, 'dropped', rec.last_robot)
+
+    def _touching(self, rec: ItemRecord) -> str:
+        """Name what touches an item now: an arm link, another item, or nothing."""
+        others = {r.body: r for r in self.records.values() if r is not rec}
+        found = ''
+        for c in self._pb.getContactPoints(bodyA=rec.body):
+            if c[2] == self._cell_body:
+                return f'knocked by {self._link_names.get(c[4], "the cell")}'
+            if c[2] in others and not found:
+                other = others[c[2]]
+                found = f'pushed by item {other.id}' + (
+                    f' (held by {other.holder})' if other.holder is not None else '')
+        return found or 'left the belt with nothing touching it'
+
+    def items(self) -> List[Item]:
+        """Every item in the cell now (positions and velocities read from PyBullet)."""
+        out = []
+        for rec in self.records.values():
+            pos = self._get_pose(rec.body)[0]
+            vel = self._get_vel(rec.body)[0]
+            out.append(Item(rec.id, rec.cls, np.array(pos), np.array(vel), rec.state))
+        return out
+
+    def event(self, kind: str, rec: ItemRecord, robot: str = '', cause: str = '') -> None:
+        """Record that ``kind`` happened to the item of ``rec`` now."""
+        self._events.append(SimEvent(self._clock(), kind, rec.id, rec.cls, robot, cause))
+
+    def pop_events(self) -> List[SimEvent]:
+        """Events since the last call, oldest first (the list is emptied)."""
+        events, self._events = self._events, []
+        return events
