@@ -439,7 +439,7 @@ def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):
     """Deferring is for items with time to spare: else both arms may defer one until it is gone.
 
     In an hour's soak one item rode the whole belt while both arms took younger ones: each
-    deferred it for the other's booked move. An item with less than ``DEFER_SLACK`` left in
+    deferred it for the other's booked move. An item with less than ``URGENT_SLACK`` left in
     the arm's reach is chased at once (the planner holds the arm back if it must).
     """
     from scara_collab.core import job as job_module, planning
@@ -463,13 +463,58 @@ def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):
                              leader=False)
     tolerance = 0.5 * job.s.grasp_reach / cell.belt.speed
     assert held is None or held.delay > tolerance  # it will wait: deferring would have skipped
-    assert (exit_x - ours.position[0]) / cell.belt.speed < job_module.DEFER_SLACK
+    assert (exit_x - ours.position[0]) / cell.belt.speed < job_module.URGENT_SLACK
     # the same item with time to spare is deferred (met later or left for another)
-    job_module.DEFER_SLACK, saved = 0.0, job_module.DEFER_SLACK
+    job_module.URGENT_SLACK, saved = 0.0, job_module.URGENT_SLACK
     try:
         lane.phase, lane.item = 'idle', None
         job._out = []
         if job._chase(lane, ours, 0.0):
             assert job._out[-1].start > cmd.start
     finally:
-        job_module.DEFER_SLACK = saved
+        job_module.URGENT_SLACK = saved
+
+
+def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
+    """Urgent items the arm can save go first, most urgent first; the rest by their cycle.
+
+    The left arm waits above its red bin (upstream, x = 0.6). A red and a blue item side by
+    side upstream, both with time to spare: the red one makes the shorter cycle (its bin is
+    near) and comes first, though the blue one is further downstream (more urgent). One blue
+    item about to leave reach stays in front of both. With more urgent items than the arm can
+    save (the feed is faster than the arm), every candidate goes by its cycle.
+    """
+    from scara_collab.core import job as job_module, sorting
+    job = make_job(cell)
+    lane = job.lanes[0]
+    arm = cell.arm(lane.robot)
+    job.on_arm_state(lane.robot, ik(arm, sorting.drop_point(cell, lane.robot, 'red', 0.1)).q)
+    z, start = job.s.pick_z, job.s.decision_lead
+
+    def spare(it):
+        return sorting.time_in_reach(cell, arm, sorting.predict(cell, it, start), z)
+
+    def cost(it):
+        return sorting.cycle_bound(cell, arm, job.q[lane.robot], it, start, z,
+                                   job.s.drop_clearance)
+
+    def ranked(items):
+        urgency = sorting.order_candidates(cell, arm, items, start, z, True, False)
+        return [it.id for it in urgency], [it.id for it in job._cheap_first(lane, urgency, 0.0)]
+
+    red = item_on_belt(cell, 1, x=0.7, y=-0.2, cls='red')
+    blue = item_on_belt(cell, 2, x=0.9, y=-0.2, cls='blue')
+    late = item_on_belt(cell, 3, x=3.3, y=-0.2, cls='blue')
+    assert min(spare(red), spare(blue)) >= job_module.URGENT_SLACK > spare(late)
+    assert cost(red) < cost(blue)
+    assert ranked([red, blue, late]) == ([3, 2, 1], [3, 1, 2])
+
+    crowd = [item_on_belt(cell, 10 + k, x=x, y=-0.2, cls=c)
+             for k, (x, c) in enumerate(((3.3, 'red'), (3.1, 'blue'), (2.9, 'red'),
+                                         (2.7, 'blue')))]
+    assert all(spare(it) < job_module.URGENT_SLACK for it in crowd)
+    assert len(crowd) > job_module.SAVABLE
+    urgency, order = ranked(crowd + [red])
+    assert urgency == [10, 11, 12, 13, 1]
+    by_cost = sorted(crowd + [red], key=cost)
+    assert order == [it.id for it in by_cost] and order != urgency

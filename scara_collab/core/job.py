@@ -60,9 +60,16 @@ MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
 VIA_OFFSETS = (0.6, 0.9, 1.2)
 #: s an idle arm that found nothing to take waits before it looks again (the items move 2 cm)
 LOOK_AGAIN = 0.1
-#: s: an item with less time than this left in an arm's reach is chased even when the other
-#: arm's booked move will hold the arm up (else both arms may defer it until it is missed)
-DEFER_SLACK = 4.0
+#: s: an item with less than this left in an arm's reach is urgent: about two cycles, so of
+#: two urgent items the arm can still take the one after the other. An urgent item is chased
+#: even when the other arm's booked move will hold the arm up (else the arm may take another
+#: first and come back too late, or both arms may defer it until it is missed)
+URGENT_SLACK = 8.0
+#: urgent items an arm can still save by taking them first, most urgent first; with more, the
+#: feed is faster than the arm and it takes the item that makes the shortest cycle
+SAVABLE = 2
+#: how many candidates (most urgent first) an idle arm compares
+CANDIDATES = 6
 #: planner / bridge answers about a move, in the order a move goes through them
 MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
 FAILED_MOVE = ('refused', 'superseded', 'held')
@@ -644,7 +651,7 @@ class SortingJob:
         the chase would have to wait longer than the item takes to move half the grasp
         reach, the item is met later, from where the arm waits; if even that is held up, or
         the item would get away meanwhile, None: the arm takes another item instead. An item
-        with less than ``DEFER_SLACK`` left in reach is never deferred: the arm goes for it and
+        with less than ``URGENT_SLACK`` left in reach is never deferred: the arm goes for it and
         waits if it must (in an hour's soak both arms deferred one item until it was missed).
         """
         arm = self.cell.arm(lane.robot)
@@ -652,7 +659,7 @@ class SortingJob:
         if other.name not in self.q:
             return hit
         p = sorting.predict(self.cell, item, now)
-        if sorting.time_in_reach(self.cell, arm, p, self.s.pick_z) < DEFER_SLACK:
+        if sorting.time_in_reach(self.cell, arm, p, self.s.pick_z) < URGENT_SLACK:
             return hit
         tolerance = 0.5 * self.s.grasp_reach / max(self.cell.belt.speed, 1e-9)
         booked = self._committed(other.name, now)
@@ -735,9 +742,12 @@ class SortingJob:
             side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
             free = [it for it in free if np.sign(it.position[1]) == side]
         own = None if self.s.mode == 'single' else True
-        for item in sorting.order_candidates(self.cell, arm, free, now + self.s.decision_lead,
-                                             self.s.pick_z, own, steal=others_busy,
-                                             other_cycle=self.s.steal_cycle or None)[:2]:
+        order = sorting.order_candidates(self.cell, arm, free, now + self.s.decision_lead,
+                                         self.s.pick_z, own, steal=others_busy,
+                                         other_cycle=self.s.steal_cycle or None)
+        if self.s.mode != 'mirrored':
+            order = self._cheap_first(lane, order, now)
+        for item in order[:2]:
             if not self._chase(lane, item, now):
                 continue
             self.claimed[item.id] = lane.robot
@@ -747,6 +757,36 @@ class SortingJob:
                     self.claimed[partner.id] = self.cell.follower.name
             return
         lane.next_look = now + LOOK_AGAIN  # each look plans: not at every tick
+
+    def _cheap_first(self, lane: Lane, order: List[sorting.SeenItem],
+                     now: float) -> List[sorting.SeenItem]:
+        """Reorder the first ``CANDIDATES`` of ``order`` (most urgent first): cheap cycles first.
+
+        Each candidate's cost is the bound of the cycle it makes
+        (:func:`scara_collab.core.sorting.cycle_bound`: meet it, carry it to its bin), the
+        arm's own half before the other's: a red item is met upstream near the red bins, a
+        blue one left to ride down to the blue bins. Up to ``SAVABLE`` urgent items (less than
+        ``URGENT_SLACK`` left in reach) stay in front, most urgent first, so none is left to
+        leave the belt; more than that means the feed is faster than the arm, and then every
+        candidate goes by its cost (the items it cannot save anyway are left, not the ones
+        that make its cycles short).
+        """
+        arm, q0 = self.cell.arm(lane.robot), self.q[lane.robot]
+        start, z = now + self.s.decision_lead, self.s.pick_z
+        side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
+        ranked = []
+        for k, item in enumerate(order[:CANDIDATES]):
+            p = sorting.predict(self.cell, item, start)
+            urgent = sorting.time_in_reach(self.cell, arm, p, z) < URGENT_SLACK
+            other_half = self.s.mode != 'single' and np.sign(
+                p[1] - self.cell.belt.centre_y) not in (side, 0.0)
+            cost = sorting.cycle_bound(self.cell, arm, q0, item, start, z, self.s.drop_clearance)
+            ranked.append([urgent, other_half, cost, k, item])
+        if sum(e[0] for e in ranked) > SAVABLE:
+            for e in ranked:
+                e[0] = False  # more urgent items than the arm can save: cost alone
+        ranked.sort(key=lambda e: (not e[0], e[3] if e[0] else 0, e[1], e[2], e[3]))
+        return [e[4] for e in ranked] + order[CANDIDATES:]
 
     def _park_unused(self, now: float) -> None:
         """Arms no lane uses wait above their first bin, off the belt (once)."""

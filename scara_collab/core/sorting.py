@@ -9,6 +9,7 @@ moves at 0.2 m/s and a move's duration changes by well under 1 s per metre, the 
 a contraction and converges in a few steps.
 """
 from dataclasses import dataclass
+import math
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -83,6 +84,53 @@ def joint_time(arm: ArmModel, q0, q1) -> float:
     return float(t.max())
 
 
+def meet_bound(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: float,
+               z: float, iterations: int = 8,
+               tol: float = 0.003) -> Optional[Tuple[float, Optional[np.ndarray]]]:
+    """Return the earliest time the tool could meet ``item`` by the joint-time bound, no planning.
+
+    From when the item enters the arm's reach, the meeting time is raised to ``t_start`` plus
+    the bound (:func:`joint_time`) of the move to where the item is then, until it settles.
+
+    :return: ``(time, joints at the meeting point)`` (joints ``None`` if the item has left
+        reach by then), or None if the item never comes into reach from ``t_start`` on.
+    """
+    speed = max(cell.belt.speed, 1e-9)
+    p0 = predict(cell, item, t_start)
+    x_in = reach_span(arm, p0[1], z, p0[0], cell.belt.x_end)[0]
+    if not np.isfinite(x_in):
+        return None
+    arrive, q = max(t_start, t_start + (x_in - p0[0]) / speed), None
+    for _ in range(iterations):
+        p = predict(cell, item, arrive)
+        p[2] = z
+        sol = ik(arm, p, q_current=q_start)
+        if not sol.ok:
+            return arrive, None
+        q = sol.q
+        bound = t_start + joint_time(arm, q_start, sol.q)
+        if bound <= arrive + tol / speed:
+            break
+        arrive = bound
+    return arrive, q
+
+
+def cycle_bound(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: float,
+                z: float, drop_clearance: float) -> float:
+    """Return a lower bound of the seconds from ``t_start`` until ``item`` is over its bin.
+
+    The meeting bound (:func:`meet_bound`) plus the joint-time bound of the carry from there
+    to the bin of the item's class; ``inf`` if the arm cannot meet it or reach the bin.
+    """
+    bound = meet_bound(cell, arm, q_start, item, t_start, z)
+    if bound is None or bound[1] is None:
+        return math.inf
+    drop = ik(arm, drop_point(cell, arm.name, item.cls, drop_clearance), q_current=bound[1])
+    if not drop.ok:
+        return math.inf
+    return bound[0] - t_start + joint_time(arm, bound[1], drop.q)
+
+
 def intercept(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: float,
               z: float, plan: Callable[[np.ndarray, np.ndarray], Trajectory],
               iterations: int = 8, tol: float = 0.003) -> Optional[Intercept]:
@@ -98,21 +146,10 @@ def intercept(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: 
     :return: the :class:`Intercept`, or None if the item leaves the arm's reach first.
     """
     speed = max(cell.belt.speed, 1e-9)
-    p0 = predict(cell, item, t_start)
-    x_in = reach_span(arm, p0[1], z, p0[0], cell.belt.x_end)[0]
-    if not np.isfinite(x_in):
+    bound = meet_bound(cell, arm, q_start, item, t_start, z, iterations, tol)
+    if bound is None:
         return None
-    arrive = max(t_start, t_start + (x_in - p0[0]) / speed)
-    for _ in range(iterations):  # cheap first: the joint-space time bound, no planning
-        p = predict(cell, item, arrive)
-        p[2] = z
-        sol = ik(arm, p, q_current=q_start)
-        if not sol.ok:
-            break
-        bound = t_start + joint_time(arm, q_start, sol.q)
-        if bound <= arrive + tol / speed:
-            break
-        arrive = bound
+    arrive = bound[0]
     for _ in range(iterations):  # then real plans (usually one or two) until it settles
         p = predict(cell, item, arrive)
         p[2] = z
