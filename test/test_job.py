@@ -499,8 +499,9 @@ def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
                                    job.s.drop_clearance)
 
     def ranked(items):
-        urgency = sorting.order_candidates(cell, arm, items, start, z, True, False)
-        return [it.id for it in urgency], [it.id for it in job._cheap_first(lane, urgency, 0.0)]
+        urgency = sorting.order_candidates(cell, arm, items, start, z, True, False, groups=True)
+        return ([it.id for _, it in urgency],
+                [it.id for _, it in job._cheap_first(lane, urgency, 0.0)])
 
     red = item_on_belt(cell, 1, x=0.7, y=-0.2, cls='red')
     blue = item_on_belt(cell, 2, x=0.9, y=-0.2, cls='blue')

@@ -107,3 +107,14 @@ def test_mirror_partner():
     other = SeenItem(3, 'blue', np.array([1.0, 0.2, 0.25]), 5.0)
     assert mirror_partner(CELL, item, [item, other, twin]).id == 2
     assert mirror_partner(CELL, item, [item, other]) is None
+
+
+def test_candidate_groups_say_which_items_come_with_the_arms_own():
+    """With ``groups``, each candidate says whether it comes with the arm's own items (0)."""
+    z = pick_height(CELL, 0.04)
+    own = SeenItem(1, 'red', np.array([1.0, -0.2, 0.25]), 0.0)
+    other = SeenItem(2, 'red', np.array([2.5, 0.2, 0.25]), 0.0)
+    plain = order_candidates(CELL, LEFT, [own, other], 0.0, z, True, True)
+    grouped = order_candidates(CELL, LEFT, [own, other], 0.0, z, True, True, groups=True)
+    assert [(g, it.id) for g, it in grouped] == [(0, 1), (1, 2)]
+    assert [it for _, it in grouped] == plain

@@ -744,10 +744,10 @@ class SortingJob:
         own = None if self.s.mode == 'single' else True
         order = sorting.order_candidates(self.cell, arm, free, now + self.s.decision_lead,
                                          self.s.pick_z, own, steal=others_busy,
-                                         other_cycle=self.s.steal_cycle or None)
+                                         other_cycle=self.s.steal_cycle or None, groups=True)
         if self.s.mode != 'mirrored':
             order = self._cheap_first(lane, order, now)
-        for item in order[:2]:
+        for item in [it for _, it in order[:2]]:
             if not self._chase(lane, item, now):
                 continue
             self.claimed[item.id] = lane.robot
@@ -758,14 +758,16 @@ class SortingJob:
             return
         lane.next_look = now + LOOK_AGAIN  # each look plans: not at every tick
 
-    def _cheap_first(self, lane: Lane, order: List[sorting.SeenItem],
-                     now: float) -> List[sorting.SeenItem]:
+    def _cheap_first(self, lane: Lane, order: List[Tuple[int, sorting.SeenItem]],
+                     now: float) -> List[Tuple[int, sorting.SeenItem]]:
         """Reorder the first ``CANDIDATES`` of ``order`` (most urgent first): cheap cycles first.
 
-        Each candidate's cost is the bound of the cycle it makes
-        (:func:`scara_collab.core.sorting.cycle_bound`: meet it, carry it to its bin), the
-        arm's own half before the other's: a red item is met upstream near the red bins, a
-        blue one left to ride down to the blue bins. Up to ``SAVABLE`` urgent items (less than
+        ``order`` is :func:`scara_collab.core.sorting.order_candidates` with its groups (0:
+        the arm's own items and the other half's it must take with them, 1: the other half's
+        it takes only after them); groups keep their order. Within them each candidate's cost
+        is the bound of the cycle it makes (:func:`scara_collab.core.sorting.cycle_bound`: meet
+        it, carry it to its bin): a red item is met upstream near the red bins, a blue one left
+        to ride down to the blue bins. Up to ``SAVABLE`` urgent items (less than
         ``URGENT_SLACK`` left in reach) stay in front, most urgent first, so none is left to
         leave the belt; more than that means the feed is faster than the arm, and then every
         candidate goes by its cost (the items it cannot save anyway are left, not the ones
@@ -773,15 +775,12 @@ class SortingJob:
         """
         arm, q0 = self.cell.arm(lane.robot), self.q[lane.robot]
         start, z = now + self.s.decision_lead, self.s.pick_z
-        side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
         ranked = []
-        for k, item in enumerate(order[:CANDIDATES]):
+        for k, (group, item) in enumerate(order[:CANDIDATES]):
             p = sorting.predict(self.cell, item, start)
             urgent = sorting.time_in_reach(self.cell, arm, p, z) < URGENT_SLACK
-            other_half = self.s.mode != 'single' and np.sign(
-                p[1] - self.cell.belt.centre_y) not in (side, 0.0)
             cost = sorting.cycle_bound(self.cell, arm, q0, item, start, z, self.s.drop_clearance)
-            ranked.append([urgent, other_half, cost, k, item])
+            ranked.append([urgent, group, cost, k, (group, item)])
         if sum(e[0] for e in ranked) > SAVABLE:
             for e in ranked:
                 e[0] = False  # more urgent items than the arm can save: cost alone

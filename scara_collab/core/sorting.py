@@ -190,7 +190,7 @@ def time_in_reach(cell: CellModel, arm: ArmModel, p: np.ndarray, z: float) -> fl
 
 def order_candidates(cell: CellModel, arm: ArmModel, items: Iterable[SeenItem], now: float,
                      z: float, own_side: Optional[bool], steal: bool,
-                     other_cycle: Optional[float] = None) -> List[SeenItem]:
+                     other_cycle: Optional[float] = None, groups: bool = False) -> List:
     """Return the items an arm may take next, most urgent first (closest to leaving reach).
 
     Items on the arm's own half come first; with ``steal``, the other half's follow. An item on
@@ -203,6 +203,8 @@ def order_candidates(cell: CellModel, arm: ArmModel, items: Iterable[SeenItem], 
     :param steal: also offer items on the other half (the other arm is busy).
     :param other_cycle: the other arm's time per item, s; ``None``: never take an item of the
         other half before the arm's own.
+    :param groups: return ``(group, item)`` pairs: group 0 for the arm's own items (and the
+        other half's it takes with them), 1 for the other half's it takes only after them.
     """
     side = np.sign(arm.base_position[1] - cell.belt.centre_y)
     out = []
@@ -224,7 +226,7 @@ def order_candidates(cell: CellModel, arm: ArmModel, items: Iterable[SeenItem], 
             if (1 + ahead) * other_cycle > left:
                 out[k][0] = 0  # the other arm, busy now, would not get to it in time
     out.sort(key=lambda e: (e[0], e[1]))
-    return [e[2] for e in out]
+    return [(e[0], e[2]) if groups else e[2] for e in out]
 
 
 def mirror_partner(cell: CellModel, item: SeenItem, others: Sequence[SeenItem],
