@@ -768,9 +768,9 @@ class SortingJob:
         is the bound of the cycle it makes (:func:`scara_collab.core.sorting.cycle_bound`: meet
         it, carry it to its bin): a red item is met upstream near the red bins, a blue one left
         to ride down to the blue bins. Up to ``SAVABLE`` urgent items (less than
-        ``URGENT_SLACK`` left in reach) stay in front, most urgent first, so none is left to
-        leave the belt; more than that means the feed is faster than the arm, and then every
-        candidate goes by its cost (the items it cannot save anyway are left, not the ones
+        ``URGENT_SLACK`` left in reach) stay in front, most urgent first, so an item the arm can
+        still save is not left; more than that means the feed is faster than the arm, and every
+        candidate then goes by its cost (the items it cannot save anyway are left, not the ones
         that make its cycles short).
         """
         arm, q0 = self.cell.arm(lane.robot), self.q[lane.robot]
