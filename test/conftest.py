@@ -1,4 +1,4 @@
-"""Shared test setup: DDS isolation for every session, and the default cell model."""
+"""Shared test setup: DDS isolation for every session, the default cell model, a context."""
 import os
 
 import pytest
@@ -14,3 +14,13 @@ def cell():
     """Return the default cell model (built once per session)."""
     from scara_collab.core.model import load_cell
     return load_cell()
+
+
+@pytest.fixture
+def context():
+    """Yield an initialised rclpy context of its own; shut it down afterwards."""
+    import rclpy  # after the DDS settings above
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)

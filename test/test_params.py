@@ -1,7 +1,6 @@
 """Config files as ROS parameters: declared with the file's defaults, validated, dynamic keys."""
 import pytest
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -23,51 +22,36 @@ def _node(ctx, name, **params):
     return Node(name, context=ctx, cli_args=ros_args((), params, sim_time=False))
 
 
-def test_a_node_gets_the_files_defaults_and_overrides():
+def test_a_node_gets_the_files_defaults_and_overrides(context):
     """Every key of the file is a parameter with its default; ``-p`` overrides one."""
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    try:
-        node = _node(ctx, 'params_probe', feed_interval=2.5)
-        trees = declare_config(node, ('simulation',))
-        want = load_config('simulation')
-        assert trees['simulation']['feed_interval'] == 2.5
-        assert trees['simulation']['physics_rate'] == want['physics_rate']
-        assert node.get_parameter('feed_interval').value == 2.5
-        node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=ctx)
+    node = _node(context, 'params_probe', feed_interval=2.5)
+    trees = declare_config(node, ('simulation',))
+    want = load_config('simulation')
+    assert trees['simulation']['feed_interval'] == 2.5
+    assert trees['simulation']['physics_rate'] == want['physics_rate']
+    assert node.get_parameter('feed_interval').value == 2.5
+    node.destroy_node()
 
 
-def test_an_invalid_override_stops_the_node_with_the_files_reason():
+def test_an_invalid_override_stops_the_node_with_the_files_reason(context):
     """A value the file's rules refuse raises ConfigError naming the node and the file."""
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    try:
-        node = _node(ctx, 'params_bad', physics_rate=-1.0)
-        with pytest.raises(ConfigError, match='params_bad'):
-            declare_config(node, ('simulation',))
-        node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=ctx)
+    node = _node(context, 'params_bad', physics_rate=-1.0)
+    with pytest.raises(ConfigError, match='params_bad'):
+        declare_config(node, ('simulation',))
+    node.destroy_node()
 
 
-def test_only_dynamic_keys_change_at_run_time_and_only_to_valid_values():
+def test_only_dynamic_keys_change_at_run_time_and_only_to_valid_values(context):
     """A dynamic key takes a valid value (and the callback hears it); others are refused."""
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    try:
-        node = _node(ctx, 'params_dyn')
-        heard = []
-        trees = declare_config(node, ('simulation',), dynamic=('feed_interval',),
-                               on_change=lambda name, tree: heard.append(tree['feed_interval']))
-        ok = node.set_parameters([Parameter('feed_interval', value=3.0)])[0]
-        assert isinstance(ok, SetParametersResult) and ok.successful
-        assert trees['simulation']['feed_interval'] == 3.0 and heard == [3.0]
-        bad = node.set_parameters([Parameter('feed_interval', value=-1.0)])[0]
-        assert not bad.successful and trees['simulation']['feed_interval'] == 3.0
-        fixed = node.set_parameters([Parameter('physics_rate', value=500.0)])[0]
-        assert not fixed.successful  # read-only: not a dynamic key
-        node.destroy_node()
-    finally:
-        rclpy.try_shutdown(context=ctx)
+    node = _node(context, 'params_dyn')
+    heard = []
+    trees = declare_config(node, ('simulation',), dynamic=('feed_interval',),
+                           on_change=lambda name, tree: heard.append(tree['feed_interval']))
+    ok = node.set_parameters([Parameter('feed_interval', value=3.0)])[0]
+    assert isinstance(ok, SetParametersResult) and ok.successful
+    assert trees['simulation']['feed_interval'] == 3.0 and heard == [3.0]
+    bad = node.set_parameters([Parameter('feed_interval', value=-1.0)])[0]
+    assert not bad.successful and trees['simulation']['feed_interval'] == 3.0
+    fixed = node.set_parameters([Parameter('physics_rate', value=500.0)])[0]
+    assert not fixed.successful  # read-only: not a dynamic key
+    node.destroy_node()

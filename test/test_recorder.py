@@ -6,7 +6,6 @@ import math
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
-import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.time import Time as RclpyTime
@@ -26,15 +25,6 @@ SUMMARY_KEYS = ('mode', 'sim_seconds', 'wall_seconds', 'sorted', 'missed', 'wron
                 'items_per_minute', 'min_separation_m', 'mirror_error_max_m',
                 'real_time_factor', 'interrupted', 'exit_reason', 'job', 'counts_source',
                 'min_separation_source')
-
-
-@pytest.fixture
-def context():
-    """Yield an initialised rclpy context of its own; shut it down afterwards."""
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
 
 
 @pytest.fixture
