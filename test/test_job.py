@@ -475,6 +475,56 @@ def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):
         job_module.URGENT_SLACK = saved
 
 
+def test_an_urgent_chase_is_timed_around_the_other_arms_booked_move(cell):
+    """An urgent item is not deferred, but met where it will be when the way is clear.
+
+    In an hour's soak an arm chased an urgent item on the time it could have left, the
+    planner held it back for the other arm's move, the tool arrived 4.7 cm behind the item at
+    the end of its reach and the item was lost. Here the follower's booked move stands on the
+    leader's way to an urgent item for a while: the leader's chase starts when the way is
+    clear, aimed at where the item will be then; if the item would have left the leader's reach
+    by then, the leader does not claim it (the other arm may still save it).
+    """
+    from scara_collab.core import planning
+    from scara_collab.core.job import MoveTrack, URGENT_SLACK
+    from scara_collab.core.sorting import intercept, time_in_reach
+    lead, foll = cell.leader, cell.follower
+    tolerance = 0.5 * load_config('automation')['grasp_reach'] / cell.belt.speed
+
+    def chase(leaves_at):
+        job = make_job(cell)
+        item = item_on_belt(cell, 97, x=2.6, y=0.1)
+        job.on_items([item])
+        blind = intercept(cell, lead, job.q[lead.name], item, job.s.decision_lead,
+                          job.s.pick_z, lambda q, p: job.plan(lead.name, q, p))
+        stay = ik(foll, blind.target + [0.0, 0.12, 0.0]).q  # on the meeting point
+        away = ik(foll, np.array([3.3, 1.6, job.s.pick_z])).q
+        motion = planning.Timeline(np.array([0.0, leaves_at, leaves_at + 0.5]),
+                                   np.array([stay, stay, away]))
+        busy = next(la for la in job.lanes if la.robot == foll.name)
+        busy.phase, busy.request = 'to_item', 5
+        busy.moves = {foll.name: MoveTrack('planned', start=0.0, end=motion.end,
+                                           timeline=motion)}
+        job.on_arm_state(foll.name, stay)
+        lane = next(la for la in job.lanes if la.robot == lead.name)
+        assert time_in_reach(cell, lead, item.position, job.s.pick_z) < URGENT_SLACK
+        took = job._chase(lane, item, 0.0)
+        return job, blind, motion, lane, took
+
+    job, blind, motion, lane, took = chase(leaves_at=2.0)
+    assert took
+    cmd = job._out[-1]
+    assert cmd.start > blind.start + tolerance  # waits for the way to clear ...
+    moved = cell.belt.speed * (cmd.start - blind.start)
+    assert cmd.target[0] - blind.target[0] == pytest.approx(moved, abs=0.03)  # ... aimed later
+    traj = job.plan(lead.name, job.q[lead.name], cmd.target)
+    held = planning.schedule(lead, traj, cmd.start, foll, motion, job.s.pair_margin,
+                             leader=False)
+    assert held is not None and held.delay <= tolerance  # no further wait: it meets the item
+    job, blind, motion, lane, took = chase(leaves_at=3.5)
+    assert not took and lane.phase == 'idle' and 97 not in job.claimed  # gone by then
+
+
 def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
     """Urgent items the arm can save go first, most urgent first; the rest by their cycle.
 

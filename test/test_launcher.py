@@ -268,6 +268,9 @@ def test_sigint_mid_run_shuts_down_cleanly(launch, tmp_path):
     assert len(rows) - 1 == summary['joint_state_rows']
     assert_complete_csv(out / 'events.csv', min_rows=0)
     assert 'did not stop on SIGINT' not in la.output
+    crashed = [p.name for p in (out / 'logs').glob('*.log')
+               if 'Exception in' in p.read_text() or '[FATAL]' in p.read_text()]
+    assert not crashed, crashed  # Ctrl-C ends each spin loop, not a callback
     assert_children_gone(out)
     assert_complete_mcap(out, summary)  # closed with its footer on the way out
 

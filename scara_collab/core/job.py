@@ -641,7 +641,7 @@ class SortingJob:
 
     def _unhindered(self, lane: Lane, item: sorting.SeenItem, hit: sorting.Intercept,
                     now: float) -> Optional[sorting.Intercept]:
-        """Return an intercept the other arm's booked motion does not hold up, or None.
+        """Return an intercept timed around the other arm's booked motion, or None.
 
         The shared zone booked in time (collaborative): the chase is scheduled against the
         other arm's committed move (:func:`scara_collab.core.planning.schedule`, with the
@@ -649,18 +649,21 @@ class SortingJob:
         follower has already booked, though its planner would make the follower yield (it
         does when a conflict comes anyway: the priority rule stays the planners' safety). If
         the chase would have to wait longer than the item takes to move half the grasp
-        reach, the item is met later, from where the arm waits; if even that is held up, or
-        the item would get away meanwhile, None: the arm takes another item instead. An item
-        with less than ``URGENT_SLACK`` left in reach is never deferred: the arm goes for it and
-        waits if it must (in an hour's soak both arms deferred one item until it was missed).
+        reach, the item is met later, from where the arm waits, so the tool arrives where the
+        item will be then. An item with more than ``URGENT_SLACK`` left in reach is deferred
+        (None: the arm takes another) when even that is held up or the item would get away
+        meanwhile. An urgent one is never deferred for a long wait: the arm goes for it and
+        waits if it must (in an hour's soak both arms deferred one item until it was missed);
+        None only when the delayed meeting is out of this arm's reach (the other arm may still
+        save it: in another soak an arm chased such an item on the un-delayed time, arrived
+        late and lost it).
         """
         arm = self.cell.arm(lane.robot)
         other = next(a for a in self.cell.arms if a.name != lane.robot)
         if other.name not in self.q:
             return hit
         p = sorting.predict(self.cell, item, now)
-        if sorting.time_in_reach(self.cell, arm, p, self.s.pick_z) < URGENT_SLACK:
-            return hit
+        urgent = sorting.time_in_reach(self.cell, arm, p, self.s.pick_z) < URGENT_SLACK
         tolerance = 0.5 * self.s.grasp_reach / max(self.cell.belt.speed, 1e-9)
         booked = self._committed(other.name, now)
         for _ in range(2):
@@ -668,7 +671,7 @@ class SortingJob:
                                      self.s.pair_margin, leader=False,
                                      max_delay=self.s.move_timeout)
             if plan is None:
-                return None
+                return hit if urgent else None  # urgent: wait, re-aimed as the belt moves
             if plan.delay <= tolerance:
                 return hit
             hit = sorting.intercept(self.cell, arm, self.q[lane.robot], self._aim(item),
@@ -676,7 +679,7 @@ class SortingJob:
                                     lambda q, p: self.plan(lane.robot, q, p))
             if hit is None:
                 return None
-        return None
+        return hit if urgent else None
 
     def _to_bin(self, lane: Lane, now: float) -> None:
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, self.s.drop_clearance)

@@ -83,16 +83,20 @@ def make_executor(kind: Optional[str] = None, context=None) -> Executor:
 
 
 def _note_signals() -> list:
-    """Return a list that becomes non-empty on SIGINT (the handler before it still runs)."""
+    """Return a list that becomes non-empty on SIGINT; the spin loop then ends cleanly.
+
+    Python's own handler would raise ``KeyboardInterrupt`` wherever the interpreter is, most
+    often inside a callback the executor called from C++, which logs that as a fatal callback
+    exception on every Ctrl-C. A handler installed before this one (not Python's default) still
+    runs.
+    """
     seen: list = []
     previous = signal.getsignal(signal.SIGINT)
 
     def note(signum, frame):
         seen.append(signum)
-        if callable(previous):
+        if callable(previous) and previous is not signal.default_int_handler:
             previous(signum, frame)
-        else:
-            raise KeyboardInterrupt
     signal.signal(signal.SIGINT, note)
     return seen
 
@@ -127,12 +131,12 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Optional[list] = No
             executor.add_node(node)
         # spin_once in a loop: the EventsExecutor's spin() ran no timers in our tests (7.1.6)
         stopping = _note_signals()
-        while rclpy.ok():
+        while rclpy.ok() and not stopping:
             try:
                 executor.spin_once(timeout_sec=0.25)
             except RuntimeError:
-                # SIGINT in the middle of the EventsExecutor's call into Python (7.1.6) comes
-                # out as "Unable to convert call argument"; that is the shutdown asked for
+                # a signal while the EventsExecutor calls into Python (7.1.6) can come out as
+                # "Unable to convert call argument"; after a SIGINT, the shutdown asked for
                 if not stopping:
                     raise
                 break
