@@ -442,7 +442,7 @@ def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):
     deferred it for the other's booked move. An item with less than ``URGENT_SLACK`` left in
     the arm's reach is chased at once (the planner holds the arm back if it must).
     """
-    from scara_collab.core import job as job_module, planning
+    from scara_collab.core import planning, sharing as job_module
     from scara_collab.core.sorting import reach_span
     lead, foll = cell.leader, cell.follower
     job = make_job(cell)
@@ -486,7 +486,8 @@ def test_an_urgent_chase_is_timed_around_the_other_arms_booked_move(cell):
     by then, the leader does not claim it (the other arm may still save it).
     """
     from scara_collab.core import planning
-    from scara_collab.core.job import MoveTrack, URGENT_SLACK
+    from scara_collab.core.job import MoveTrack
+    from scara_collab.core.sharing import URGENT_SLACK
     from scara_collab.core.sorting import intercept, time_in_reach
     lead, foll = cell.leader, cell.follower
     tolerance = 0.5 * load_config('automation')['grasp_reach'] / cell.belt.speed
@@ -534,7 +535,7 @@ def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
     item about to leave reach stays in front of both. With more urgent items than the arm can
     save (the feed is faster than the arm), every candidate goes by its cycle.
     """
-    from scara_collab.core import job as job_module, sorting
+    from scara_collab.core import job as job_module, sharing, sorting
     job = make_job(cell)
     lane = job.lanes[0]
     arm = cell.arm(lane.robot)
@@ -551,19 +552,21 @@ def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
     def ranked(items):
         urgency = sorting.order_candidates(cell, arm, items, start, z, True, False, groups=True)
         return ([it.id for _, it in urgency],
-                [it.id for _, it in job._cheap_first(lane, urgency, 0.0)])
+                [it.id for _, it in sorting.rank_by_cycle(
+                    cell, arm, job.q[lane.robot], urgency, start, z, job.s.drop_clearance,
+                    sharing.URGENT_SLACK, job_module.SAVABLE, job_module.CANDIDATES)])
 
     red = item_on_belt(cell, 1, x=0.7, y=-0.2, cls='red')
     blue = item_on_belt(cell, 2, x=0.9, y=-0.2, cls='blue')
     late = item_on_belt(cell, 3, x=3.3, y=-0.2, cls='blue')
-    assert min(spare(red), spare(blue)) >= job_module.URGENT_SLACK > spare(late)
+    assert min(spare(red), spare(blue)) >= sharing.URGENT_SLACK > spare(late)
     assert cost(red) < cost(blue)
     assert ranked([red, blue, late]) == ([3, 2, 1], [3, 1, 2])
 
     crowd = [item_on_belt(cell, 10 + k, x=x, y=-0.2, cls=c)
              for k, (x, c) in enumerate(((3.3, 'red'), (3.1, 'blue'), (2.9, 'red'),
                                          (2.7, 'blue')))]
-    assert all(spare(it) < job_module.URGENT_SLACK for it in crowd)
+    assert all(spare(it) < sharing.URGENT_SLACK for it in crowd)
     assert len(crowd) > job_module.SAVABLE
     urgency, order = ranked(crowd + [red])
     assert urgency == [10, 11, 12, 13, 1]

@@ -35,46 +35,34 @@ Every observation names what it is about (a move by its request, a grip by its t
 late, duplicated or unknown one is ignored, and every waiting phase has a deadline, so a lost
 one costs a retry, never the run. The servers are idempotent (a planner re-publishes the status
 of a request it already has; a grasp while holding and a release while empty succeed), so a
-re-sent request is always safe.
-
-Move requests are identified by their requested start in integer nanoseconds
-(:mod:`scara_collab.nodes.protocol` carries that id through planner and bridge); the job keeps
-them unique per arm.
+re-sent request is always safe. That protocol is :class:`scara_collab.core.lanes.LaneProtocol`;
+:class:`SortingJob` adds the decisions: which item an arm takes and when (ranked by
+:func:`scara_collab.core.sorting.rank_by_cycle`), what follows each arrival and grip, how the
+two arms share the belt (:mod:`scara_collab.core.pairing`).
 """
-from dataclasses import dataclass, field
-import math
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from dataclasses import dataclass
+from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from scara_collab.core import collision, planning, sorting
-from scara_collab.core.kinematics import fk
-from scara_collab.core.mirror import mirror_joints, mirror_point
+from scara_collab.core import pairing, sharing, sorting
+from scara_collab.core.lanes import (FAILED_MOVE, GripCommand, GripTrack, Lane, MOVE_STATES,
+                                     MoveCommand, MoveTrack, MOVING, PHASES, PlanFn)
 from scara_collab.core.model import CellModel
-from scara_collab.core.trajectory import Trajectory
+from scara_collab.core.sharing import SharedBelt
+
+__all__ = ['CANDIDATES', 'FAILED_MOVE', 'GripCommand', 'GripTrack', 'items_per_minute',
+           'JobSettings', 'Lane', 'LOOK_AGAIN', 'MODES', 'MOVE_STATES', 'MoveCommand',
+           'MoveTrack', 'MOVING', 'PHASES', 'SAVABLE', 'SortingJob']
 
 MODES = ('single', 'collaborative', 'mirrored')
-PHASES = ('idle', 'to_item', 'grasping', 'lift', 'via', 'to_bin', 'releasing', 'to_park')
-MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
-#: m: waypoints a mirrored pair may take to stay apart: this far out from the belt centre line
-VIA_OFFSETS = (0.6, 0.9, 1.2)
 #: s an idle arm that found nothing to take waits before it looks again (the items move 2 cm)
 LOOK_AGAIN = 0.1
-#: s: an item with less than this left in an arm's reach is urgent: about two cycles, so of
-#: two urgent items the arm can still take the one after the other. An urgent item is chased
-#: even when the other arm's booked move will hold the arm up (else the arm may take another
-#: first and come back too late, or both arms may defer it until it is missed)
-URGENT_SLACK = 8.0
 #: urgent items an arm can still save by taking them first, most urgent first; with more, the
 #: feed is faster than the arm and it takes the item that makes the shortest cycle
 SAVABLE = 2
 #: how many candidates (most urgent first) an idle arm compares
 CANDIDATES = 6
-#: planner / bridge answers about a move, in the order a move goes through them
-MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
-FAILED_MOVE = ('refused', 'superseded', 'held')
-
-PlanFn = Callable[[str, np.ndarray, np.ndarray], Trajectory]
 
 
 def items_per_minute(sorted_count: int, seconds: float) -> float:
@@ -146,86 +134,7 @@ class JobSettings:
             pair_margin=cell.safety_margin + float(planning_buffer))
 
 
-@dataclass(frozen=True)
-class MoveCommand:
-    """Ask the planner(s) for a move: ``robot``'s tool to ``target`` (world), from ``start``.
-
-    ``mirrored``: send it to the replication manager (``/collab/target``), which moves the
-    follower to the mirror image with the same request. ``request`` (ns) is the target's
-    stamp and the move's identity; a re-sent request has the same one.
-    """
-
-    robot: str
-    target: np.ndarray
-    request: int
-    mirrored: bool
-    purpose: str
-
-    @property
-    def start(self) -> float:
-        """The requested start, s."""
-        return self.request * 1e-9
-
-
-@dataclass(frozen=True)
-class GripCommand:
-    """Call ``robot``'s gripper: ``grasp`` true = grasp, false = release; answer with ``token``."""
-
-    robot: str
-    grasp: bool
-    token: int
-
-
-@dataclass
-class MoveTrack:
-    """What is known of one arm's move of the current request."""
-
-    state: str = 'asked'
-    since: float = 0.0  # when it entered this state (for 'waiting')
-    start: Optional[float] = None
-    end: Optional[float] = None
-    reason: str = ''
-    arrived: bool = False
-    #: the motion it commits to (the job's own plan of it, from its start), once timed
-    timeline: Optional[planning.Timeline] = None
-
-
-@dataclass
-class GripTrack:
-    """One gripper request: its token, when it was sent, how often, its outcome."""
-
-    token: int
-    sent: float
-    attempts: int = 1
-    ok: Optional[bool] = None
-    message: str = ''
-
-
-@dataclass
-class Lane:
-    """One arm's work (both arms' in mirrored mode); see the module docstring."""
-
-    robot: str
-    robots: Tuple[str, ...]
-    phase: str = 'idle'
-    item: Optional[sorting.SeenItem] = None
-    target: Optional[np.ndarray] = None
-    request: int = 0
-    purpose: str = ''
-    since: float = 0.0
-    sent: float = 0.0
-    sends: int = 0
-    moves: Dict[str, MoveTrack] = field(default_factory=dict)
-    grips: Dict[str, GripTrack] = field(default_factory=dict)
-    bin_tries: int = 0
-    reaims: int = 0
-    holding: bool = False
-    route: List[Tuple[str, np.ndarray]] = field(default_factory=list)
-    failures: Dict[int, int] = field(default_factory=dict)
-    next_look: float = 0.0  # idle with nothing to take: look again from then
-
-
-class SortingJob:
+class SortingJob(SharedBelt):
     """The sorting job's decisions (see the module docstring).
 
     :param cell: the cell model.
@@ -239,28 +148,21 @@ class SortingJob:
     def __init__(self, cell: CellModel, settings: JobSettings, plan: PlanFn,
                  log: Callable[[str, str], None] = lambda level, text: None):
         """Set up one lane per arm that moves on its own (one for a mirrored pair); not started."""
-        self.cell, self.s, self.plan, self.log = cell, settings, plan, log
         lead, foll = cell.leader, cell.follower
-        robots = {'single': [(lead.name, (lead.name,))],
-                  'collaborative': [(lead.name, (lead.name,)), (foll.name, (foll.name,))],
-                  'mirrored': [(lead.name, (lead.name, foll.name))]}[settings.mode]
-        self.lanes = [Lane(r, rs) for r, rs in robots]
+        lanes = {'single': [(lead.name, (lead.name,))],
+                 'collaborative': [(lead.name, (lead.name,)), (foll.name, (foll.name,))],
+                 'mirrored': [(lead.name, (lead.name, foll.name))]}[settings.mode]
+        super().__init__(cell, settings, lanes, plan, log)
         self.running = False
         self.estop = False
         self.start_time: Optional[float] = None
-        self.q: Dict[str, np.ndarray] = {}
         self.items: Dict[int, sorting.SeenItem] = {}
         self.claimed: Dict[int, str] = {}
         self.counts: Dict[str, int] = {}
         self.sorted_by: Dict[str, int] = {a.name: 0 for a in cell.arms}
         self.give_ups = 0
-        self.retries = 0
         self.last_give_up = ''
-        self._last_request: Dict[str, int] = {a.name: 0 for a in cell.arms}
-        self._token = 0
         self._parked_unused = False
-        self._out: List[object] = []
-        self._now = 0.0
 
     # --- observations ---------------------------------------------------------------------
     def start(self, now: float) -> bool:
@@ -277,10 +179,6 @@ class SortingJob:
         was, self.running = self.running, False
         return was
 
-    def on_arm_state(self, robot: str, q: np.ndarray) -> None:
-        """Take the measured joints of ``robot`` ``(3,)`` (finite, checked by the caller)."""
-        self.q[robot] = np.asarray(q, dtype=float)
-
     def on_items(self, items: Sequence[sorting.SeenItem]) -> None:
         """Take the items resting on the belt now (not held, not falling, not in a bin)."""
         self.items = {it.id: it for it in items}
@@ -290,92 +188,13 @@ class SortingJob:
         self.estop = bool(on)
 
     def on_item_event(self, kind: str, item: int, robot: str) -> None:
-        """Count a bridge item event; it also and it confirms grasps and releases."""
+        """Count a bridge item event; it also confirms grasps and releases."""
         self.counts[kind] = self.counts.get(kind, 0) + 1
         if kind == 'sorted' and robot in self.sorted_by:
             self.sorted_by[robot] += 1
         if kind in ('sorted', 'wrong_bin', 'missed', 'dropped'):
             self.claimed.pop(item, None)
-        phase = {'grasped': 'grasping', 'released': 'releasing'}.get(kind)
-        for lane in self.lanes:  # the bridge saw it happen: the response may be lost
-            track = lane.grips.get(robot)
-            if lane.phase == phase and track is not None and track.ok is None:
-                track.ok, track.message = True, f'{kind} event'
-
-    def on_planner(self, robot: str, request: int, state: str, start: Optional[float],
-                   end: Optional[float], reason: str = '') -> None:
-        """Take a planner status about ``robot``'s move for ``request`` (others are ignored)."""
-        track = self._track(robot, request)
-        if track is None or track.state in ('finished',) + FAILED_MOVE:
-            return
-        if state == 'planned':
-            if track.state == 'accepted' and abs(start - track.start) < 1e-6:
-                return  # the bridge already runs it (its start is the one that counts)
-            track.state, track.start, track.end = 'planned', start, end
-            self._book(robot, request, track)
-        elif state in ('queued', 'waiting'):  # not (or no longer) committed
-            if track.state != state:
-                track.since = self._now
-            track.state, track.start, track.end = state, None, None
-        elif state in ('refused', 'superseded'):
-            track.state, track.reason = state, reason
-
-    def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
-                     end: Optional[float], reason: str = '') -> None:
-        """Take a bridge execution status about ``robot``'s move for ``request``."""
-        track = self._track(robot, request)
-        if track is None or track.state in ('finished',) + FAILED_MOVE:
-            return
-        if state == 'accepted':
-            track.state, track.start, track.end = 'accepted', start, end
-            self._book(robot, request, track)
-        elif state == 'finished':
-            track.state = 'finished'
-        elif state == 'preempted':  # the planner took it back (it says what comes next)
-            track.state, track.start, track.end = 'waiting', None, None
-        elif state in ('refused', 'held'):
-            track.state, track.reason = state, reason or state
-
-    def on_grip(self, token: int, ok: bool, message: str = '') -> None:
-        """Take a gripper response for request ``token`` (late or unknown tokens: ignored)."""
-        for lane in self.lanes:
-            for track in lane.grips.values():
-                if track.token == token and track.ok is None:
-                    track.ok, track.message = bool(ok), message
-
-    def _book(self, robot: str, request: int, track: MoveTrack) -> None:
-        """Keep the motion a timed move commits ``robot`` to (collaborative look-ahead).
-
-        The job plans the move itself, as the planner did, from where the arm is when the
-        move is first timed (it has not started yet); a later start only shifts it.
-        """
-        if len(self.lanes) < 2 or track.start is None:
-            return
-        if track.timeline is not None:
-            shift = track.start - track.timeline.start
-            track.timeline = planning.Timeline(track.timeline.t + shift, track.timeline.q)
-            return
-        lane = next(la for la in self.lanes if la.request == request and robot in la.moves)
-        try:
-            traj = self.plan(robot, self.q[robot], self._target_of(lane, robot))
-        except (ValueError, KeyError):
-            return
-        track.timeline = planning.Timeline.of(traj, track.start)
-
-    def _committed(self, robot: str, now: float) -> planning.Timeline:
-        """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds)."""
-        for lane in self.lanes:
-            track = lane.moves.get(robot) if lane.phase in MOVING else None
-            if (track is not None and track.timeline is not None
-                    and track.state in ('planned', 'accepted') and track.timeline.end > now):
-                return track.timeline
-        return planning.Timeline.hold(now, self.q[robot])
-
-    def _track(self, robot: str, request: int) -> Optional[MoveTrack]:
-        for lane in self.lanes:
-            if lane.phase in MOVING and lane.request == request and robot in lane.moves:
-                return lane.moves[robot]
-        return None
+        self._confirm_grip(kind, robot)
 
     # --- the clock ------------------------------------------------------------------------
     def tick(self, now: float) -> List[object]:
@@ -398,184 +217,7 @@ class SortingJob:
             self._unblock(now)
         return self._out
 
-    def _blocked(self, lane: Lane, now: float) -> bool:
-        """Return True if the lane's planner has waited for the other arm ``unblock_after``."""
-        return lane.phase in MOVING and any(
-            t.state == 'waiting' and now - t.since > self.s.unblock_after
-            for t in lane.moves.values())
-
-    def _unblock(self, now: float) -> None:
-        """Clear the way for an arm that waits for the other one (collaborative mode).
-
-        An idle arm in the way parks; when both wait for each other, the follower's lane
-        gives way (unless it holds an item), as the priority rule has it. When both hold
-        items (neither may put its item down), the follower first backs out of the shared zone
-        by a waypoint on its own side (:meth:`_retreat`), then goes to its bin. An arm on its
-        way to an item that waits for the other arm's work (it will leave when done) re-aims
-        at the item as the belt carries it on (:meth:`_reaim`).
-        """
-        for lane in self.lanes:
-            if not self._blocked(lane, now):
-                continue
-            other = next(o for o in self.lanes if o is not lane)
-            if other.phase == 'idle':
-                self.log('info', f'{other.robot}: parks to clear the way for {lane.robot}')
-                self._park(other, now)
-            elif not self._blocked(other, now):
-                if lane.phase == 'to_item' and not lane.holding:
-                    self._reaim(lane, other, now)
-            elif self._blocked(other, now):
-                # the one not holding an item gives way; if neither holds one, the follower
-                free = [o for o in (lane, other) if not o.holding]
-                if free:
-                    yielder = next((o for o in free if o.robot != self.cell.leader.name),
-                                   free[0])
-                    self._give_up(yielder, now, 'both arms wait for each other: '
-                                  f'{yielder.robot} gives way')
-                else:  # both carry items: one backs out of the way, follower first
-                    for o in sorted((lane, other), key=lambda o: o.robot ==
-                                    self.cell.leader.name):
-                        if o.phase != 'via' and self._retreat(o, now):
-                            break
-            return
-
-    def _reaim(self, lane: Lane, other: Lane, now: float) -> None:
-        """Ask again for the item an arm waits to meet, where the belt has carried it by now.
-
-        The planner holds a waiting move until the other arm's next move clears the way (the
-        other arm waits at an item or its bin while it grips), then plans the target it has:
-        by then the item has moved on. Asking again every ``unblock_after`` keeps the target
-        current, so the arm meets the item as soon as the way is clear; the item's deadline
-        is the belt's end (the intercept no longer exists: give up).
-        """
-        seen = self.items.get(lane.item.id)
-        if seen is None:  # not seen resting on the belt just now: the move's deadline holds
-            return
-        if lane.reaims == 0:
-            self.log('info', f'{lane.robot}: waits for {other.robot} ({other.phase}); '
-                     f're-aims at item {seen.id} while it waits')
-        if not self._chase(lane, seen, now):
-            return self._give_up(lane, now, f'item {seen.id} got away while {lane.robot} '
-                                 f'waited for {other.robot}')
-        lane.reaims += 1
-
-    def _retreat(self, lane: Lane, now: float) -> bool:
-        """Back an arm holding an item out of the shared zone, away from the other arm.
-
-        The waypoint is straight out from the belt on the arm's own side (``VIA_OFFSETS``
-        from the centre line, at carry height) and further out than the tool is now (so a
-        retreat that did not clear the way is followed by one further out); the first whose
-        leg keeps the planners' margin from the other arm where it stands is taken, then the
-        bin. Return False if none does (then the other arm backs out).
-        """
-        arm = self.cell.arm(lane.robot)
-        other = next(a for a in self.cell.arms if a.name != lane.robot)
-        q0, q_other = self.q[lane.robot], self.q.get(other.name)
-        if q_other is None:
-            return False
-        start = fk(arm, q0)
-        side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
-        for off in VIA_OFFSETS:
-            via = np.array([start[0], self.cell.belt.centre_y + side * off,
-                            max(start[2], self.s.carry_z)])
-            if side * (via[1] - start[1]) < 0.05:
-                continue  # out there already (an earlier retreat did not clear the way)
-            try:
-                leg = self.plan(lane.robot, q0, via)
-            except ValueError:
-                continue
-            if np.min(collision.arm_distance(arm, leg.q, other, q_other)) < self.s.pair_margin:
-                continue
-            drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls,
-                                      self.s.drop_clearance)
-            self.log('info', f'{lane.robot}: both arms hold items and wait for each other: '
-                     f'{lane.robot} backs out to y={via[1]:.2f} first')
-            lane.route = [('to_bin', drop)]
-            self._move(lane, 'via', via, self._soon(lane, now), now)
-            return True
-        return False
-
-    def phases(self) -> Dict[str, str]:
-        """Each lane's phase, by its robot."""
-        return {lane.robot: lane.phase for lane in self.lanes}
-
-    # --- moves ----------------------------------------------------------------------------
-    def _request(self, robots: Sequence[str], start: float) -> int:
-        req = max([int(round(start * 1e9))] + [self._last_request[r] + 1 for r in robots])
-        for r in robots:
-            self._last_request[r] = req
-        return req
-
-    def _move(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
-        lane.phase, lane.target = phase, np.asarray(target, dtype=float)
-        lane.request = self._request(lane.robots, max(start, now + 1e-3))
-        lane.moves = {r: MoveTrack() for r in lane.robots}
-        lane.since = lane.sent = now
-        lane.sends = 1
-        self._send(lane)
-
-    def _soon(self, lane: Lane, now: float) -> float:
-        """Return the start to ask for a move that should start as soon as possible.
-
-        One arm: now (its planner adds its own planning lead). A mirrored pair: ``pair_lead``
-        ahead, so both planners get a start that is still in the future and plan the same.
-        """
-        return now + (self.s.pair_lead if len(lane.robots) > 1 else 1e-3)
-
-    def _send(self, lane: Lane) -> None:
-        self._out.append(MoveCommand(lane.robot, lane.target, lane.request,
-                                     len(lane.robots) > 1, lane.phase))
-
-    def _target_of(self, lane: Lane, robot: str) -> np.ndarray:
-        if robot == lane.robot:
-            return lane.target
-        return mirror_point(self.cell.arm(lane.robot), self.cell.arm(robot), lane.target)
-
-    def _at_target(self, lane: Lane, robot: str) -> bool:
-        q = self.q.get(robot)
-        if q is None:
-            return False
-        tip = fk(self.cell.arm(robot), q)
-        return float(np.linalg.norm(tip - self._target_of(lane, robot))) <= \
-            self.s.arrive_tolerance
-
-    def _tick_move(self, lane: Lane, now: float) -> None:
-        limit = self.s.carry_timeout if lane.holding else self.s.move_timeout
-        for robot, track in lane.moves.items():
-            if track.arrived:
-                continue
-            if track.state in FAILED_MOVE:
-                return self._give_up(lane, now, f'{robot} move {track.state}: {track.reason}')
-            if track.state == 'finished':
-                track.arrived = True
-                continue
-            if track.state == 'asked' and now - lane.sent > self.s.answer_timeout:
-                if lane.sends > self.s.answer_retries:
-                    return self._give_up(lane, now, f'no answer from the {robot} planner '
-                                         f'after {lane.sends} requests')
-                lane.sends += 1
-                lane.sent = now
-                self.retries += 1
-                self.log('info', f'{robot}: no planner answer for request {lane.request} in '
-                         f'{self.s.answer_timeout:g} s; asking again ({lane.sends})')
-                self._send(lane)
-                continue
-            if track.end is None:  # asked, queued or waiting
-                if now - lane.since > limit:
-                    others = ', '.join(f'{o.robot} {o.phase}' + (' holding' if o.holding else '')
-                                       for o in self.lanes if o is not lane)
-                    return self._give_up(lane, now, f'no plan from the {robot} planner in '
-                                         f'{limit:g} s ({track.state}'
-                                         + (f'; {others})' if others else ')'))
-                continue
-            if now >= track.end and self._at_target(lane, robot):
-                track.arrived = True
-            elif now > track.end + self.s.arrive_timeout:
-                return self._give_up(lane, now, f'{robot} did not arrive within '
-                                     f'{self.s.arrive_timeout:g} s of its end ({track.state})')
-        if all(t.arrived for t in lane.moves.values()):
-            self._arrived(lane, now)
-
+    # --- after a move -----------------------------------------------------------------------
     def _arrived(self, lane: Lane, now: float) -> None:
         if lane.phase == 'to_park':
             self._idle(lane)
@@ -596,42 +238,28 @@ class SortingJob:
             if seen is None:
                 return self._give_up(lane, now, f'item {lane.item.id} is no longer on the belt')
             off = sorting.predict(self.cell, seen, now)[:2] - lane.target[:2]
-            if math.hypot(*off) <= self.s.grasp_reach:
+            if np.hypot(*off) <= self.s.grasp_reach:
                 self._grip(lane, True, now)
             elif not self._chase(lane, seen, now):
-                self._give_up(lane, now, f'item {seen.id} got away ({math.hypot(*off):.3f} m)')
-
-    def _aim(self, item: sorting.SeenItem) -> sorting.SeenItem:
-        """Return where the tool meets ``item``.
-
-        In mirrored mode that is at least ``pair_offset`` from the belt centre line (within
-        grasp reach), so the two mirrored tools keep the planners' margin and the follower
-        never has to yield: both start together.
-        """
-        if len(self.lanes[0].robots) < 2:
-            return item
-        centre = self.cell.belt.centre_y
-        dy = item.position[1] - centre
-        if abs(dy) >= self.s.pair_offset:
-            return item
-        side = np.sign(self.cell.leader.base_position[1] - centre)
-        aim = item.position.copy()
-        aim[1] = centre + side * self.s.pair_offset
-        return sorting.SeenItem(item.id, item.cls, aim, item.stamp)
+                self._give_up(lane, now, f'item {seen.id} got away ({np.hypot(*off):.3f} m)')
 
     def _chase(self, lane: Lane, item: sorting.SeenItem, now: float) -> bool:
         start = now + self.s.decision_lead
         arm = self.cell.arm(lane.robot)
         q0 = self.q[lane.robot]
-        hit = sorting.intercept(self.cell, arm, q0, self._aim(item), start,
-                                self.s.pick_z, lambda q, p: self.plan(lane.robot, q, p))
+        mirrored = len(lane.robots) > 1
+        aim = pairing.pair_aim(self.cell, item, self.s.pair_offset) if mirrored else item
+        hit = sorting.intercept(self.cell, arm, q0, aim, start, self.s.pick_z,
+                                lambda q, p: self.plan(lane.robot, q, p))
         if hit is not None and len(self.lanes) > 1:
-            hit = self._unhindered(lane, item, hit, now)
+            hit = self._unhindered(lane, aim, hit, now)
         if hit is None:
             return False
         lane.item = item
-        if len(lane.robots) > 1 and not self._pair_clear(lane.robot, hit.traj):
-            route = self._detour(lane.robot, q0, hit.target)
+        if mirrored and not pairing.pair_clear(self.cell, lane.robot, hit.traj,
+                                               self.s.pair_margin):
+            route = pairing.detour(self.cell, self.plan, lane.robot, q0, hit.target,
+                                   self.s.carry_z, self.s.pair_margin)
             if route:  # go round first, then meet the item from there
                 self._move(lane, 'via', route[0], start, now)
                 lane.route = [('via', p) for p in route[1:]]
@@ -639,101 +267,9 @@ class SortingJob:
         self._move(lane, 'to_item', hit.target, hit.start, now)
         return True
 
-    def _unhindered(self, lane: Lane, item: sorting.SeenItem, hit: sorting.Intercept,
-                    now: float) -> Optional[sorting.Intercept]:
-        """Return an intercept timed around the other arm's booked motion, or None.
-
-        The shared zone booked in time (collaborative): the chase is scheduled against the
-        other arm's committed move (:func:`scara_collab.core.planning.schedule`, with the
-        planners' margin), first booked, first served: the leader too respects a move the
-        follower has already booked, though its planner would make the follower yield (it
-        does when a conflict comes anyway: the priority rule stays the planners' safety). If
-        the chase would have to wait longer than the item takes to move half the grasp
-        reach, the item is met later, from where the arm waits, so the tool arrives where the
-        item will be then. An item with more than ``URGENT_SLACK`` left in reach is deferred
-        (None: the arm takes another) when even that is held up or the item would get away
-        meanwhile. An urgent one is never deferred for a long wait: the arm goes for it and
-        waits if it must (in an hour's soak both arms deferred one item until it was missed);
-        None only when the delayed meeting is out of this arm's reach (the other arm may still
-        save it: in another soak an arm chased such an item on the un-delayed time, arrived
-        late and lost it).
-        """
-        arm = self.cell.arm(lane.robot)
-        other = next(a for a in self.cell.arms if a.name != lane.robot)
-        if other.name not in self.q:
-            return hit
-        p = sorting.predict(self.cell, item, now)
-        urgent = sorting.time_in_reach(self.cell, arm, p, self.s.pick_z) < URGENT_SLACK
-        tolerance = 0.5 * self.s.grasp_reach / max(self.cell.belt.speed, 1e-9)
-        booked = self._committed(other.name, now)
-        for _ in range(2):
-            plan = planning.schedule(arm, hit.traj, hit.start, other, booked,
-                                     self.s.pair_margin, leader=False,
-                                     max_delay=self.s.move_timeout)
-            if plan is None:
-                return hit if urgent else None  # urgent: wait, re-aimed as the belt moves
-            if plan.delay <= tolerance:
-                return hit
-            hit = sorting.intercept(self.cell, arm, self.q[lane.robot], self._aim(item),
-                                    hit.start + plan.delay, self.s.pick_z,
-                                    lambda q, p: self.plan(lane.robot, q, p))
-            if hit is None:
-                return None
-        return hit if urgent else None
-
     def _to_bin(self, lane: Lane, now: float) -> None:
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, self.s.drop_clearance)
         self._move_safely(lane, 'to_bin', drop, self._soon(lane, now), now)
-
-    def _move_safely(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
-        """Ask for a move like :meth:`_move`; a mirrored pair may go round by a waypoint.
-
-        A pair that would come within the planners' margin goes round, so the follower need
-        not yield and both arms start together.
-        """
-        if len(lane.robots) > 1:
-            q0 = self.q[lane.robot]
-            try:
-                clear = self._pair_clear(lane.robot, self.plan(lane.robot, q0, target))
-            except ValueError:
-                clear = True  # the planner will refuse it with the reason
-            route = [] if clear else self._detour(lane.robot, q0, target)
-            if route:
-                lane.route = [('via', p) for p in route[1:]] + [(phase, np.asarray(target))]
-                self._move(lane, 'via', route[0], start, now)
-                return
-        self._move(lane, phase, target, start, now)
-
-    def _pair_clear(self, robot: str, traj: Trajectory) -> bool:
-        """Return True if ``traj`` and its mirror image (the follower's copy) keep the margin."""
-        me, other = self.cell.arm(robot), next(a for a in self.cell.arms if a.name != robot)
-        d, _ = collision.trajectory_min_distance(me, traj.t, traj.q, other, traj.t,
-                                                 mirror_joints(traj.q))
-        return d >= self.s.pair_margin
-
-    def _detour(self, robot: str, q0: np.ndarray, target) -> List[np.ndarray]:
-        """Return waypoints (world) whose legs and their mirror images keep the margin.
-
-        Candidates lie out from the belt centre line on the arm's side, at ``VIA_OFFSETS``,
-        above the start, the target or half way, at carry height; the first that works wins,
-        ``[]`` if none does.
-        """
-        arm = self.cell.arm(robot)
-        start = fk(arm, q0)
-        target = np.asarray(target, dtype=float)
-        side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
-        z = max(start[2], target[2], self.s.carry_z)
-        for off in VIA_OFFSETS:
-            for x in (start[0], 0.5 * (start[0] + target[0]), target[0]):
-                via = np.array([x, self.cell.belt.centre_y + side * off, z])
-                try:
-                    leg1 = self.plan(robot, q0, via)
-                    leg2 = self.plan(robot, leg1.q[-1], target)
-                except ValueError:
-                    continue
-                if self._pair_clear(robot, leg1) and self._pair_clear(robot, leg2):
-                    return [via]
-        return []
 
     # --- picking --------------------------------------------------------------------------
     def _pick_next(self, lane: Lane, now: float) -> None:
@@ -748,8 +284,11 @@ class SortingJob:
         order = sorting.order_candidates(self.cell, arm, free, now + self.s.decision_lead,
                                          self.s.pick_z, own, steal=others_busy,
                                          other_cycle=self.s.steal_cycle or None, groups=True)
-        if self.s.mode != 'mirrored':
-            order = self._cheap_first(lane, order, now)
+        if self.s.mode != 'mirrored':  # the shortest cycles first, urgent savable items first
+            order = sorting.rank_by_cycle(self.cell, arm, self.q[lane.robot], order,
+                                          now + self.s.decision_lead, self.s.pick_z,
+                                          self.s.drop_clearance, sharing.URGENT_SLACK, SAVABLE,
+                                          CANDIDATES)
         for item in [it for _, it in order[:2]]:
             if not self._chase(lane, item, now):
                 continue
@@ -760,35 +299,6 @@ class SortingJob:
                     self.claimed[partner.id] = self.cell.follower.name
             return
         lane.next_look = now + LOOK_AGAIN  # each look plans: not at every tick
-
-    def _cheap_first(self, lane: Lane, order: List[Tuple[int, sorting.SeenItem]],
-                     now: float) -> List[Tuple[int, sorting.SeenItem]]:
-        """Reorder the first ``CANDIDATES`` of ``order`` (most urgent first): cheap cycles first.
-
-        ``order`` is :func:`scara_collab.core.sorting.order_candidates` with its groups (0:
-        the arm's own items and the other half's it must take with them, 1: the other half's
-        it takes only after them); groups keep their order. Within them each candidate's cost
-        is the bound of the cycle it makes (:func:`scara_collab.core.sorting.cycle_bound`: meet
-        it, carry it to its bin): a red item is met upstream near the red bins, a blue one left
-        to ride down to the blue bins. Up to ``SAVABLE`` urgent items (less than
-        ``URGENT_SLACK`` left in reach) stay in front, most urgent first, so an item the arm can
-        still save is not left; more than that means the feed is faster than the arm, and every
-        candidate then goes by its cost (the items it cannot save anyway are left, not the ones
-        that make its cycles short).
-        """
-        arm, q0 = self.cell.arm(lane.robot), self.q[lane.robot]
-        start, z = now + self.s.decision_lead, self.s.pick_z
-        ranked = []
-        for k, (group, item) in enumerate(order[:CANDIDATES]):
-            p = sorting.predict(self.cell, item, start)
-            urgent = sorting.time_in_reach(self.cell, arm, p, z) < URGENT_SLACK
-            cost = sorting.cycle_bound(self.cell, arm, q0, item, start, z, self.s.drop_clearance)
-            ranked.append([urgent, group, cost, k, (group, item)])
-        if sum(e[0] for e in ranked) > SAVABLE:
-            for e in ranked:
-                e[0] = False  # more urgent items than the arm can save: cost alone
-        ranked.sort(key=lambda e: (not e[0], e[3] if e[0] else 0, e[1], e[2], e[3]))
-        return [e[4] for e in ranked] + order[CANDIDATES:]
 
     def _park_unused(self, now: float) -> None:
         """Arms no lane uses wait above their first bin, off the belt (once)."""
@@ -801,37 +311,13 @@ class SortingJob:
                 req = self._request([arm.name], now + self.s.decision_lead)
                 self._out.append(MoveCommand(arm.name, park, req, False, 'park'))
 
-    # --- gripper --------------------------------------------------------------------------
-    def _grip(self, lane: Lane, grasp: bool, now: float) -> None:
-        lane.phase = 'grasping' if grasp else 'releasing'
-        lane.since = now
-        lane.grips = {}
-        for robot in lane.robots:
-            self._token += 1
-            lane.grips[robot] = GripTrack(self._token, now)
-            self._out.append(GripCommand(robot, grasp, self._token))
-
-    def _tick_grip(self, lane: Lane, now: float) -> None:
-        grasp = lane.phase == 'grasping'
-        for robot, track in lane.grips.items():
-            if track.ok is None and now - track.sent > self.s.grip_timeout:
-                if track.attempts > self.s.grip_retries:
-                    track.ok, track.message = False, f'no answer after {track.attempts} calls'
-                    continue
-                self._token += 1
-                track.token, track.sent = self._token, now
-                track.attempts += 1
-                self.retries += 1
-                self.log('info', f'{robot}: no gripper answer in {self.s.grip_timeout:g} s; '
-                         f'asking again ({track.attempts})')
-                self._out.append(GripCommand(robot, grasp, track.token))
-        if any(t.ok is None for t in lane.grips.values()):
-            return
+    # --- after a grip -----------------------------------------------------------------------
+    def _gripped(self, lane: Lane, now: float) -> None:
         main = lane.grips[lane.robot]
         for robot, track in lane.grips.items():
             if robot != lane.robot and not track.ok:
                 self.log('warn', f'{robot} gripper: {track.message}')
-        if not grasp:
+        if lane.phase == 'releasing':
             if lane.item is not None:
                 self.claimed.pop(lane.item.id, None)
             if not main.ok:
@@ -854,11 +340,10 @@ class SortingJob:
     def _would_sweep(self, lane: Lane, now: float) -> bool:
         """Return True if the item just grasped would touch an item on the belt on its way.
 
-        Then it is lifted clear first. A held item hangs with its bottom ``pick_z - belt
-        top`` below the tool; the move to the bin (as the planner will plan it) is checked
-        against every other item's predicted position, with ``carry_clearance`` to spare
-        (in mirrored mode the follower's mirror
-        image too). Checking costs about a millisecond; lifting costs a move.
+        Then it is lifted clear first: the move to the bin, as the planner will plan it, is
+        checked against every other item's predicted position with ``carry_clearance`` to
+        spare (:func:`scara_collab.core.sorting.carry_sweeps`; in mirrored mode the follower's
+        mirror image too). Checking costs about a millisecond; lifting costs a move.
         """
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, self.s.drop_clearance)
         try:
@@ -866,24 +351,10 @@ class SortingJob:
         except ValueError:
             return True
         others = [it for it in self.items.values() if it.id != lane.item.id]
-        if not others:
-            return False
-        belt, size = self.cell.belt, self.cell.item_size
-        spare = self.s.carry_z - self.s.pick_z - size  # = carry_clearance
-        low = traj.p[:, 2] - self.s.pick_z < size + spare  # held bottom below item tops
-        if not np.any(low):
-            return False
-        t = self._soon(lane, now) + traj.t[low]
-        path = traj.p[low, :2]
-        paths = [path] + ([path * [1.0, -1.0] + [0.0, 2 * belt.centre_y]]
-                          if len(lane.robots) > 1 else [])
-        for it in others:
-            x = it.position[0] + belt.speed * (t - it.stamp)
-            for p in paths:
-                if np.any((np.abs(p[:, 0] - x) < size + spare)
-                          & (np.abs(p[:, 1] - it.position[1]) < size + spare)):
-                    return True
-        return False
+        spare = self.s.carry_z - self.s.pick_z - self.cell.item_size  # = carry_clearance
+        return bool(others) and sorting.carry_sweeps(
+            self.cell, traj.p, self._soon(lane, now) + traj.t, others, self.s.pick_z, spare,
+            mirrored=len(lane.robots) > 1)
 
     # --- endings --------------------------------------------------------------------------
     def _idle(self, lane: Lane) -> None:

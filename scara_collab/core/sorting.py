@@ -241,3 +241,60 @@ def mirror_partner(cell: CellModel, item: SeenItem, others: Sequence[SeenItem],
         if d < tol:
             best[d] = o
     return best[min(best)] if best else None
+
+
+def rank_by_cycle(cell: CellModel, arm: ArmModel, q_start, order: Sequence[Tuple[int, SeenItem]],
+                  t_start: float, z: float, drop_clearance: float, urgent_slack: float,
+                  savable: int, candidates: int) -> List[Tuple[int, SeenItem]]:
+    """Reorder the first ``candidates`` of ``order`` (most urgent first): cheap cycles first.
+
+    ``order`` is :func:`order_candidates` with its groups (0: the arm's own items and the
+    other half's it must take with them, 1: the other half's it takes only after them);
+    groups keep their order. Within them each candidate's cost is the bound of the cycle it
+    makes (:func:`cycle_bound`: meet it, carry it to its bin): a red item is met upstream near
+    the red bins, a blue one left to ride down to the blue bins. Up to ``savable`` urgent
+    items (less than ``urgent_slack`` seconds left in reach) stay in front, most urgent
+    first, so an item the arm can still save is not left; more than that means the feed is
+    faster than the arm, and every candidate then goes by its cost (the items it cannot save
+    anyway are left, not the ones that make its cycles short).
+    """
+    ranked = []
+    for k, (group, item) in enumerate(order[:candidates]):
+        p = predict(cell, item, t_start)
+        urgent = time_in_reach(cell, arm, p, z) < urgent_slack
+        cost = cycle_bound(cell, arm, q_start, item, t_start, z, drop_clearance)
+        ranked.append([urgent, group, cost, k, (group, item)])
+    if sum(e[0] for e in ranked) > savable:
+        for e in ranked:
+            e[0] = False  # more urgent items than the arm can save: cost alone
+    ranked.sort(key=lambda e: (not e[0], e[3] if e[0] else 0, e[1], e[2], e[3]))
+    return [e[4] for e in ranked] + list(order[candidates:])
+
+
+def carry_sweeps(cell: CellModel, path: np.ndarray, times: np.ndarray,
+                 items: Iterable[SeenItem], pick_z: float, spare: float,
+                 mirrored: bool = False) -> bool:
+    """Return True if an item held under the tool along ``path`` would touch one on the belt.
+
+    A held item hangs with its bottom ``pick_z - belt top`` below the tool (it was grasped
+    there). Where the tool is low enough for the held item's bottom to come within ``spare``
+    of the tops of the items on the belt, their predicted positions at ``times`` are checked
+    for overlap (with ``spare``); ``mirrored`` also checks the path's mirror image (a mirrored
+    follower's copy).
+
+    :param path: ``(N, 3)`` tool positions (world); :param times: ``(N,)`` when, s (sim).
+    :param items: the other items resting on the belt.
+    """
+    size = cell.item_size
+    low = path[:, 2] - pick_z < size + spare  # the held bottom below the item tops
+    if not np.any(low):
+        return False
+    t, xy = np.asarray(times)[low], path[low, :2]
+    paths = [xy] + ([xy * [1.0, -1.0] + [0.0, 2 * cell.belt.centre_y]] if mirrored else [])
+    for it in items:
+        x = it.position[0] + cell.belt.speed * (t - it.stamp)
+        for p in paths:
+            if np.any((np.abs(p[:, 0] - x) < size + spare)
+                      & (np.abs(p[:, 1] - it.position[1]) < size + spare)):
+                return True
+    return False

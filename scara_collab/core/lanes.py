@@ -1,0 +1,354 @@
+"""The job's request protocol, without ROS: moves and grips asked, answered, retried, timed out.
+
+A *lane* is one arm's work (both arms' in mirrored mode). :class:`LaneProtocol` keeps what is
+known of each lane's current move (per arm: the planner's and the bridge's answers, its start
+and end, whether it arrived) and grip (per arm: its token, attempts, outcome), turns the
+observations into that state and the state into commands, and enforces every deadline of the
+table in :mod:`scara_collab.core.job`. What to do next (a move arrived, a grip answered, a
+request failed) is the job's decision: :class:`scara_collab.core.job.SortingJob` subclasses
+it and decides in :meth:`LaneProtocol._arrived`, :meth:`LaneProtocol._gripped` and
+:meth:`LaneProtocol._give_up`.
+
+Every observation names what it is about (a move by its request, a grip by its token), so a
+late, duplicated or unknown one is ignored. Move requests are identified by their requested
+start in integer nanoseconds (:mod:`scara_collab.nodes.protocol` carries that id through
+planner and bridge); they are unique per arm.
+"""
+from dataclasses import dataclass, field
+from typing import Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CHECKING
+
+import numpy as np
+
+from scara_collab.core import planning, sorting
+from scara_collab.core.kinematics import fk
+from scara_collab.core.mirror import mirror_point
+from scara_collab.core.model import CellModel
+from scara_collab.core.trajectory import Trajectory
+
+if TYPE_CHECKING:  # the job's settings (JobSettings lives with the job)
+    from scara_collab.core.job import JobSettings
+
+PHASES = ('idle', 'to_item', 'grasping', 'lift', 'via', 'to_bin', 'releasing', 'to_park')
+MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
+#: planner / bridge answers about a move, in the order a move goes through them
+MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
+FAILED_MOVE = ('refused', 'superseded', 'held')
+
+PlanFn = Callable[[str, np.ndarray, np.ndarray], Trajectory]
+
+
+@dataclass(frozen=True)
+class MoveCommand:
+    """Ask the planner(s) for a move: ``robot``'s tool to ``target`` (world), from ``start``.
+
+    ``mirrored``: send it to the replication manager (``/collab/target``), which moves the
+    follower to the mirror image with the same request. ``request`` (ns) is the target's
+    stamp and the move's identity; a re-sent request has the same one.
+    """
+
+    robot: str
+    target: np.ndarray
+    request: int
+    mirrored: bool
+    purpose: str
+
+    @property
+    def start(self) -> float:
+        """The requested start, s."""
+        return self.request * 1e-9
+
+
+@dataclass(frozen=True)
+class GripCommand:
+    """Call ``robot``'s gripper: ``grasp`` true = grasp, false = release; answer with ``token``."""
+
+    robot: str
+    grasp: bool
+    token: int
+
+
+@dataclass
+class MoveTrack:
+    """What is known of one arm's move of the current request."""
+
+    state: str = 'asked'
+    since: float = 0.0  # when it entered this state (for 'waiting')
+    start: Optional[float] = None
+    end: Optional[float] = None
+    reason: str = ''
+    arrived: bool = False
+    #: the motion it commits to (the job's own plan of it, from its start), once timed
+    timeline: Optional[planning.Timeline] = None
+
+
+@dataclass
+class GripTrack:
+    """One gripper request: its token, when it was sent, how often, its outcome."""
+
+    token: int
+    sent: float
+    attempts: int = 1
+    ok: Optional[bool] = None
+    message: str = ''
+
+
+@dataclass
+class Lane:
+    """One arm's work (both arms' in mirrored mode); see :mod:`scara_collab.core.job`."""
+
+    robot: str
+    robots: Tuple[str, ...]
+    phase: str = 'idle'
+    item: Optional[sorting.SeenItem] = None
+    target: Optional[np.ndarray] = None
+    request: int = 0
+    purpose: str = ''
+    since: float = 0.0
+    sent: float = 0.0
+    sends: int = 0
+    moves: Dict[str, MoveTrack] = field(default_factory=dict)
+    grips: Dict[str, GripTrack] = field(default_factory=dict)
+    bin_tries: int = 0
+    reaims: int = 0
+    holding: bool = False
+    route: List[Tuple[str, np.ndarray]] = field(default_factory=list)
+    failures: Dict[int, int] = field(default_factory=dict)
+    next_look: float = 0.0  # idle with nothing to take: look again from then
+
+
+class LaneProtocol:
+    """Moves and grips of the lanes, asked and tracked to an outcome (see the module docstring).
+
+    :param cell: the cell model.
+    :param settings: the timeouts and retries (:class:`scara_collab.core.job.JobSettings`).
+    :param lanes: the lanes, ``(robot, robots it moves)`` each.
+    :param plan: ``plan(robot, q_start, target) -> Trajectory`` with the planners' settings
+        (raises ``ValueError`` if refused): a timed move's motion is known from it.
+    :param log: ``log(level, text)`` for events worth a log line (``'info'``, ``'warn'``).
+    """
+
+    def __init__(self, cell: CellModel, settings: 'JobSettings',
+                 lanes: Sequence[Tuple[str, Tuple[str, ...]]], plan: PlanFn,
+                 log: Callable[[str, str], None]):
+        """Set up idle lanes; nothing is asked yet."""
+        self.cell, self.s, self.plan, self.log = cell, settings, plan, log
+        self.lanes = [Lane(r, rs) for r, rs in lanes]
+        self.q: Dict[str, np.ndarray] = {}
+        self.retries = 0
+        self._last_request: Dict[str, int] = {a.name: 0 for a in cell.arms}
+        self._token = 0
+        self._out: List[object] = []
+        self._now = 0.0
+
+    # --- the decisions, taken by the subclass ----------------------------------------------
+    def _arrived(self, lane: Lane, now: float) -> None:
+        """Decide what follows a move every arm of ``lane`` has completed."""
+        raise NotImplementedError
+
+    def _gripped(self, lane: Lane, now: float) -> None:
+        """Decide what follows a grip every gripper of ``lane`` has answered (or given up)."""
+        raise NotImplementedError
+
+    def _give_up(self, lane: Lane, now: float, why: str) -> None:
+        """Decide what follows a move that failed or ran out of time."""
+        raise NotImplementedError
+
+    # --- observations -----------------------------------------------------------------------
+    def on_arm_state(self, robot: str, q: np.ndarray) -> None:
+        """Take the measured joints of ``robot`` ``(3,)`` (finite, checked by the caller)."""
+        self.q[robot] = np.asarray(q, dtype=float)
+
+    def on_planner(self, robot: str, request: int, state: str, start: Optional[float],
+                   end: Optional[float], reason: str = '') -> None:
+        """Take a planner status about ``robot``'s move for ``request`` (others are ignored)."""
+        track = self._open_track(robot, request)
+        if track is None:
+            return
+        if state == 'planned':
+            if track.state == 'accepted' and abs(start - track.start) < 1e-6:
+                return  # the bridge already runs it (its start is the one that counts)
+            self._timed(robot, request, track, 'planned', start, end)
+        elif state in ('queued', 'waiting'):  # not (or no longer) committed
+            if track.state != state:
+                track.since = self._now
+            track.state, track.start, track.end = state, None, None
+        elif state in ('refused', 'superseded'):
+            track.state, track.reason = state, reason
+
+    def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
+                     end: Optional[float], reason: str = '') -> None:
+        """Take a bridge execution status about ``robot``'s move for ``request``."""
+        track = self._open_track(robot, request)
+        if track is None:
+            return
+        if state == 'accepted':
+            self._timed(robot, request, track, 'accepted', start, end)
+        elif state == 'finished':
+            track.state = 'finished'
+        elif state == 'preempted':  # the planner took it back (it says what comes next)
+            track.state, track.start, track.end = 'waiting', None, None
+        elif state in ('refused', 'held'):
+            track.state, track.reason = state, reason or state
+
+    def on_grip(self, token: int, ok: bool, message: str = '') -> None:
+        """Take a gripper response for request ``token`` (late or unknown tokens: ignored)."""
+        for lane in self.lanes:
+            for track in lane.grips.values():
+                if track.token == token and track.ok is None:
+                    track.ok, track.message = bool(ok), message
+
+    def _confirm_grip(self, kind: str, robot: str) -> None:
+        """Take a bridge ``grasped`` or ``released`` event: the response may be lost."""
+        phase = {'grasped': 'grasping', 'released': 'releasing'}.get(kind)
+        for lane in self.lanes:
+            track = lane.grips.get(robot)
+            if lane.phase == phase and track is not None and track.ok is None:
+                track.ok, track.message = True, f'{kind} event'
+
+    def _open_track(self, robot: str, request: int) -> Optional[MoveTrack]:
+        """Return the track of ``robot``'s current move ``request``, None if unknown or over."""
+        for lane in self.lanes:
+            if lane.phase in MOVING and lane.request == request and robot in lane.moves:
+                track = lane.moves[robot]
+                return None if track.state in ('finished',) + FAILED_MOVE else track
+        return None
+
+    def _timed(self, robot: str, request: int, track: MoveTrack, state: str,
+               start: float, end: float) -> None:
+        track.state, track.start, track.end = state, start, end
+        self._book(robot, request, track)
+
+    def _book(self, robot: str, request: int, track: MoveTrack) -> None:
+        """Keep the motion a timed move commits ``robot`` to (two lanes: each one's look-ahead).
+
+        The move is planned here as the planner did, from where the arm is when the move is
+        first timed (it has not started yet); a later start only shifts it.
+        """
+        if len(self.lanes) < 2 or track.start is None:
+            return
+        if track.timeline is not None:
+            track.timeline = track.timeline.shifted(track.start - track.timeline.start)
+            return
+        lane = next(la for la in self.lanes if la.request == request and robot in la.moves)
+        try:
+            traj = self.plan(robot, self.q[robot], self._target_of(lane, robot))
+        except (ValueError, KeyError):
+            return
+        track.timeline = planning.Timeline.of(traj, track.start)
+
+    def _committed(self, robot: str, now: float) -> planning.Timeline:
+        """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds)."""
+        for lane in self.lanes:
+            track = lane.moves.get(robot) if lane.phase in MOVING else None
+            if (track is not None and track.timeline is not None
+                    and track.state in ('planned', 'accepted') and track.timeline.end > now):
+                return track.timeline
+        return planning.Timeline.hold(now, self.q[robot])
+
+    def phases(self) -> Dict[str, str]:
+        """Each lane's phase, by its robot."""
+        return {lane.robot: lane.phase for lane in self.lanes}
+
+    # --- moves --------------------------------------------------------------------------------
+    def _request(self, robots: Sequence[str], start: float) -> int:
+        req = max([int(round(start * 1e9))] + [self._last_request[r] + 1 for r in robots])
+        for r in robots:
+            self._last_request[r] = req
+        return req
+
+    def _move(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
+        lane.phase, lane.target = phase, np.asarray(target, dtype=float)
+        lane.request = self._request(lane.robots, max(start, now + 1e-3))
+        lane.moves = {r: MoveTrack() for r in lane.robots}
+        lane.since = lane.sent = now
+        lane.sends = 1
+        self._send(lane)
+
+    def _soon(self, lane: Lane, now: float) -> float:
+        """Return the start to ask for a move that should start as soon as possible.
+
+        One arm: now (its planner adds its own planning lead). A mirrored pair: ``pair_lead``
+        ahead, so both planners get a start that is still in the future and plan the same.
+        """
+        return now + (self.s.pair_lead if len(lane.robots) > 1 else 1e-3)
+
+    def _send(self, lane: Lane) -> None:
+        self._out.append(MoveCommand(lane.robot, lane.target, lane.request,
+                                     len(lane.robots) > 1, lane.phase))
+
+    def _target_of(self, lane: Lane, robot: str) -> np.ndarray:
+        if robot == lane.robot:
+            return lane.target
+        return mirror_point(self.cell.arm(lane.robot), self.cell.arm(robot), lane.target)
+
+    def _at_target(self, lane: Lane, robot: str) -> bool:
+        q = self.q.get(robot)
+        if q is None:
+            return False
+        tip = fk(self.cell.arm(robot), q)
+        return float(np.linalg.norm(tip - self._target_of(lane, robot))) <= \
+            self.s.arrive_tolerance
+
+    def _tick_move(self, lane: Lane, now: float) -> None:
+        limit = self.s.carry_timeout if lane.holding else self.s.move_timeout
+        for robot, track in lane.moves.items():
+            if track.arrived:
+                continue
+            if track.state in FAILED_MOVE:
+                return self._give_up(lane, now, f'{robot} move {track.state}: {track.reason}')
+            if track.state == 'finished':
+                track.arrived = True
+                continue
+            if track.state == 'asked' and now - lane.sent > self.s.answer_timeout:
+                if lane.sends > self.s.answer_retries:
+                    return self._give_up(lane, now, f'no answer from the {robot} planner '
+                                         f'after {lane.sends} requests')
+                lane.sends += 1
+                lane.sent = now
+                self.retries += 1
+                self.log('info', f'{robot}: no planner answer for request {lane.request} in '
+                         f'{self.s.answer_timeout:g} s; asking again ({lane.sends})')
+                self._send(lane)
+                continue
+            if track.end is None:  # asked, queued or waiting
+                if now - lane.since > limit:
+                    others = ', '.join(f'{o.robot} {o.phase}' + (' holding' if o.holding else '')
+                                       for o in self.lanes if o is not lane)
+                    return self._give_up(lane, now, f'no plan from the {robot} planner in '
+                                         f'{limit:g} s ({track.state}'
+                                         + (f'; {others})' if others else ')'))
+                continue
+            if now >= track.end and self._at_target(lane, robot):
+                track.arrived = True
+            elif now > track.end + self.s.arrive_timeout:
+                return self._give_up(lane, now, f'{robot} did not arrive within '
+                                     f'{self.s.arrive_timeout:g} s of its end ({track.state})')
+        if all(t.arrived for t in lane.moves.values()):
+            self._arrived(lane, now)
+
+    # --- gripper ------------------------------------------------------------------------------
+    def _grip(self, lane: Lane, grasp: bool, now: float) -> None:
+        lane.phase = 'grasping' if grasp else 'releasing'
+        lane.since = now
+        lane.grips = {}
+        for robot in lane.robots:
+            self._token += 1
+            lane.grips[robot] = GripTrack(self._token, now)
+            self._out.append(GripCommand(robot, grasp, self._token))
+
+    def _tick_grip(self, lane: Lane, now: float) -> None:
+        grasp = lane.phase == 'grasping'
+        for robot, track in lane.grips.items():
+            if track.ok is None and now - track.sent > self.s.grip_timeout:
+                if track.attempts > self.s.grip_retries:
+                    track.ok, track.message = False, f'no answer after {track.attempts} calls'
+                    continue
+                self._token += 1
+                track.token, track.sent = self._token, now
+                track.attempts += 1
+                self.retries += 1
+                self.log('info', f'{robot}: no gripper answer in {self.s.grip_timeout:g} s; '
+                         f'asking again ({track.attempts})')
+                self._out.append(GripCommand(robot, grasp, track.token))
+        if all(t.ok is not None for t in lane.grips.values()):
+            self._gripped(lane, now)

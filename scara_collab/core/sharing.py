@@ -1,0 +1,168 @@
+"""Two lanes over one belt, without ROS: waits broken, the shared zone booked in time.
+
+:class:`SharedBelt` is the layer of the job between the request protocol
+(:class:`scara_collab.core.lanes.LaneProtocol`) and the sorting decisions
+(:class:`scara_collab.core.job.SortingJob`) that deals with the other arm: a chase timed around
+the other arm's booked motion (:meth:`SharedBelt._unhindered`), an arm that waits for the other
+unblocked (parks, gives way, backs out or re-aims: :meth:`SharedBelt._unblock`), a mirrored
+pair kept apart by a detour (:meth:`SharedBelt._move_safely`). The geometry is
+:mod:`scara_collab.core.pairing`'s; with one lane nothing here acts.
+"""
+from typing import Dict, Optional
+
+import numpy as np
+
+from scara_collab.core import pairing, sorting
+from scara_collab.core.lanes import Lane, LaneProtocol, MOVING
+
+#: s: an item with less than this left in an arm's reach is urgent: about two cycles, so of
+#: two urgent items the arm can still take the one after the other. An urgent item is chased
+#: even when the other arm's booked move will hold the arm up (else the arm may take another
+#: first and come back too late, or both arms may defer it until it is missed)
+URGENT_SLACK = 8.0
+
+
+class SharedBelt(LaneProtocol):
+    """The job's dealings with the other arm (see the module docstring).
+
+    The subclass provides ``items`` (the items resting on the belt, by id), the chase
+    (:meth:`_chase`) and the park (:meth:`_park`).
+    """
+
+    items: Dict[int, sorting.SeenItem]
+
+    def _chase(self, lane: Lane, item: sorting.SeenItem, now: float) -> bool:
+        """Ask for the move that meets ``item``; return False if the arm cannot."""
+        raise NotImplementedError
+
+    def _park(self, lane: Lane, now: float) -> None:
+        """Move the lane's arm clear of the shared zone."""
+        raise NotImplementedError
+
+    def _blocked(self, lane: Lane, now: float) -> bool:
+        """Return True if the lane's planner has waited for the other arm ``unblock_after``."""
+        return lane.phase in MOVING and any(
+            t.state == 'waiting' and now - t.since > self.s.unblock_after
+            for t in lane.moves.values())
+
+    def _unblock(self, now: float) -> None:
+        """Clear the way for an arm that waits for the other one (collaborative mode).
+
+        An idle arm in the way parks; when both wait for each other, the follower's lane
+        gives way (unless it holds an item), as the priority rule has it. When both hold
+        items (neither may put its item down), the follower first backs out of the shared zone
+        by a waypoint on its own side (:meth:`_retreat`), then goes to its bin. An arm on its
+        way to an item that waits for the other arm's work (it will leave when done) re-aims
+        at the item as the belt carries it on (:meth:`_reaim`).
+        """
+        for lane in self.lanes:
+            if not self._blocked(lane, now):
+                continue
+            other = next(o for o in self.lanes if o is not lane)
+            if other.phase == 'idle':
+                self.log('info', f'{other.robot}: parks to clear the way for {lane.robot}')
+                self._park(other, now)
+            elif not self._blocked(other, now):
+                if lane.phase == 'to_item' and not lane.holding:
+                    self._reaim(lane, other, now)
+            else:
+                # the one not holding an item gives way; if neither holds one, the follower
+                free = [o for o in (lane, other) if not o.holding]
+                if free:
+                    yielder = next((o for o in free if o.robot != self.cell.leader.name),
+                                   free[0])
+                    self._give_up(yielder, now, 'both arms wait for each other: '
+                                  f'{yielder.robot} gives way')
+                else:  # both carry items: one backs out of the way, follower first
+                    for o in sorted((lane, other), key=lambda o: o.robot ==
+                                    self.cell.leader.name):
+                        if o.phase != 'via' and self._retreat(o, now):
+                            break
+            return
+
+    def _reaim(self, lane: Lane, other: Lane, now: float) -> None:
+        """Ask again for the item an arm waits to meet, where the belt has carried it by now.
+
+        The planner holds a waiting move until the other arm's next move clears the way (the
+        other arm waits at an item or its bin while it grips), then plans the target it has:
+        by then the item has moved on. Asking again every ``unblock_after`` keeps the target
+        current, so the arm meets the item as soon as the way is clear; the item's deadline
+        is the belt's end (the intercept no longer exists: give up).
+        """
+        seen = self.items.get(lane.item.id)
+        if seen is None:  # not seen resting on the belt just now: the move's deadline holds
+            return
+        if lane.reaims == 0:
+            self.log('info', f'{lane.robot}: waits for {other.robot} ({other.phase}); '
+                     f're-aims at item {seen.id} while it waits')
+        if not self._chase(lane, seen, now):
+            return self._give_up(lane, now, f'item {seen.id} got away while {lane.robot} '
+                                 f'waited for {other.robot}')
+        lane.reaims += 1
+
+    def _retreat(self, lane: Lane, now: float) -> bool:
+        """Back an arm holding an item out of the shared zone, then on to its bin.
+
+        The waypoint is :func:`scara_collab.core.pairing.retreat_via` (out from the belt on
+        the arm's own side, clear of the other arm where it stands). Return False if there is
+        none (then the other arm backs out).
+        """
+        other = next(a for a in self.cell.arms if a.name != lane.robot)
+        q_other = self.q.get(other.name)
+        if q_other is None:
+            return False
+        via = pairing.retreat_via(self.cell, self.plan, lane.robot, self.q[lane.robot],
+                                  q_other, self.s.carry_z, self.s.pair_margin)
+        if via is None:
+            return False
+        drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, self.s.drop_clearance)
+        self.log('info', f'{lane.robot}: both arms hold items and wait for each other: '
+                 f'{lane.robot} backs out to y={via[1]:.2f} first')
+        lane.route = [('to_bin', drop)]
+        self._move(lane, 'via', via, self._soon(lane, now), now)
+        return True
+
+    def _unhindered(self, lane: Lane, item: sorting.SeenItem, hit: sorting.Intercept,
+                    now: float) -> Optional[sorting.Intercept]:
+        """Return the chase timed around the other arm's booked move, or None to defer it.
+
+        :func:`scara_collab.core.pairing.unhindered` against what the other arm has booked
+        (:meth:`_committed`), with the planners' margin; a wait of up to half the grasp
+        reach's belt travel is taken as it is. An item with less than ``URGENT_SLACK`` left in
+        reach is never deferred for a wait (in an hour's soak both arms deferred one item until
+        it was missed), but it is met where it will be when the way is clear (in another soak
+        an arm chased such an item on the un-delayed time, arrived 4.7 cm late at the end of
+        its reach and lost it).
+        """
+        arm = self.cell.arm(lane.robot)
+        other = next(a for a in self.cell.arms if a.name != lane.robot)
+        if other.name not in self.q:
+            return hit
+        p = sorting.predict(self.cell, item, now)
+        urgent = sorting.time_in_reach(self.cell, arm, p, self.s.pick_z) < URGENT_SLACK
+        return pairing.unhindered(
+            self.cell, self.plan, lane.robot, self.q[lane.robot], item, hit,
+            self._committed(other.name, now), self.s.pick_z, self.s.pair_margin,
+            tolerance=0.5 * self.s.grasp_reach / max(self.cell.belt.speed, 1e-9),
+            max_delay=self.s.move_timeout, urgent=urgent)
+
+    def _move_safely(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
+        """Ask for a move like :meth:`_move`; a mirrored pair may go round by a waypoint.
+
+        A pair that would come within the planners' margin goes round, so the follower need
+        not yield and both arms start together.
+        """
+        if len(lane.robots) > 1:
+            q0 = self.q[lane.robot]
+            try:
+                clear = pairing.pair_clear(self.cell, lane.robot,
+                                           self.plan(lane.robot, q0, target), self.s.pair_margin)
+            except ValueError:
+                clear = True  # the planner will refuse it with the reason
+            route = [] if clear else pairing.detour(self.cell, self.plan, lane.robot, q0,
+                                                    target, self.s.carry_z, self.s.pair_margin)
+            if route:
+                lane.route = [('via', p) for p in route[1:]] + [(phase, np.asarray(target))]
+                self._move(lane, 'via', route[0], start, now)
+                return
+        self._move(lane, phase, target, start, now)
