@@ -321,7 +321,7 @@ def test_automatic_feed_random(cell):
         for it in items:
             assert it.cls in cell.item_classes
             assert abs(it.position[1] - cell.belt.centre_y) <= jitter + 1e-9
-        sim.set_feed(0.0)
+        sim.conveyor.set_feed(0.0)
         sim.step(1000)
         assert len(sim.items()) == 2
 

@@ -158,8 +158,8 @@ class PyBulletBridge(Node):
                 self._timer = self.create_timer(0.0 if self._rtf == 0 else 0.002, self._tick,
                                                 clock=self._steady)
                 self._parked = False
-            if float(tree['feed_interval']) != self.sim.feed_interval:
-                self.sim.set_feed(float(tree['feed_interval']))
+            if float(tree['feed_interval']) != self.sim.conveyor.feed_interval:
+                self.sim.conveyor.set_feed(float(tree['feed_interval']))
 
     def _steps_due(self) -> int:
         if self._rtf <= 0:

@@ -8,7 +8,8 @@ never the global client). It loads the cell URDF of :func:`scara_collab.core.mod
 Physics step (every ``1 / physics_rate`` s of sim time):
 
 1. read the six joints in one ``getJointStates`` call;
-2. every ``physics_rate / servo_rate`` steps, the servo: sample each arm's reference (hold or
+2. every ``physics_rate / servo_rate`` steps, the servo (:class:`scara_collab.sim.servo.Servo`,
+   which also owns the emergency stop): sample each arm's reference (hold or
    cubic Hermite trajectory, :mod:`scara_collab.sim.reference`) and evaluate the control law
    for both arms at once (:mod:`scara_collab.sim.controllers`: PID on torque, or computed
    torque with one vectorised inverse-dynamics call), clamped to the effort limits. The torque
@@ -39,23 +40,22 @@ from contextlib import contextmanager
 import os
 import sys
 import tempfile
-from typing import List, NamedTuple, Optional, Tuple
+from typing import Dict, List, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from scara_collab.core import safety
 from scara_collab.core.config import ConfigError, load_config
 from scara_collab.core.model import CellModel, load_cell
-from scara_collab.sim.controllers import (
-    ComputedTorqueController, joint_gains, PidController, smooth_friction)
+from scara_collab.sim.controllers import smooth_friction
 from scara_collab.sim.conveyor import Conveyor, Item, SimEvent
 from scara_collab.sim.gripper import Grippers
 from scara_collab.sim.reference import HermiteReference, TrajectoryError, validate_trajectory
+from scara_collab.sim.servo import CONTROL_MODES, Servo
 
-CONTROL_MODES = ('pid', 'computed_torque')
+__all__ = ['CellSim', 'CONTROL_MODES', 'JointStateSample']
 
 
 class JointStateSample(NamedTuple):
@@ -100,6 +100,56 @@ def _divisor(physics_rate: float, rate: float, key: str) -> int:
     return n
 
 
+class World(NamedTuple):
+    """The cell URDF loaded into a PyBullet world (see :func:`load_world`).
+
+    :ivar body: the cell's multibody; :ivar joints: the arms' joint indices, in
+        ``joint_names`` order; :ivar link_names: link name by index; :ivar quills: each
+        arm's quill link (the tool); :ivar belt_link: the conveyor's link.
+    """
+
+    body: int
+    joints: List[int]
+    link_names: Dict[int, str]
+    quills: List[int]
+    belt_link: int
+
+
+def load_world(pb: BulletClient, cell: CellModel, joint_names: Sequence[str]) -> World:
+    """Load the cell URDF (fixed base, inertias from the file) and a floor into ``pb``.
+
+    The arms' joints are set up for torque control with friction applied explicitly: the
+    default velocity motors are switched off (zero force) and PyBullet's own joint and link
+    damping are zeroed, so friction is counted once (:mod:`scara_collab.sim.cell_sim`).
+
+    :raises ConfigError: if the URDF lacks one of ``joint_names``.
+    """
+    fd, path = tempfile.mkstemp(suffix='.urdf', prefix='scara_cell_')
+    try:
+        with os.fdopen(fd, 'w') as f:
+            f.write(cell.urdf)
+        with _quiet_stdout():
+            body = pb.loadURDF(path, useFixedBase=True, flags=pybullet.URDF_USE_INERTIA_FROM_FILE)
+    finally:
+        os.unlink(path)
+    joints, links = {}, {}
+    for j in range(pb.getNumJoints(body)):
+        info = pb.getJointInfo(body, j)
+        joints[info[1].decode()] = j
+        links[info[12].decode()] = j
+    missing = [n for n in joint_names if n not in joints]
+    if missing:
+        raise ConfigError(f'the cell URDF has no joints {missing}')
+    idx = [joints[n] for n in joint_names]
+    pb.setJointMotorControlArray(body, idx, pybullet.VELOCITY_CONTROL, forces=[0.0] * len(idx))
+    pb.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0)
+    for j in idx:
+        pb.changeDynamics(body, j, jointDamping=0.0, linearDamping=0.0, angularDamping=0.0)
+    pb.createMultiBody(0.0, pb.createCollisionShape(pybullet.GEOM_PLANE), -1, [0.0, 0.0, 0.0])
+    return World(body, idx, {i: name for name, i in links.items()},
+                 [links[f'{a.name}_quill'] for a in cell.arms], links['conveyor'])
+
+
 class CellSim:
     """The PyBullet cell (see the module docstring for the loop, the belt and the events).
 
@@ -121,7 +171,7 @@ class CellSim:
         self.ctl_cfg = ctl_cfg if ctl_cfg is not None else load_config('controllers')
         cfg = self.sim_cfg
         self.control_mode = control_mode or self.ctl_cfg['control_mode']
-        if self.control_mode not in CONTROL_MODES:
+        if self.control_mode not in CONTROL_MODES:  # before PyBullet starts
             raise ValueError(f'control_mode must be one of {CONTROL_MODES}, '
                              f'got {self.control_mode!r}')
         self.physics_rate = float(cfg['physics_rate'])
@@ -135,16 +185,8 @@ class CellSim:
         self.joint_names = tuple(n for a in self.arms for n in a.joint_names)
         self._gravity = [float(v) for v in cfg['gravity']]
         self._eps = float(cfg['friction_smoothing'])
-        self._effort = np.stack([a.max_effort for a in self.arms])
         self._viscous = np.stack([a.viscous for a in self.arms])
         self._coulomb = np.stack([a.coulomb for a in self.arms])
-        pid = self.ctl_cfg['pid']
-        self._pid = PidController(joint_gains(pid, 'kp'), joint_gains(pid, 'ki'),
-                                  joint_gains(pid, 'kd'), self._effort, len(self.arms))
-        self._ct = ComputedTorqueController(
-            self.arms, joint_gains(self.ctl_cfg['computed_torque'], 'kp'),
-            joint_gains(self.ctl_cfg['computed_torque'], 'kd'), g=-self._gravity[2],
-            friction_smoothing=self._eps)
         self._pb: Optional[BulletClient] = None
         try:
             self._build(gui)
@@ -160,35 +202,8 @@ class CellSim:
         pb.setTimeStep(self.dt)
         pb.setPhysicsEngineParameter(numSolverIterations=int(self.sim_cfg['solver_iterations']))
         pb.setGravity(*self._gravity)
-        fd, path = tempfile.mkstemp(suffix='.urdf', prefix='scara_cell_')
-        try:
-            with os.fdopen(fd, 'w') as f:
-                f.write(self.cell.urdf)
-            with _quiet_stdout():
-                self._body = pb.loadURDF(path, useFixedBase=True,
-                                         flags=pybullet.URDF_USE_INERTIA_FROM_FILE)
-        finally:
-            os.unlink(path)
-        body = self._body
-        joints = {}
-        links = {}
-        for j in range(pb.getNumJoints(body)):
-            info = pb.getJointInfo(body, j)
-            joints[info[1].decode()] = j
-            links[info[12].decode()] = j
-        missing = [n for n in self.joint_names if n not in joints]
-        if missing:
-            raise ConfigError(f'the cell URDF has no joints {missing}')
-        self._jidx = [joints[n] for n in self.joint_names]
-        self._link_names = {idx: name for name, idx in links.items()}
-        self._quill = [links[f'{a.name}_quill'] for a in self.arms]
-        pb.setJointMotorControlArray(body, self._jidx, pybullet.VELOCITY_CONTROL,
-                                     forces=[0.0] * len(self._jidx))
-        pb.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0)
-        for j in self._jidx:
-            pb.changeDynamics(body, j, jointDamping=0.0, linearDamping=0.0, angularDamping=0.0)
-        floor = pb.createCollisionShape(pybullet.GEOM_PLANE)
-        self._floor = pb.createMultiBody(0.0, floor, -1, [0.0, 0.0, 0.0])
+        world = load_world(pb, self.cell, self.joint_names)
+        self._body, self._jidx, self._quill = world.body, world.joints, world.quills
         if gui:
             pb.resetDebugVisualizerCamera(6.0, 30.0, -40.0,
                                           [float(self.arms[0].base[0, 3]), 0.0, 0.3])
@@ -196,19 +211,13 @@ class CellSim:
         self._get_states = pb.getJointStates
         self._set_motors = pb.setJointMotorControlArray
         self._step_sim = pb.stepSimulation
-        self._get_pose = pb.getBasePositionAndOrientation
         # state
         self._steps = 0
-        self._estop = False
-        self._traj: List[Optional[HermiteReference]] = [None] * len(self.arms)
-        self._tau = np.zeros((len(self.arms), 3))
-        q, _ = self._read()
-        self._ref_q = q.copy()
-        self._ref_qd = np.zeros_like(q)
-        self._ref_qdd = np.zeros_like(q)
-        self.conveyor = Conveyor(pb, self.cell, self.sim_cfg, lambda: self.time, body,
-                                 links['conveyor'], self._link_names, self._seed)
-        self.grippers = Grippers(pb, self.conveyor, body, self._quill, self.robots,
+        self.servo = Servo(self.arms, self.ctl_cfg, self.control_mode, -self._gravity[2],
+                           self._eps, self._servo_dt, self._read()[0])
+        self.conveyor = Conveyor(pb, self.cell, self.sim_cfg, lambda: self.time, world.body,
+                                 world.belt_link, world.link_names, self._seed)
+        self.grippers = Grippers(pb, self.conveyor, world.body, world.quills, self.robots,
                                  float(self.sim_cfg['grasp_tolerance']))
 
     @property
@@ -226,33 +235,20 @@ class CellSim:
         """Advance ``n`` physics steps (servo, friction, items included)."""
         body, idx = self._body, self._jidx
         get_states, set_motors, step_sim = self._get_states, self._set_motors, self._step_sim
-        torque = pybullet.TORQUE_CONTROL
-        shape = self._tau.shape
+        torque, servo = pybullet.TORQUE_CONTROL, self.servo
+        shape = servo.tau.shape
         for _ in range(int(n)):
             states = get_states(body, idx)
             qd = np.array([s[1] for s in states]).reshape(shape)
             if self._steps % self._servo_every == 0:
-                self._servo(np.array([s[0] for s in states]).reshape(shape), qd)
-            force = self._tau - smooth_friction(self._viscous, self._coulomb, qd, self._eps)
+                servo.update(self._steps * self.dt, np.array([s[0] for s in states])
+                             .reshape(shape), qd, self.grippers.payload)
+            force = servo.tau - smooth_friction(self._viscous, self._coulomb, qd, self._eps)
             set_motors(body, idx, torque, forces=force.ravel().tolist())
             step_sim()
             self._steps += 1
             if self._steps % self._item_every == 0:
                 self.conveyor.update()
-
-    def _servo(self, q: np.ndarray, qd: np.ndarray) -> None:
-        now = self._steps * self.dt
-        for a, ref in enumerate(self._traj):
-            if ref is None or now < ref.start:
-                continue
-            self._ref_q[a], self._ref_qd[a], self._ref_qdd[a] = ref.sample(now)
-            if now >= ref.end:
-                self._traj[a] = None  # done: hold the last point (sample() gave it at rest)
-        if self.control_mode == 'pid':
-            tau = self._pid(q, qd, self._ref_q, self._ref_qd, self._servo_dt)
-        else:
-            tau = self._ct(q, qd, self._ref_q, self._ref_qd, self._ref_qdd, self.grippers.payload)
-        self._tau = np.minimum(np.maximum(tau, -self._effort), self._effort)
 
     def _read(self) -> Tuple[np.ndarray, np.ndarray]:
         states = self._get_states(self._body, self._jidx)
@@ -271,7 +267,8 @@ class CellSim:
     def joint_state(self) -> JointStateSample:
         """Positions, velocities and applied motor efforts of all six joints (see the type)."""
         q, qd = self._read()
-        return JointStateSample(self.joint_names, q.ravel(), qd.ravel(), self._tau.ravel().copy())
+        return JointStateSample(self.joint_names, q.ravel(), qd.ravel(),
+                                self.servo.tau.ravel().copy())
 
     def arm_state(self, robot: str) -> Tuple[np.ndarray, np.ndarray]:
         """Measured ``(q, qd)`` of one arm, each ``(3,)``."""
@@ -281,21 +278,13 @@ class CellSim:
 
     def reference(self, robot: str) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return the servo's reference ``(q, qd, qdd)`` of one arm (as of the last tick)."""
-        a = self._index(robot)
-        return self._ref_q[a].copy(), self._ref_qd[a].copy(), self._ref_qdd[a].copy()
+        return self.servo.reference(self._index(robot))
 
     def tool_tip(self, robot: str) -> np.ndarray:
         """World position of the tool tip (the ``<robot>_quill`` link frame origin), ``(3,)``."""
         a = self._index(robot)
         state = self._pb.getLinkState(self._body, self._quill[a], computeForwardKinematics=True)
         return np.array(state[4])
-
-    def _hold_arm(self, a: int) -> None:
-        q, _ = self._read()
-        self._traj[a] = None
-        self._ref_q[a] = q[a]
-        self._ref_qd[a] = 0.0
-        self._ref_qdd[a] = 0.0
 
     def execute(self, robot: str, t: ArrayLike, q: ArrayLike, qd: Optional[ArrayLike] = None,
                 qdd: Optional[ArrayLike] = None) -> None:
@@ -324,8 +313,8 @@ class CellSim:
         t, q, qd, qdd = validate_trajectory(
             t, q, qd, arm.lower, arm.upper, arm.max_velocity,
             float(self.sim_cfg['velocity_tolerance']), qdd=qdd)
-        if self._estop:
-            self._check_recovery(a, q)
+        if self.servo.estop:
+            self.servo.check_recovery(a, q, *self._read(), self.time)
         ref = HermiteReference(t, q, qd, qdd)
         q_now = self._read()[0][a]
         start_q = ref.sample(max(self.time, ref.start))[0]
@@ -336,42 +325,24 @@ class CellSim:
             raise TrajectoryError(
                 f'the trajectory starts {jump[j]:.4f} away from the measured position of joint '
                 f'{j + 1} ({q_now[j]:.4f}); at most {tol} is allowed')
-        self._hold_arm(a)
-        self._traj[a] = ref
+        self.servo.follow(a, ref, q_now)
 
     def hold(self, robot: str) -> None:
         """Drop the running trajectory and hold the arm where it is now."""
-        self._hold_arm(self._index(robot))
+        a = self._index(robot)
+        self.servo.hold(a, self._read()[0][a])
 
     def active(self, robot: str) -> bool:
         """Return ``True`` while the arm has a trajectory to run (also before its start time)."""
-        ref = self._traj[self._index(robot)]
-        return ref is not None and self.time < ref.end
-
-    def _check_recovery(self, a: int, q: np.ndarray) -> None:
-        """Refuse a move under the emergency stop unless it only parts the arms."""
-        q_now, qd_now = self._read()
-        others = [b for b in range(len(self.arms)) if b != a]
-        if any(self.active(self.robots[b]) or np.any(np.abs(qd_now[b]) > 1e-3)
-               for b in others):
-            raise TrajectoryError('emergency stop is active and the other arm is moving: '
-                                  'refused (one separating move at a time)')
-        path = np.vstack([q_now[a], q])
-        if not all(safety.separating(self.arms[a], path, self.arms[b], q_now[b])
-                   for b in others):
-            raise TrajectoryError('emergency stop is active: only a move that takes the arm '
-                                  'away from the other one is run')
+        return self.servo.active(self._index(robot), self.time)
 
     def set_estop(self, on: bool) -> None:
         """Emergency stop: both arms brake at their acceleration limits and then hold.
 
         While it is set, new trajectories are refused unless they part the arms (see
-        :meth:`execute`).
+        :meth:`execute`; :meth:`scara_collab.sim.servo.Servo.set_estop`).
         """
-        if on and not self._estop:
-            for robot in self.robots:
-                self.brake(robot)
-        self._estop = bool(on)
+        self.servo.set_estop(on, *self._read(), self.time)
 
     def brake(self, robot: str) -> None:
         """Drop the running trajectory: brake every joint at its acceleration limit, then hold.
@@ -380,14 +351,12 @@ class CellSim:
         """
         a = self._index(robot)
         q, qd = self._read()
-        t, pos, vel, acc = safety.braking(self.arms[a], q[a], qd[a], self._servo_dt)
-        self._hold_arm(a)
-        self._traj[a] = HermiteReference(self.time + t, pos, vel, acc)
+        self.servo.brake(a, q[a], qd[a], self.time)
 
     @property
     def estop(self) -> bool:
         """``True`` while the emergency stop is set."""
-        return self._estop
+        return self.servo.estop
 
     def reset_arm(self, robot: str, q: ArrayLike, qd: Optional[ArrayLike] = None) -> None:
         """Teleport an arm to ``q`` ``(3,)`` and hold that position (tests, benchmarks).
@@ -404,9 +373,7 @@ class CellSim:
             raise TrajectoryError(f'{robot} holds item {self.grippers.held[a]}: release it first')
         for j, idx in enumerate(self._jidx[3 * a:3 * a + 3]):
             self._pb.resetJointState(self._body, idx, float(q[0, j]), float(qd[0, j]))
-        self._pid.reset(a)
-        self._tau[a] = 0.0
-        self._hold_arm(a)
+        self.servo.reset(a, self._read()[0][a])
 
     def mass_matrix(self, robot: str, q: ArrayLike) -> np.ndarray:
         """Return PyBullet's joint-space inertia matrix ``(3, 3)`` of one arm at ``q`` ``(3,)``.
@@ -421,22 +388,7 @@ class CellSim:
         m = np.array(self._pb.calculateMassMatrix(self._body, q_all.ravel().tolist()))
         return m[3 * a:3 * a + 3, 3 * a:3 * a + 3]
 
-    # --- items ----------------------------------------------------------------------------
     # --- the conveyor (items, feed, bins, events: :class:`~scara_collab.sim.conveyor.Conveyor`)
-    def set_feed(self, interval: Optional[float] = None, pattern: Optional[str] = None) -> None:
-        """Change the automatic feed (:meth:`Conveyor.set_feed`)."""
-        self.conveyor.set_feed(interval, pattern)
-
-    @property
-    def feed_interval(self) -> float:
-        """Return the seconds of sim time between items (0: no automatic feed)."""
-        return self.conveyor.feed_interval
-
-    @property
-    def feed_pattern(self) -> str:
-        """Return the feed pattern (``'random'`` or ``'mirror_pairs'``)."""
-        return self.conveyor.feed_pattern
-
     def spawn_item(self, cls: Optional[str] = None, y: Optional[float] = None,
                    x: Optional[float] = None) -> int:
         """Put an item on the belt (:meth:`Conveyor.spawn_item`); return its id."""

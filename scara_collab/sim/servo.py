@@ -1,0 +1,137 @@
+"""The arms' servo, without PyBullet: the reference each arm follows and the law that tracks it.
+
+Each arm follows a reference: a hold (its last point at rest) or a trajectory
+(:class:`scara_collab.sim.reference.HermiteReference`, from its start time on; before it the
+arm holds). At every servo tick :meth:`Servo.update` samples both references and evaluates the
+control law for both arms at once (:mod:`scara_collab.sim.controllers`: PID on torque, or
+computed torque with one vectorised inverse-dynamics call), clamped to the effort limits; the
+simulator applies :attr:`Servo.tau` until the next tick.
+
+The emergency stop is the servo's too (:meth:`Servo.set_estop`): every arm brakes at its
+acceleration limits (:func:`scara_collab.core.safety.braking`) and holds, and while it is set
+a new trajectory is run only if it parts the arms (:meth:`Servo.check_recovery`).
+"""
+from typing import List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from scara_collab.core import safety
+from scara_collab.core.model import ArmModel
+from scara_collab.sim.controllers import ComputedTorqueController, joint_gains, PidController
+from scara_collab.sim.reference import HermiteReference, TrajectoryError
+
+CONTROL_MODES = ('pid', 'computed_torque')
+
+
+class Servo:
+    """Both arms' references and control law (see the module docstring).
+
+    :param arms: the arms, in the simulator's order.
+    :param ctl_cfg: ``controllers.yaml`` parameters (``pid``, ``computed_torque`` gains).
+    :param control_mode: ``'pid'`` or ``'computed_torque'``.
+    :param gravity: m/s², downwards (positive).
+    :param friction_smoothing: the Coulomb friction's tanh scale (computed torque's model).
+    :param dt: s between servo ticks (the PID's integration step).
+    :param q: ``(arms, 3)`` the joints now: each arm holds them.
+    :raises ValueError: for an unknown ``control_mode``.
+    """
+
+    def __init__(self, arms: Sequence[ArmModel], ctl_cfg: dict, control_mode: str,
+                 gravity: float, friction_smoothing: float, dt: float, q: np.ndarray):
+        """Make both control laws; every arm holds ``q``."""
+        if control_mode not in CONTROL_MODES:
+            raise ValueError(f'control_mode must be one of {CONTROL_MODES}, '
+                             f'got {control_mode!r}')
+        self.arms, self.control_mode, self.dt = tuple(arms), control_mode, float(dt)
+        self.estop = False
+        self.effort = np.stack([a.max_effort for a in arms])
+        pid = ctl_cfg['pid']
+        self._pid = PidController(joint_gains(pid, 'kp'), joint_gains(pid, 'ki'),
+                                  joint_gains(pid, 'kd'), self.effort, len(arms))
+        self._ct = ComputedTorqueController(
+            arms, joint_gains(ctl_cfg['computed_torque'], 'kp'),
+            joint_gains(ctl_cfg['computed_torque'], 'kd'), g=gravity,
+            friction_smoothing=friction_smoothing)
+        self._traj: List[Optional[HermiteReference]] = [None] * len(arms)
+        self.tau = np.zeros((len(arms), 3))
+        self.ref_q = np.array(q, dtype=float)
+        self.ref_qd = np.zeros_like(self.ref_q)
+        self.ref_qdd = np.zeros_like(self.ref_q)
+
+    def update(self, now: float, q: np.ndarray, qd: np.ndarray, payload: np.ndarray) -> None:
+        """Sample the references at ``now`` (s) and set :attr:`tau` for the measured state.
+
+        :param q, qd: ``(arms, 3)`` measured joints; :param payload: kg held per arm.
+        """
+        for a, ref in enumerate(self._traj):
+            if ref is None or now < ref.start:
+                continue
+            self.ref_q[a], self.ref_qd[a], self.ref_qdd[a] = ref.sample(now)
+            if now >= ref.end:
+                self._traj[a] = None  # done: hold the last point (sample() gave it at rest)
+        if self.control_mode == 'pid':
+            tau = self._pid(q, qd, self.ref_q, self.ref_qd, self.dt)
+        else:
+            tau = self._ct(q, qd, self.ref_q, self.ref_qd, self.ref_qdd, payload)
+        self.tau = np.minimum(np.maximum(tau, -self.effort), self.effort)
+
+    def hold(self, a: int, q: np.ndarray) -> None:
+        """Drop arm ``a``'s trajectory: it holds ``q`` ``(3,)`` at rest."""
+        self._traj[a] = None
+        self.ref_q[a] = q
+        self.ref_qd[a] = 0.0
+        self.ref_qdd[a] = 0.0
+
+    def follow(self, a: int, ref: HermiteReference, q: np.ndarray) -> None:
+        """Run ``ref`` on arm ``a`` (replacing its trajectory); until its start it holds ``q``."""
+        self.hold(a, q)
+        self._traj[a] = ref
+
+    def active(self, a: int, now: float) -> bool:
+        """Return True while arm ``a`` has a trajectory to run (also before its start)."""
+        ref = self._traj[a]
+        return ref is not None and now < ref.end
+
+    def reference(self, a: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return arm ``a``'s reference ``(q, qd, qdd)`` as of the last tick (copies)."""
+        return self.ref_q[a].copy(), self.ref_qd[a].copy(), self.ref_qdd[a].copy()
+
+    def reset(self, a: int, q: np.ndarray) -> None:
+        """Start arm ``a`` afresh at ``q`` (teleported): no integral, no torque, holding."""
+        self._pid.reset(a)
+        self.tau[a] = 0.0
+        self.hold(a, q)
+
+    def brake(self, a: int, q: np.ndarray, qd: np.ndarray, now: float) -> None:
+        """Stop arm ``a`` from ``(q, qd)`` ``(3,)`` each at its acceleration limits, then hold."""
+        t, pos, vel, acc = safety.braking(self.arms[a], q, qd, self.dt)
+        self.follow(a, HermiteReference(now + t, pos, vel, acc), q)
+
+    def set_estop(self, on: bool, q: np.ndarray, qd: np.ndarray, now: float) -> None:
+        """Set or clear the emergency stop; setting it brakes every arm from ``(q, qd)``.
+
+        :param q, qd: ``(arms, 3)`` the measured joints now.
+        """
+        if on and not self.estop:
+            for a in range(len(self.arms)):
+                self.brake(a, q[a], qd[a], now)
+        self.estop = bool(on)
+
+    def check_recovery(self, a: int, path: np.ndarray, q: np.ndarray, qd: np.ndarray,
+                       now: float) -> None:
+        """Refuse a move of arm ``a`` under the emergency stop unless it only parts the arms.
+
+        One separating move at a time: every other arm must stand still (no trajectory, no
+        joint faster than 1e-3), and the move from ``q[a]`` through ``path`` ``(N, 3)`` must
+        take arm ``a`` away from each of them (:func:`scara_collab.core.safety.separating`).
+
+        :raises TrajectoryError: with the reason, if it does not.
+        """
+        others = [b for b in range(len(self.arms)) if b != a]
+        if any(self.active(b, now) or np.any(np.abs(qd[b]) > 1e-3) for b in others):
+            raise TrajectoryError('emergency stop is active and the other arm is moving: '
+                                  'refused (one separating move at a time)')
+        full = np.vstack([q[a], path])
+        if not all(safety.separating(self.arms[a], full, self.arms[b], q[b]) for b in others):
+            raise TrajectoryError('emergency stop is active: only a move that takes the arm '
+                                  'away from the other one is run')
