@@ -435,6 +435,56 @@ def test_an_arm_takes_no_item_the_other_arms_booked_move_would_make_it_wait_for(
         assert lane.phase == 'idle' and lane.item is None
 
 
+def test_the_booking_is_the_trajectory_the_planner_published(cell):
+    """The other arm's booked motion is the planner's own trajectory, not planned again.
+
+    Published before or after the planner's ``planned`` status, it becomes the booking, shifted
+    to the start the bridge reports; only without it (the message lost) does the job plan the
+    move itself. Trajectories of moves the job did not ask for, and any in single mode, are
+    ignored.
+    """
+    from scara_collab.core import planning
+    lead = cell.leader
+    for published_first in (True, False):
+        job = make_job(cell)
+        calls = []
+        plan = job.plan
+        job.plan = lambda *a: calls.append(a) or plan(*a)
+        job.on_items([item_on_belt(cell, 98, x=1.07, y=0.27)])
+        busy = next(la for la in job.lanes if la.robot == lead.name)
+        assert job._chase(busy, job.items[98], 0.0)
+        cmd, calls[:] = job._out[-1], []
+        traj = plan(lead.name, job.q[lead.name], cmd.target)
+        published = traj.t + cmd.start + 0.05, traj.q + 1e-3  # the planner's, not the job's
+        if published_first:
+            job.on_trajectory(lead.name, cmd.request, *published)
+        job.on_planner(lead.name, cmd.request, 'planned', cmd.start + 0.05,
+                       cmd.start + 0.05 + traj.duration)
+        if not published_first:
+            job.on_trajectory(lead.name, cmd.request, *published)
+        booked = job._committed(lead.name, 0.0)
+        np.testing.assert_allclose(booked.q, published[1])
+        job.on_execution(lead.name, cmd.request, 'accepted', cmd.start + 0.25,
+                         cmd.start + 0.25 + traj.duration)
+        np.testing.assert_allclose(job._committed(lead.name, 0.0).t, published[0] + 0.2)
+        assert calls == [] if published_first else len(calls) == 1  # planned only if missing
+        job.on_trajectory(lead.name, cmd.request + 1, *published)  # not a move it asked for
+        assert job._committed(lead.name, 0.0).start == pytest.approx(published[0][0] + 0.2)
+    lost = make_job(cell)  # the trajectory lost: the job plans the move itself
+    lost.on_items([item_on_belt(cell, 98, x=1.07, y=0.27)])
+    busy = lost.lanes[0]
+    assert lost._chase(busy, lost.items[98], 0.0)
+    cmd = lost._out[-1]
+    lost.on_planner(lead.name, cmd.request, 'planned', cmd.start, cmd.start + 2.0)
+    assert isinstance(busy.moves[lead.name].timeline, planning.Timeline)
+    single = make_job(cell, mode='single')
+    single.on_items([item_on_belt(cell, 98, x=1.07, y=0.27)])
+    assert single._chase(single.lanes[0], single.items[98], 0.0)
+    cmd = single._out[-1]
+    single.on_trajectory(lead.name, cmd.request, *published)
+    assert single.lanes[0].moves[lead.name].timeline is None  # one arm: nothing to book
+
+
 def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):
     """Deferring is for items with time to spare: else both arms may defer one until it is gone.
 

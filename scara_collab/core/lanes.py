@@ -190,6 +190,21 @@ class LaneProtocol:
         elif state in ('refused', 'held'):
             track.state, track.reason = state, reason or state
 
+    def on_trajectory(self, robot: str, request: int, t: np.ndarray, q: np.ndarray) -> None:
+        """Take the trajectory a planner published for ``robot``'s move ``request``.
+
+        With two lanes it is the motion the move commits the arm to (its booking, see
+        :meth:`_book`); a later start reported by the bridge shifts it.
+
+        :param t: ``(N,)`` absolute sim times, s; :param q: ``(N, 3)`` joint positions.
+        """
+        track = self._open_track(robot, request)
+        if len(self.lanes) < 2 or track is None:
+            return
+        track.timeline = planning.Timeline(np.asarray(t, dtype=float), np.asarray(q, dtype=float))
+        if track.start is not None:  # already timed: the start that counts
+            self._book(robot, request, track)
+
     def on_grip(self, token: int, ok: bool, message: str = '') -> None:
         """Take a gripper response for request ``token`` (late or unknown tokens: ignored)."""
         for lane in self.lanes:
@@ -221,8 +236,11 @@ class LaneProtocol:
     def _book(self, robot: str, request: int, track: MoveTrack) -> None:
         """Keep the motion a timed move commits ``robot`` to (two lanes: each one's look-ahead).
 
-        The move is planned here as the planner did, from where the arm is when the move is
-        first timed (it has not started yet); a later start only shifts it.
+        It is the trajectory the planner published (:meth:`on_trajectory`), shifted to the
+        start the planner's ``planned`` or the bridge's ``accepted`` reports. Only if that
+        message has not come (lost, or overtaken by the status) is the move planned here, as
+        the planner did, from where the arm is when the move is first timed (it has not
+        started yet).
         """
         if len(self.lanes) < 2 or track.start is None:
             return

@@ -8,7 +8,8 @@ retries, :mod:`scara_collab.nodes.protocol` for the statuses):
 
 * in: ``/conveyor/items`` (items resting on the belt), ``/joint_states``,
   ``/<robot>/planner_status`` and ``/<robot>/execution_status`` (about its moves, by request
-  id), ``/conveyor/events`` (counts; confirms grasps and releases), ``/emergency_stop``;
+  id), ``/<robot>/joint_trajectory`` (the planners' moves: the other arm's booked motion),
+  ``/conveyor/events`` (counts; confirms grasps and releases), ``/emergency_stop``;
 * out: ``/<robot>/target`` or, in mirrored mode, ``/collab/target`` (PointStamped; the stamp
   is the requested start and the move's id), ``/<robot>/gripper`` calls (std_srvs/SetBool;
   each answer goes back to the job with its request's token, a lost one is asked again).
@@ -30,6 +31,7 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
+from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from scara_collab.core import sorting
@@ -90,7 +92,9 @@ class AutomationManager(Node):
                 self.create_subscription(DiagnosticStatus, f'/{a.name}/planner_status',
                                          guarded(self, self._on_planner), 50),
                 self.create_subscription(DiagnosticStatus, f'/{a.name}/execution_status',
-                                         guarded(self, self._on_execution), 50))
+                                         guarded(self, self._on_execution), 50),
+                self.create_subscription(JointTrajectory, f'/{a.name}/joint_trajectory',
+                                         guarded(self, self._on_trajectory), 10))
         self.world_subs = (
             self.create_subscription(MarkerArray, '/conveyor/items',
                                      guarded(self, self._on_items), QoSProfile(depth=1)),
@@ -147,6 +151,16 @@ class AutomationManager(Node):
             return
         robot, request = proto.parse_move_id(st.move)
         self.job.on_execution(robot, request, st.state, st.start, st.end, st.reason)
+
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        if not msg.header.frame_id:
+            return  # not a planner's move (a raw command): nothing to book
+        robot, request = proto.parse_move_id(msg.header.frame_id)
+        if robot not in self.job.sorted_by:  # the cell's arms
+            raise proto.ProtocolError(f'trajectory for move {msg.header.frame_id!r}: '
+                                      'no such arm in the cell')
+        stamp, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
+        self.job.on_trajectory(robot, request, stamp + t, q)
 
     def _on_estop(self, msg: Bool) -> None:
         self.job.on_estop(bool(msg.data))
