@@ -236,3 +236,57 @@ def test_lockstep_guard_silent_holds_both_arms_and_refuses_moves_until_it_answer
                                         if 'accepted' in m.message) > n_accepted)
     finally:
         g.close()
+
+
+def test_pause_step_resume_and_reset_control_the_simulation(graph):
+    """Paused, sim time stands still; each step advances exactly ``sim_step_count`` steps.
+
+    Resume runs it again; reset refuses while an arm moves (a move would be lost) and then puts
+    both arms back at home, at rest. Every service is idempotent and says the sim time.
+    """
+    from std_srvs.srv import Trigger
+    bridge, arm = graph.bridge, graph.bridge.cell.leader
+    assert graph.spin_until(lambda: sim_time(graph) > 0.2)
+    res = graph.call(Trigger, '/sim/pause', Trigger.Request())
+    assert res.success and res.message.startswith('paused at sim t=')
+    t0 = sim_time(graph)
+    graph.spin_until(lambda: False, timeout=0.5)  # let the executor run: no step may happen
+    assert sim_time(graph) == t0
+    assert graph.call(Trigger, '/sim/pause', Trigger.Request()).message.startswith(
+        'already paused')
+    n = bridge.get_parameter('sim_step_count').value
+    for k in range(1, 4):
+        res = graph.call(Trigger, '/sim/step', Trigger.Request())
+        assert res.success, res.message
+        assert sim_time(graph) == pytest.approx(t0 + k * n * bridge.dt, abs=1e-12)
+    assert res.message == f'advanced {n} physics steps to sim t={sim_time(graph):.3f} s'
+    # a move asked for while paused waits; reset refuses while it is there to run
+    q0 = bridge.sim.arm_state(arm.name)[0]
+    traj = joint_move(arm, q0, q0 + np.array([0.3, 0.0, 0.0]))
+    bridge.sim.execute(arm.name, sim_time(graph) + traj.t, traj.q, traj.qd, traj.qdd)
+    res = graph.call(Trigger, '/sim/reset', Trigger.Request())
+    assert not res.success and f'{arm.name} is executing a move' in res.message
+    assert graph.call(Trigger, '/sim/resume', Trigger.Request()).success
+    assert graph.spin_until(lambda: sim_time(graph) > t0 + traj.duration + 0.3, timeout=60)
+    assert graph.call(Trigger, '/sim/resume', Trigger.Request()).message.startswith(
+        'already running')
+    res = graph.call(Trigger, '/sim/reset', Trigger.Request())
+    assert res.success, res.message
+    for a in bridge.cell.arms:
+        q, qd = bridge.sim.arm_state(a.name)
+        np.testing.assert_allclose(q, bridge.home[a.name], atol=1e-9)
+        np.testing.assert_allclose(qd, 0.0, atol=1e-9)
+    res = graph.call(Trigger, '/sim/step', Trigger.Request())
+    assert not res.success and 'pause first' in res.message
+
+
+def test_a_bad_sim_step_count_is_refused_at_start():
+    """``sim_step_count`` below 1 stops the bridge with the reason."""
+    g = Graph()
+    try:
+        with pytest.raises(ValueError, match='sim_step_count must be an integer >= 1'):
+            bad = {'real_time_factor': 0.0, 'feed_interval': 0.0, 'sim_step_count': 0}
+            PyBulletBridge(context=g.context,
+                           cli_args=params_args('simulation', 'controllers', overrides=bad))
+    finally:
+        g.close()

@@ -17,6 +17,8 @@ refused with the reason and the arm keeps its current command) and ``/emergency_
 true = grasp, false = release), idempotent: a grasp while holding an item and a release with
 an empty gripper succeed and say so, so a client may repeat a request whose answer was lost.
 Parameter ``faults`` (:mod:`scara_collab.nodes.faults`) can lose or delay its statuses.
+``/sim/pause``, ``/sim/resume``, ``/sim/step`` and ``/sim/reset`` (std_srvs/Trigger) control
+the simulation (:mod:`scara_collab.nodes.sim_control`).
 
 Lockstep (:mod:`scara_collab.nodes.lockstep`): the nodes on sim time answer each ``/clock``
 on ``/sim/lockstep``, and the bridge never steps more than ``lockstep_window`` sim seconds
@@ -56,6 +58,7 @@ from scara_collab.nodes.lockstep import LockstepGate, parse_timeouts
 from scara_collab.nodes.params import declare_config
 from scara_collab.nodes.qos import EVENTS, LATCHED
 from scara_collab.nodes.runner import guarded, run_node
+from scara_collab.nodes.sim_control import SimControl
 from scara_collab.sim.cell_sim import CellSim
 
 STATE_QOS = QoSProfile(depth=10)
@@ -91,10 +94,12 @@ class PyBulletBridge(Node):
         self.cell = load_cell(profile)
         self.sim = CellSim(self.cell, sim_cfg, ctl_cfg, gui=bool(sim_cfg['gui']))
         home = np.asarray(self.get_parameter('home').value, dtype=float)
-        for arm, q in zip(self.cell.arms, (home, mirror_joints(home))):
-            if not within_limits(arm, q):
-                raise ValueError(f'home {q.tolist()} is outside the joint limits of {arm.name}')
-            self.sim.reset_arm(arm.name, q)
+        self.home = dict(zip((a.name for a in self.cell.arms), (home, mirror_joints(home))))
+        for arm in self.cell.arms:
+            if not within_limits(arm, self.home[arm.name]):
+                raise ValueError(f'home {self.home[arm.name].tolist()} is outside the joint '
+                                 f'limits of {arm.name}')
+            self.sim.reset_arm(arm.name, self.home[arm.name])
         self.dt = 1.0 / float(sim_cfg['physics_rate'])
         self._rtf = float(sim_cfg['real_time_factor'])
         self._periods = {
@@ -138,6 +143,8 @@ class PyBulletBridge(Node):
         self._timer = self.create_timer(0.0 if self._rtf == 0 else 0.002, self._tick,
                                         clock=self._steady)
         self._parked = False  # the stepping timer is off while the bridge waits for answers
+        self.control = SimControl(self, self.sim, self.home, self._advance, self._on_pause,
+                                  self._busy)
         if self.gate.enabled:  # re-arm now and then, so a silent participant times out
             self.create_timer(0.25, self._wake, clock=self._steady)
         self._publish_all()
@@ -158,6 +165,8 @@ class PyBulletBridge(Node):
                 self._timer = self.create_timer(0.0 if self._rtf == 0 else 0.002, self._tick,
                                                 clock=self._steady)
                 self._parked = False
+                if self.control.paused:
+                    self._timer.cancel()
             if float(tree['feed_interval']) != self.sim.conveyor.feed_interval:
                 self.sim.conveyor.set_feed(float(tree['feed_interval']))
 
@@ -175,7 +184,7 @@ class PyBulletBridge(Node):
         return max(due, 0)
 
     def _wake(self) -> None:
-        if self._parked:
+        if self._parked and not self.control.paused:
             self._parked = False
             self._timer.reset()
 
@@ -204,6 +213,8 @@ class PyBulletBridge(Node):
         self._on_trajectory(robot, msg)
 
     def _tick(self) -> None:
+        if self.control.paused:
+            return
         due = self._steps_due()
         limit = self.gate.limit(self.sim.time)
         if limit != float('inf'):
@@ -213,6 +224,10 @@ class PyBulletBridge(Node):
                 self._timer.cancel()
                 return
             due = min(due, allowed)
+        self._advance(due)
+
+    def _advance(self, due: int) -> None:
+        """Step ``due`` physics steps, publishing whatever falls due on the way."""
         while due > 0:
             t = self.sim.time
             to_next = min(self._next.values()) - t
@@ -220,6 +235,20 @@ class PyBulletBridge(Node):
             self.sim.step(n)
             due -= n
             self._publish_due()
+
+    def _on_pause(self, paused: bool) -> None:
+        if paused:
+            self._timer.cancel()
+        else:
+            self._anchor, self._parked = None, False
+            self._timer.reset()
+
+    def _busy(self) -> str:
+        """Return why the arms cannot be reset now (a move runs, an item is held), or ''."""
+        why = [f'{r} is executing a move' for r in self.sim.robots if self.sim.active(r)]
+        why += [f'{r} holds item {self.sim.held_item(r)}' for r in self.sim.robots
+                if self.sim.held_item(r) is not None]
+        return '; '.join(why)
 
     def _publish_due(self) -> None:
         t = self.sim.time + 1e-9

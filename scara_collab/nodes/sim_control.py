@@ -1,0 +1,95 @@
+"""Simulation control services of the bridge: pause, resume, step, reset (std_srvs/Trigger).
+
+Gazebo's world control, for this cell: ``/sim/pause`` stops the clock (no physics step, no
+``/clock``; every node on sim time waits), ``/sim/resume`` lets it run again at the bridge's
+real-time factor, ``/sim/step`` advances a paused simulation by exactly ``sim_step_count``
+physics steps (parameter, default 10 = 10 ms at 1 kHz) and publishes what falls due, and
+``/sim/reset`` puts both arms back at their home pose, at rest. All four are idempotent
+(pausing a paused simulation succeeds and says so); the answer's message says the sim time.
+Reset refuses, with the reason, while an arm executes a move or holds an item: that would lose
+the move or drop the item outside its bin. Items stay on the belt and sim time runs on (ROS
+time never goes back); the feed goes on when the simulation resumes.
+"""
+from typing import Callable, Dict
+
+import numpy as np
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rclpy.node import Node
+from std_srvs.srv import Trigger
+
+from scara_collab.nodes.runner import guarded
+from scara_collab.sim.cell_sim import CellSim
+
+
+class SimControl:
+    """The services of the module docstring, on ``node`` for ``sim``.
+
+    :param node: the bridge.
+    :param sim: its simulator.
+    :param home: each arm's home joints ``(3,)``.
+    :param advance: ``advance(n)`` steps the simulation ``n`` physics steps and publishes.
+    :param on_pause: ``on_pause(paused)``: the bridge stops or restarts its stepping timer.
+    :param busy: ``busy()`` returns why a reset would lose data (``''`` if it would not).
+    """
+
+    def __init__(self, node: Node, sim: CellSim, home: Dict[str, np.ndarray],
+                 advance: Callable[[int], None], on_pause: Callable[[bool], None],
+                 busy: Callable[[], str]):
+        """Declare ``sim_step_count`` and serve ``/sim/{pause,resume,step,reset}``."""
+        self.node, self.sim, self.home = node, sim, home
+        self._advance, self._on_pause, self._busy = advance, on_pause, busy
+        self.paused = False
+        node.declare_parameter('sim_step_count', 10, ParameterDescriptor(
+            type=ParameterType.PARAMETER_INTEGER,
+            description='physics steps one /sim/step call advances (>= 1)'))
+        self._step_count()  # refuse a bad value at start
+        for name, callback in (('pause', self._pause), ('resume', self._resume),
+                               ('step', self._step), ('reset', self._reset)):
+            node.create_service(Trigger, f'/sim/{name}', guarded(node, callback, service=True))
+
+    def _step_count(self) -> int:
+        n = self.node.get_parameter('sim_step_count').value
+        if not isinstance(n, int) or n < 1:
+            raise ValueError(f'sim_step_count must be an integer >= 1, got {n!r}')
+        return n
+
+    def _at(self) -> str:
+        return f'sim t={self.sim.time:.3f} s'
+
+    def _pause(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        was, self.paused = self.paused, True
+        if not was:
+            self._on_pause(True)
+            self.node.get_logger().info(f'simulation paused at {self._at()}')
+        res.success, res.message = True, ('already paused' if was else 'paused') + \
+            f' at {self._at()}'
+        return res
+
+    def _resume(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        was, self.paused = self.paused, False
+        if was:
+            self._on_pause(False)
+            self.node.get_logger().info(f'simulation resumed at {self._at()}')
+        res.success, res.message = True, ('resumed' if was else 'already running') + \
+            f' at {self._at()}'
+        return res
+
+    def _step(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        if not self.paused:
+            res.success, res.message = False, f'refused: running ({self._at()}); pause first'
+            return res
+        n = self._step_count()
+        self._advance(n)
+        res.success, res.message = True, f'advanced {n} physics steps to {self._at()}'
+        return res
+
+    def _reset(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
+        why = self._busy()
+        if why:
+            res.success, res.message = False, f'refused: {why}'
+            return res
+        for robot, q in self.home.items():
+            self.sim.reset_arm(robot, q)
+        self.node.get_logger().info(f'arms reset to their home poses at {self._at()}')
+        res.success, res.message = True, f'arms at home at {self._at()}'
+        return res
