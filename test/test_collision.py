@@ -10,9 +10,11 @@ from numpy.testing import assert_allclose
 import pytest
 
 from scara_collab.core.collision import (arm_capsules, arm_distance, arm_pair_distances,
-                                         capsule_distance, closest_points, segment_distance,
-                                         smallest_safe_delay, trajectory_min_distance)
+                                         capsule_distance, closest_points, first_safe_delay,
+                                         segment_distance, smallest_safe_delay,
+                                         trajectory_min_distance)
 from scara_collab.core.model import load_cell
+from scara_collab.core.trajectory import interp_rows
 
 BELT_POINT = (2.0, 0.0)
 
@@ -304,8 +306,7 @@ def joint_path(waypoints):
     """Time-stamped joint trajectory through (time, theta1, theta2, d3) waypoints, 0.1 s apart."""
     waypoints = np.asarray(waypoints, dtype=float)
     t = np.arange(waypoints[0, 0], waypoints[-1, 0] + 1e-9, 0.1)
-    q = np.stack([np.interp(t, waypoints[:, 0], waypoints[:, j]) for j in (1, 2, 3)], -1)
-    return t, q
+    return t, interp_rows(t, waypoints[:, 0], waypoints[:, 1:])
 
 
 def hold_interp(t, ts, qs):
@@ -418,7 +419,7 @@ def test_smallest_safe_delay_none_when_impossible(arms, belt_scenario):
     q_near = [*planar_ik(right, (2.0, 0.15), -1.0), 0.0]
     t_near, q_near = joint_path([[0.0, *q_near], [1.0, np.pi / 2, 0.0, 0.0]])
     assert smallest_safe_delay(left, t_park, q_park, right, t_near, q_near, margin) is None
-    # Right ends next to where left ends: no delay can help (decided without a scan).
+    # Right ends next to where left ends: no delay can help (decided from the final poses).
     t_end, q_end = joint_path([[0.0, np.pi / 2, 0.0, 0.0], [1.0, *q_near[0]]])
     assert smallest_safe_delay(left, t_park, q_park, right, t_end, q_end, margin) is None
     # A delay exists for the belt scenario, but not within a too-short max_delay.
@@ -442,6 +443,38 @@ def test_smallest_safe_delay_when_safety_is_not_monotonic(arms):
     assert trajectory_min_distance(left, t_a, q_a, right, t_b, q_b, start_b=delay)[0] >= margin
     # ... although a later delay, inside left's second visit, is unsafe again.
     assert trajectory_min_distance(left, t_a, q_a, right, t_b, q_b, start_b=7.25)[0] < margin
+
+
+def test_first_safe_delay_scans_then_bisects():
+    """The delay is the first safe step after the last unsafe one before the first safe scan.
+
+    Against a plain loop over every step, for safe sets with islands the scan may miss.
+    """
+    rng = np.random.default_rng(2)
+    for case in range(200):
+        safe_steps = rng.uniform(size=301) < rng.uniform(0.0, 0.3)
+        calls = []
+
+        def safe(k):
+            calls.append(k)
+            return bool(safe_steps[k])
+
+        got = first_safe_delay(safe, max_delay=3.0, resolution=0.01, scan_step=0.25)
+        scan = [*range(0, 301, 25)]
+        hits = [k for k in scan if safe_steps[k]]
+        if not hits:
+            assert got is None, case
+            continue
+        k = round(got / 0.01)
+        assert got == k * 0.01 and safe_steps[k] and k <= hits[0], case
+        assert k == 0 or (not safe_steps[k - 1] and k - 1 >= max(0, hits[0] - 25)), case
+        assert len(calls) <= len(scan) + 6, case  # 25 steps bisected in at most 5, + 1 check
+    assert first_safe_delay(lambda k: k >= 37, max_delay=2.0) == 0.37
+    assert first_safe_delay(lambda k: True, max_delay=0.0) == 0.0
+    with pytest.raises(ValueError, match='resolution'):
+        first_safe_delay(lambda k: True, 1.0, resolution=0.0)
+    with pytest.raises(ValueError, match='max_delay'):
+        first_safe_delay(lambda k: True, -1.0)
 
 
 def test_closest_points_are_on_the_closest_capsule_axes(cell):

@@ -1,11 +1,13 @@
 """The collision monitor alone: it fails closed, recovers, and reports the separation's source."""
 import numpy as np
 import pytest
+from rclpy.parameter import Parameter
 from ros_harness import Graph, params_args
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_srvs.srv import Trigger
 
+from scara_collab.core.config import ConfigError
 from scara_collab.core.mirror import mirror_joints
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes.collision_monitor import CollisionMonitor
@@ -41,7 +43,7 @@ def state(cell, t, q_left, q_right=None, nan=False):
 def tick(g, t):
     """Publish /clock at ``t`` and spin until the monitor's clock reads it."""
     g.clock.publish(Clock(clock=conv.to_time(t)))
-    assert g.spin_until(lambda: abs(g.monitor._now() - t) < 1e-9)
+    assert g.spin_until(lambda: abs(conv.now(g.monitor) - t) < 1e-9)
 
 
 def test_a_state_before_the_first_clock_does_not_trip_the_watchdog(graph):
@@ -151,3 +153,31 @@ def test_a_late_turn_of_the_monitor_is_not_mistaken_for_missing_states(graph):
     tick(g, 1.7)
     g.monitor._watch()
     assert g.monitor.stopped and 'no valid joint state' in g.monitor.reason
+
+
+@pytest.mark.parametrize('overrides, message', [
+    ({'marker_rate': '0.0'}, 'marker_rate must be a number > 0, got 0.0'),
+    ({'stale_after': '-0.2'}, 'stale_after must be a number > 0, got -0.2'),
+    ({'stop_latency': '-0.01'}, 'stop_latency must be a number >= 0, got -0.01'),
+    ({'safety_margin': '.nan'}, 'safety_margin must be a finite number, got nan'),
+])
+def test_an_invalid_own_parameter_stops_the_monitor(context, overrides, message):
+    """An invalid value of the monitor's own parameters raises, naming node, key and value."""
+    with pytest.raises(ConfigError) as err:
+        CollisionMonitor(context=context, cli_args=params_args(
+            overrides={'lockstep': 'false', **overrides}))
+    assert str(err.value) == f'collision_monitor: {message}'
+
+
+def test_only_rate_and_latency_change_at_run_time_and_only_to_valid_values(graph):
+    """Marker rate and stop latency take valid values at run time; margin and watch do not."""
+    m = graph.monitor
+    assert m.set_parameters([Parameter('marker_rate', value=4),
+                             Parameter('stop_latency', value=0.08)])[0].successful
+    assert m.marker_period == 0.25 and m.latency == 0.08
+    bad = m.set_parameters([Parameter('stop_latency', value=-1.0)])[0]
+    assert not bad.successful and 'stop_latency must be a number >= 0' in bad.reason
+    assert m.latency == 0.08
+    for name, value in (('safety_margin', 0.0), ('stale_after', 5.0), ('profile', 'slim')):
+        assert not m.set_parameters([Parameter(name, value=value)])[0].successful
+    assert m.margin == graph.cell.safety_margin and m.stale_after == 0.2

@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 from scara_collab.core import collision
-from scara_collab.core.collision import (arm_distance, arm_pair_distances,
+from scara_collab.core.collision import (arm_distance, arm_pair_distances, first_safe_delay,
                                          smallest_safe_delay, trajectory_min_distance)
 from scara_collab.core.model import load_cell
+from scara_collab.core.trajectory import interp_rows
 
 MARGIN = 0.10
 
@@ -50,8 +51,7 @@ def random_path(rng, arm, elbow, strips, dt=0.05):
         knots_q.append(pose)
     knots_q = np.array(knots_q)
     t = np.arange(knots_t[0], knots_t[-1] + 1e-9, dt)
-    q = np.stack([np.interp(t, knots_t, knots_q[:, j]) for j in range(3)], -1)
-    return t, q
+    return t, interp_rows(t, knots_t, knots_q)
 
 
 BELT = {'left': (-0.6, 0.4), 'right': (-0.4, 0.6)}
@@ -81,10 +81,7 @@ def brute_min(left, t_a, q_a, right, t_b, q_b, start_b=0.0, max_step=collision.M
     fine = np.linspace(t0, t1, int(np.ceil((t1 - t0) / max_step)) + 1)
     times = np.unique(np.concatenate([t_a, t_b, fine]))
 
-    def states(t, q):
-        return np.stack([np.interp(times, t, q[:, j]) for j in range(3)], -1)
-
-    dist = arm_distance(left, states(t_a, q_a), right, states(t_b, q_b))
+    dist = arm_distance(left, interp_rows(times, t_a, q_a), right, interp_rows(times, t_b, q_b))
     k = int(np.argmin(dist))
     return float(dist[k]), float(times[k])
 
@@ -92,30 +89,13 @@ def brute_min(left, t_a, q_a, right, t_b, q_b, start_b=0.0, max_step=collision.M
 def brute_delay(left, t_a, q_a, right, t_b, q_b, margin, max_delay, resolution=0.01,
                 scan_step=0.25, max_step=collision.MAX_TIME_STEP):
     """Return :func:`smallest_safe_delay`'s search (scan, then bisection) on :func:`brute_min`."""
+    if arm_distance(left, q_a[-1], right, q_b[-1]) < margin:
+        return None
+
     def safe(k):
         return brute_min(left, t_a, q_a, right, t_b, q_b, k * resolution, max_step)[0] >= margin
 
-    if arm_distance(left, q_a[-1], right, q_b[-1]) < margin:
-        return None
-    last = int(np.floor(max_delay / resolution + 1e-9))
-    stride = max(1, int(round(scan_step / resolution)))
-    scan = list(range(0, last + 1, stride))
-    if scan[-1] != last:
-        scan.append(last)
-    previous = None
-    for k in scan:
-        if safe(k):
-            break
-        previous = k
-    else:
-        return None
-    if previous is None:
-        return 0.0
-    lo, hi = previous, k
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        lo, hi = (lo, mid) if safe(mid) else (mid, hi)
-    return hi * resolution
+    return first_safe_delay(safe, max_delay, resolution, scan_step)
 
 
 def test_pair_bounds_never_exceed_the_exact_distances(arms):

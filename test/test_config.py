@@ -25,7 +25,7 @@ def test_all_files_load_with_spec_defaults():
     assert sim['state_rate'] == 100.0  # SPEC: /joint_states at 100 Hz sim time
     assert sim['feed_interval'] == 1.8 and sim['feed_pattern'] == 'random'
     assert sim['lateral_jitter'] == 0.3 and sim['grasp_tolerance'] == 0.06
-    assert ctl['control_rate'] == 100.0
+    assert ctl['trajectory']['sample_period'] == 0.01  # planned points at 100 Hz
     assert ctl['pid']['planar'] == {'kp': 15.0, 'ki': 0.5, 'kd': 2.0}
     assert ctl['pid']['quill'] == {'kp': 10.0, 'ki': 0.1, 'kd': 1.0}
 

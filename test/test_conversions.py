@@ -71,3 +71,13 @@ def test_stamp_gate_lets_through_only_the_sim_clocks_states():
     assert 'non-finite' in gate.check(float('nan'), 10.2)
     assert gate.check(10.5, None) is None                # off sim time: order only
     assert gate.refused == 4 and gate.last == 10.5
+
+
+def test_target_frames_are_world_or_the_arms_base():
+    """World and the arm's base (also as ``_base_link``) are understood; others refused."""
+    assert conv.target_frame('world', 'scara_left') == 'world'
+    assert conv.target_frame('scara_left_base', 'scara_left') == 'base'
+    assert conv.target_frame('scara_left_base_link', 'scara_left') == 'base'
+    for frame in ('', 'map', 'scara_right_base'):
+        with pytest.raises(conv.MessageError, match='use world or scara_left_base'):
+            conv.target_frame(frame, 'scara_left')

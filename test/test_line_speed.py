@@ -16,16 +16,9 @@ THRESHOLD, MAX_DAMPING = 0.5, 0.15
 
 def _reference_follow_line(arm, q0, points, velocity_dir, threshold, max_damping,
                            iterations=3):
-    """Run the original numpy loop: ``iterations`` DLS Newton steps per point, world frame."""
-    q = np.empty((len(points), 3))
-    q[0] = q0
-    for i in range(1, len(points)):
-        qi = q[i - 1]
-        for _ in range(iterations):
-            qi = qi + dls_solve(arm, qi, points[i] - fk(arm, qi), threshold, max_damping)
-        q[i] = qi
-    dq = dls_solve(arm, q, np.broadcast_to(velocity_dir, q.shape), threshold, max_damping)
-    return q, dq
+    """Run ``follow_line`` on its numpy loop alone: DLS Newton steps per point, world frame."""
+    q = trajectory._follow_line_numpy(arm, q0, points, threshold, max_damping, iterations)
+    return q, dls_solve(arm, q, np.broadcast_to(velocity_dir, q.shape), threshold, max_damping)
 
 
 def _rot(axis, angle):

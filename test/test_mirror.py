@@ -5,7 +5,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 
 from scara_collab.core.kinematics import fk, ik
-from scara_collab.core.mirror import mirror_joints, mirror_point
+from scara_collab.core.mirror import mirror_error, mirror_joints, mirror_point
 from scara_collab.core.model import load_cell
 
 CELL = load_cell()
@@ -60,3 +60,16 @@ def test_mirror_of_a_belt_point_is_across_the_belt():
     p = np.array([2.5, -0.3, 0.3])  # on the left half of the belt
     m = mirror_point(LEFT, RIGHT, p)
     assert_allclose(m, [2.5, 0.3, 0.3])
+
+
+def test_mirror_error_is_zero_for_mirrored_joints_and_the_offset_otherwise():
+    """Mirrored joint states have no mirror error; a follower tool off by d has error |d|."""
+    rng = np.random.default_rng(9)
+    q = rng.uniform(LEFT.lower, LEFT.upper, (500, 3))
+    p_left, p_right = fk(LEFT, q), fk(RIGHT, mirror_joints(q))
+    assert_allclose(mirror_error(LEFT, RIGHT, p_left, p_right), 0.0, atol=1e-12)
+    offset = rng.normal(size=(500, 3))
+    err = mirror_error(LEFT, RIGHT, p_left, p_right + offset)
+    assert err.shape == (500,)
+    assert_allclose(err, np.linalg.norm(offset, axis=1), rtol=1e-12)
+    assert mirror_error(LEFT, RIGHT, p_left[0], p_right[0] + [0.0, 0.0, 0.1]).shape == ()

@@ -48,8 +48,7 @@ def test_first_breach_is_the_first_sample_within_the_margin(cell):
     a, b = Timeline.hold(0.0, q_left), Timeline.of(move, 1.0)
     breach = safety.first_breach(left, a, right, b, 0.1, 0.5)
     times = np.arange(0.5, 1.0 + move.duration, 0.0005)
-    d = arm_distance(left, q_left, right, np.stack([np.interp(times, b.t, b.q[:, j])
-                                                    for j in range(3)], -1))
+    d = arm_distance(left, q_left, right, b.at(times))
     first = times[np.argmax(d < 0.1)]
     assert 1.0 < breach and abs(breach - first) <= safety.PREDICTION_STEP
     assert safety.first_breach(left, a, right, Timeline.hold(0.0, q_right), 0.1, 0.5) is None

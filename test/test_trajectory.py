@@ -6,7 +6,7 @@ import pytest
 from scara_collab.core.kinematics import base_to_world, fk, ik, ik_both, IKError
 from scara_collab.core.model import load_cell
 from scara_collab.core.trajectory import (
-    joint_move, line_move, path_metrics, resolved_rate, segment_deviation)
+    interp_rows, joint_move, line_move, path_metrics, resolved_rate, segment_deviation)
 
 CELL = load_cell()
 ARM = CELL.leader
@@ -165,3 +165,21 @@ def test_grazing_the_inner_circle_needs_no_damping():
         assert np.abs(qd).max() < ARM.max_velocity[0]
         q = q0 + np.cumsum(qd, axis=0) * dt
         assert np.linalg.norm(fk(ARM, q) - p_ref, axis=1).max() < 0.02
+
+
+def test_interp_rows_is_numpy_interp_per_column_with_held_ends():
+    """Each column is ``numpy.interp``: exact at the knots, held outside, scalar -> one row."""
+    rng = np.random.default_rng(4)
+    xp = np.cumsum(rng.uniform(0.1, 1.0, 12))
+    fp = rng.normal(size=(12, 3))
+    x = np.concatenate([xp, rng.uniform(xp[0] - 1.0, xp[-1] + 1.0, 200)])
+    got = interp_rows(x, xp, fp)
+    assert got.shape == (212, 3)
+    assert np.array_equal(got[:12], fp)
+    for j in range(3):
+        assert np.array_equal(got[:, j], np.interp(x, xp, fp[:, j]))
+    assert np.array_equal(interp_rows(xp[0] - 5.0, xp, fp), fp[0])  # held before the start
+    assert np.array_equal(interp_rows(xp[-1] + 5.0, xp, fp), fp[-1])  # ... and after the end
+    assert interp_rows(0.3, [1.0], [[1.0, 2.0]]).tolist() == [1.0, 2.0]  # a single knot
+    traj = joint_move(ARM, [0.0, 1.0, 0.1], [0.5, 0.5, 0.3])
+    assert np.array_equal(traj.sample(traj.t), traj.q)

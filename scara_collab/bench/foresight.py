@@ -27,7 +27,7 @@ from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik, IKError
 from scara_collab.core.model import ArmModel, CellModel, load_cell
 from scara_collab.core.planning import plan_path, schedule, Timeline
-from scara_collab.core.trajectory import Trajectory
+from scara_collab.core.trajectory import interp_rows, Trajectory
 from scara_collab.sim.cell_sim import CellSim
 
 PLANNING_BUFFER = float(load_config('controllers')['planning_buffer'])
@@ -91,9 +91,8 @@ def _separation(left: ArmModel, tl: np.ndarray, ql: np.ndarray, right: ArmModel,
                 tr: np.ndarray, qr: np.ndarray, t_end: float) -> Dict[str, np.ndarray]:
     """Predicted arm-to-arm distance on a :data:`GRID` from 0 to ``t_end`` (absolute times)."""
     times = np.arange(0.0, t_end + GRID, GRID)
-    la = np.stack([np.interp(times, tl, ql[:, j]) for j in range(3)], -1)
-    ra = np.stack([np.interp(times, tr, qr[:, j]) for j in range(3)], -1)
-    return {'t': times, 'd': collision.arm_distance(left, la, right, ra)}
+    return {'t': times, 'd': collision.arm_distance(left, interp_rows(times, tl, ql), right,
+                                                    interp_rows(times, tr, qr))}
 
 
 def _schedule_pair(cell: CellModel, traj_l: Trajectory, traj_r: Trajectory, lead: float,

@@ -28,12 +28,13 @@ computes the exact distance only of the pairs whose bound is below the margin; t
 only of those whose bound does not exceed the exact distance at the state with the smallest
 bound. Both give the full computation's results, bit for bit.
 """
-from typing import Optional, Tuple
+from typing import Callable, Optional, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from scara_collab.core.model import ArmModel
+from scara_collab.core.trajectory import interp_rows
 
 #: A squared segment length at or below this (m^2) is treated as a point.
 _DEGENERATE_SQ = 1e-24
@@ -260,11 +261,6 @@ def _check_trajectory(t: ArrayLike, q: ArrayLike, name: str) -> Tuple[np.ndarray
     return t, q
 
 
-def _sample(t: np.ndarray, q: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """Linear interpolation of q (N, 3) at ``times`` (M,), holding the end states outside."""
-    return np.stack([np.interp(times, t, q[:, j]) for j in range(q.shape[1])], -1)
-
-
 def _grid_states(t_a: np.ndarray, q_a: np.ndarray, t_b: np.ndarray, q_b: np.ndarray,
                  start_b: float, max_step: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the time grid of :func:`trajectory_min_distance` and both arms' states on it."""
@@ -275,7 +271,7 @@ def _grid_states(t_a: np.ndarray, q_a: np.ndarray, t_b: np.ndarray, q_b: np.ndar
     t1 = max(t_a[-1], t_b[-1])
     fine = np.linspace(t0, t1, int(np.ceil((t1 - t0) / max_step)) + 1)
     times = np.unique(np.concatenate([t_a, t_b, fine]))
-    return times, _sample(t_a, q_a, times), _sample(t_b, q_b, times)
+    return times, interp_rows(times, t_a, q_a), interp_rows(times, t_b, q_b)
 
 
 def _axis_boxes(arm: ArmModel, q: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
@@ -427,55 +423,34 @@ def trajectory_min_distance(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm
     return dist, float(times[k])
 
 
-def smallest_safe_delay(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm_b: ArmModel,
-                        t_b: ArrayLike, q_b: ArrayLike, margin: float, max_delay: float = 30.0,
-                        resolution: float = 0.01, scan_step: float = 0.25,
-                        max_step: float = MAX_TIME_STEP) -> Optional[float]:
-    """Smallest start delay of trajectory b that keeps the arms ``margin`` apart.
+def first_safe_delay(safe: Callable[[int], bool], max_delay: float, resolution: float = 0.01,
+                     scan_step: float = 0.25) -> Optional[float]:
+    """Smallest delay ``k * resolution`` that ``safe(k)`` accepts: a scan, then a bisection.
 
-    Arm a has priority and runs as planned; b holds its first state while it waits. Safety need
-    not be monotonic in the delay, so the search is: scan delays ``0, scan_step, ...`` up to
-    ``max_delay``; take the first safe one; if it is not 0, bisect the interval from the
-    unsafe scan point before it down to ``resolution``. The result is a delay on the grid
-    ``k * resolution`` that was evaluated safe and whose predecessor ``result - resolution``
-    was evaluated unsafe. A safe island narrower than ``scan_step`` before the first safe scan
-    point can be missed (the delay returned is then larger than needed, never unsafe).
+    Safety need not be monotonic in the delay, so the search scans ``k = 0, stride, ...``
+    (``stride = scan_step / resolution``, rounded, at least 1) up to the last ``k`` within
+    ``max_delay``; takes the first safe one; if it is not 0, bisects the interval from the
+    unsafe scan point before it. The result was evaluated safe and its predecessor
+    ``result - resolution`` unsafe; a safe island narrower than ``scan_step`` before the first
+    safe scan point can be missed (the delay returned is then larger than needed, never one
+    ``safe`` refused).
 
-    A delay is safe when ``trajectory_min_distance(..., start_b=delay)[0] >= margin``; the check
-    computes exactly only the capsule pairs whose box bound (module docstring) is below
-    ``margin``, and stops at the first pair found too close.
-
-    :param arm_a: the leader.
-    :param t_a: (N,) stamps of a, s.
-    :param q_a: (N, 3) joint states of a.
-    :param arm_b: the arm that yields.
-    :param t_b: (M,) stamps of b, s, before any delay.
-    :param q_b: (M, 3) joint states of b.
-    :param margin: required capsule surface distance, m (the cell's ``safety_margin``).
+    :param safe: whether the delay ``k * resolution`` is safe, for an integer ``k >= 0``.
     :param max_delay: largest delay considered, s.
     :param resolution: the delay's resolution, s.
-    :param scan_step: coarse scan spacing, s (rounded to a multiple of ``resolution``).
-    :param max_step: largest time grid spacing of each check, as in
-        :func:`trajectory_min_distance`, s.
-    :return: the delay in s (>= 0), or None if no delay up to ``max_delay`` is safe: e.g. the
-        final poses are too close (decided at once), or b's start pose, where it waits, is too
-        close to where a works.
+    :param scan_step: coarse scan spacing, s.
+    :return: the delay in s (>= 0), or None if no scanned delay is safe.
     :raises ValueError: for non-positive ``resolution`` or negative ``max_delay``.
+
+    Safe from 0.37 s on, the scan finds 0.5 and the bisection 0.37:
+
+    >>> first_safe_delay(lambda k: k >= 37, max_delay=2.0)
+    0.37
     """
     if not resolution > 0.0:
         raise ValueError(f'resolution must be > 0, got {resolution}')
     if not max_delay >= 0.0:
         raise ValueError(f'max_delay must be >= 0, got {max_delay}')
-    t_a, q_a = _check_trajectory(t_a, q_a, 'a')
-    t_b, q_b = _check_trajectory(t_b, q_b, 'b')
-
-    def safe(k: int) -> bool:
-        _, s_a, s_b = _grid_states(t_a, q_a, t_b, q_b, k * resolution, max_step)
-        return _grid_safe(arm_a, s_a, arm_b, s_b, margin)
-
-    # Whatever the delay, both arms end up holding their final states together.
-    if arm_distance(arm_a, q_a[-1], arm_b, q_b[-1]) < margin:
-        return None
     last = int(np.floor(max_delay / resolution + 1e-9))
     stride = max(1, int(round(scan_step / resolution)))
     scan = list(range(0, last + 1, stride))
@@ -500,3 +475,50 @@ def smallest_safe_delay(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm_b: 
     if not safe(hi):  # cannot happen (hi was evaluated safe); never return an unsafe delay
         return None
     return hi * resolution
+
+
+def smallest_safe_delay(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm_b: ArmModel,
+                        t_b: ArrayLike, q_b: ArrayLike, margin: float, max_delay: float = 30.0,
+                        resolution: float = 0.01, scan_step: float = 0.25,
+                        max_step: float = MAX_TIME_STEP) -> Optional[float]:
+    """Smallest start delay of trajectory b that keeps the arms ``margin`` apart.
+
+    Arm a has priority and runs as planned; b holds its first state while it waits. The delays
+    are searched by :func:`first_safe_delay` (a scan, then a bisection down to
+    ``resolution``); the result was evaluated safe and ``result - resolution`` unsafe. A safe
+    island narrower than ``scan_step`` before the first safe scan point can be missed (the
+    delay returned is then larger than needed, never unsafe).
+
+    A delay is safe when ``trajectory_min_distance(..., start_b=delay)[0] >= margin``; the check
+    computes exactly only the capsule pairs whose box bound (module docstring) is below
+    ``margin``, and stops at the first pair found too close.
+
+    :param arm_a: the leader.
+    :param t_a: (N,) stamps of a, s.
+    :param q_a: (N, 3) joint states of a.
+    :param arm_b: the arm that yields.
+    :param t_b: (M,) stamps of b, s, before any delay.
+    :param q_b: (M, 3) joint states of b.
+    :param margin: required capsule surface distance, m (the cell's ``safety_margin``).
+    :param max_delay: largest delay considered, s.
+    :param resolution: the delay's resolution, s.
+    :param scan_step: coarse scan spacing, s (rounded to a multiple of ``resolution``).
+    :param max_step: largest time grid spacing of each check, as in
+        :func:`trajectory_min_distance`, s.
+    :return: the delay in s (>= 0), or None if no delay up to ``max_delay`` is safe: e.g. the
+        final poses are too close (decided at once), or b's start pose, where it waits, is too
+        close to where a works.
+    :raises ValueError: for non-positive ``resolution`` or negative ``max_delay``.
+    """
+    t_a, q_a = _check_trajectory(t_a, q_a, 'a')
+    t_b, q_b = _check_trajectory(t_b, q_b, 'b')
+    # Whatever the delay, both arms end up holding their final states together.
+    ends_apart = bool(arm_distance(arm_a, q_a[-1], arm_b, q_b[-1]) >= margin)
+
+    def safe(k: int) -> bool:
+        if not ends_apart:  # unsafe at every delay: decided without a check
+            return False
+        _, s_a, s_b = _grid_states(t_a, q_a, t_b, q_b, k * resolution, max_step)
+        return _grid_safe(arm_a, s_a, arm_b, s_b, margin)
+
+    return first_safe_delay(safe, max_delay, resolution, scan_step)

@@ -14,7 +14,7 @@ Example::
 from dataclasses import dataclass
 import math
 from pathlib import Path
-from typing import Any, Callable, Optional, Union
+from typing import Any, Callable, Iterable, Optional, Union
 
 import yaml
 
@@ -32,7 +32,7 @@ class Rule:
     """One checked key: dotted ``key``, expected ``kind``, and an optional value check."""
 
     key: str
-    kind: str  # 'number', 'positive', 'nonneg', 'int', 'bool', 'str', 'vec3', 'list'
+    kind: str  # 'number', 'positive', 'nonneg', 'int', 'bool', 'str', 'text', 'vec3', 'list'
     check: Optional[Callable[[Any], bool]] = None
     why: str = ''
 
@@ -48,6 +48,7 @@ _KINDS = {
     'int': (lambda v: isinstance(v, int) and not isinstance(v, bool), 'an integer'),
     'bool': (lambda v: isinstance(v, bool), 'true or false'),
     'str': (lambda v: isinstance(v, str) and v != '', 'a non-empty string'),
+    'text': (lambda v: isinstance(v, str), 'a string'),
     'vec3': (lambda v: isinstance(v, list) and len(v) == 3 and all(_num(x) for x in v),
              'a list of 3 finite numbers'),
     'list': (lambda v: isinstance(v, list) and len(v) > 0, 'a non-empty list'),
@@ -90,7 +91,6 @@ SCHEMAS = {
         Rule('belt.x_start', 'number'),
         Rule('belt.x_end', 'number'),
         Rule('belt.top_z', 'number'),
-        Rule('shared_zone_half_width', 'positive'),
         Rule('collision.safety_margin', 'nonneg'),
         Rule('items.size', 'positive'),
         Rule('items.mass', 'positive'),
@@ -125,7 +125,6 @@ SCHEMAS = {
         Rule('grasp_tolerance', 'positive'),
     ],
     'controllers': [
-        Rule('control_rate', 'positive'),
         Rule('control_mode', 'str', lambda v: v in ('pid', 'computed_torque'),
              "must be 'pid' or 'computed_torque'"),
         *[Rule(f'pid.{g}.{k}', 'nonneg') for g in ('planar', 'quill') for k in _GAINS],
@@ -202,6 +201,36 @@ def _check_cell(cfg: dict, where: str) -> None:
         fail('bins.class_x_offsets needs one entry per item class')
 
 
+def check_rules(rules: Iterable[Rule], values: dict, where: str) -> dict:
+    """Check ``values`` against ``rules``; the first missing or invalid key raises.
+
+    The checks of :func:`validate`, for any set of rules: also a node's own parameters.
+
+    :param rules: the rules; a dotted key looks into nested dicts.
+    :param values: the values (nested dicts).
+    :param where: what the values are, for the error message (a file or a node).
+    :return: ``values`` unchanged.
+    :raises ConfigError: ``'<where>: <key> must be ..., got ...'``.
+
+    >>> try:
+    ...     check_rules([Rule('rate', 'positive')], {'rate': 0.0}, 'probe')
+    ... except ConfigError as exc:
+    ...     print(exc)
+    probe: rate must be a number > 0, got 0.0
+    """
+    for rule in rules:
+        try:
+            value = _get(values, rule.key)
+        except KeyError:
+            raise ConfigError(f'{where}: missing required key {rule.key!r}') from None
+        ok, what = _KINDS[rule.kind]
+        if not ok(value):
+            raise ConfigError(f'{where}: {rule.key} must be {what}, got {value!r}')
+        if rule.check is not None and not rule.check(value):
+            raise ConfigError(f'{where}: {rule.key} {rule.why}, got {value!r}')
+    return values
+
+
 def validate(name: str, cfg: Any, where: str = '') -> dict:
     """Check a ``ros__parameters`` dict against the schema of config file ``name``.
 
@@ -214,16 +243,7 @@ def validate(name: str, cfg: Any, where: str = '') -> dict:
     where = where or f'{name}.yaml'
     if not isinstance(cfg, dict):
         raise ConfigError(f'{where}: expected a mapping of parameters, got {type(cfg).__name__}')
-    for rule in SCHEMAS[name]:
-        try:
-            value = _get(cfg, rule.key)
-        except KeyError:
-            raise ConfigError(f'{where}: missing required key {rule.key!r}') from None
-        ok, what = _KINDS[rule.kind]
-        if not ok(value):
-            raise ConfigError(f'{where}: {rule.key} must be {what}, got {value!r}')
-        if rule.check is not None and not rule.check(value):
-            raise ConfigError(f'{where}: {rule.key} {rule.why}, got {value!r}')
+    check_rules(SCHEMAS[name], cfg, where)
     if name == 'cell':
         _check_cell(cfg, where)
     return cfg

@@ -43,7 +43,7 @@ Example::
     >>> tau.shape
     (3,)
 """
-from typing import NamedTuple, Union
+from typing import NamedTuple, Tuple, Union
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -194,6 +194,22 @@ def friction(arm: ArmModel, qd: ArrayLike) -> np.ndarray:
     return arm.viscous * qd + arm.coulomb * np.sign(qd)
 
 
+def _bias(arm: ArmModel, q: ArrayLike, qd: ArrayLike, payload: Payload, g: float,
+          with_friction: bool) -> Tuple[_Inertial, np.ndarray, np.ndarray]:
+    """Return what both dynamics directions share: ``(k, q, C(q, qd) qd + G(q) [+ F(qd)])``.
+
+    ``k`` are the arm's :func:`_inertial` constants with the payload, ``q`` the checked
+    positions; the base must be upright.
+    """
+    _upright(arm)
+    k = _inertial(arm, payload)
+    q, qd = _state(q, 'q'), _state(qd, 'qd')
+    bias = _coriolis(k, q, qd) + _gravity(k, q, g)
+    if with_friction:
+        bias = bias + friction(arm, qd)
+    return k, q, bias
+
+
 def inverse_dynamics(arm: ArmModel, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike,
                      payload: Payload = 0.0, g: float = STANDARD_GRAVITY,
                      with_friction: bool = True) -> np.ndarray:
@@ -208,13 +224,8 @@ def inverse_dynamics(arm: ArmModel, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike,
     :param with_friction: add :func:`friction`.
     :return: (3,) or (N, 3) ``tau`` in (N m, N m, N).
     """
-    _upright(arm)
-    k = _inertial(arm, payload)
-    q, qd, qdd = _state(q, 'q'), _state(qd, 'qd'), _state(qdd, 'qdd')
-    tau = (_mass_matrix(k, q) @ qdd[..., None])[..., 0] + _coriolis(k, q, qd) + _gravity(k, q, g)
-    if with_friction:
-        tau = tau + friction(arm, qd)
-    return tau
+    k, q, bias = _bias(arm, q, qd, payload, g, with_friction)
+    return (_mass_matrix(k, q) @ _state(qdd, 'qdd')[..., None])[..., 0] + bias
 
 
 def forward_dynamics(arm: ArmModel, q: ArrayLike, qd: ArrayLike, tau: ArrayLike,
@@ -222,22 +233,14 @@ def forward_dynamics(arm: ArmModel, q: ArrayLike, qd: ArrayLike, tau: ArrayLike,
                      with_friction: bool = True) -> np.ndarray:
     """Joint accelerations under given efforts: ``qdd = M^-1 (tau - C qd - G [- F])``.
 
-    :param arm: the arm model; its base must be upright.
-    :param q: (3,) or (N, 3) joint positions (rad, rad, m).
-    :param qd: (3,) or (N, 3) joint velocities (rad/s, rad/s, m/s).
-    :param tau: (3,) or (N, 3) joint efforts (N m, N m, N).
-    :param payload: point mass at the tool tip, kg.
-    :param g: gravitational acceleration, m/s^2.
-    :param with_friction: subtract :func:`friction` (``sign(0) = 0``, so a joint at rest feels
-        no Coulomb friction).
+    The inverse of :func:`inverse_dynamics`, with the same parameters but ``tau`` (3,) or
+    (N, 3) joint efforts (N m, N m, N) in place of ``qdd``; ``with_friction`` subtracts
+    :func:`friction` (``sign(0) = 0``, so a joint at rest feels no Coulomb friction).
+
     :return: (3,) or (N, 3) ``qdd`` in (rad/s^2, rad/s^2, m/s^2).
     """
-    _upright(arm)
-    k = _inertial(arm, payload)
-    q, qd, tau = _state(q, 'q'), _state(qd, 'qd'), _state(tau, 'tau')
-    rhs = tau - _coriolis(k, q, qd) - _gravity(k, q, g)
-    if with_friction:
-        rhs = rhs - friction(arm, qd)
+    k, q, bias = _bias(arm, q, qd, payload, g, with_friction)
+    rhs = _state(tau, 'tau') - bias
     m = _mass_matrix(k, q)
     lead = np.broadcast_shapes(m.shape[:-2], rhs.shape[:-1])
     m, rhs = np.broadcast_to(m, lead + (3, 3)), np.broadcast_to(rhs, lead + (3,))

@@ -118,27 +118,43 @@ class _VectorOps:
 
 
 _TWO_PI = 2.0 * math.pi
-
-
 _PI = math.pi
+#: the base pose part of :attr:`ArmModel.constants` for base-frame targets (identity)
+_IDENTITY_BASE = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
 
 
 def _wrap(a):
-    """Wrap angles to [-pi, pi)."""
+    """Wrap angles to [-pi, pi) (floats or arrays)."""
     return (a + _PI) % _TWO_PI - _PI
 
 
-def _ik_core(ops, k, x, y, z, c1, c2, has_current):
-    """Both elbow solutions, the checks and the choice, for targets in the WORLD frame.
+def _constants(arm: ArmModel, frame: str) -> tuple:
+    """Return :attr:`ArmModel.constants` for targets in ``frame`` (``'world'`` or ``'base'``).
 
-    Written once for ``ops`` = :class:`_ScalarOps` (floats) or :class:`_VectorOps` (arrays):
-    only arithmetic, comparisons, ``&``/``|`` and the ops' functions, which both backends
-    support. ``k`` is :attr:`ArmModel.constants`; ``c1, c2`` the current (theta1, theta2).
-    Non-finite inputs propagate as NaN through the formula and are flagged by their code.
+    For ``'base'`` the base pose is the identity: the same formula, base-frame numbers.
     """
-    l1, l2, z0, rmin, rmax = k[0], k[1], k[2], k[3], k[4]
+    if frame not in ('world', 'base'):
+        raise ValueError(f"frame must be 'world' or 'base', got {frame!r}")
+    k = arm.constants
+    return k if frame == 'world' else k[:5] + _IDENTITY_BASE + k[17:]
+
+
+def _elbows(ops, k, x, y, z):
+    """Both elbow solutions of targets ``(x, y, z)``, the IK formula written once.
+
+    For ``ops`` = :class:`_ScalarOps` (floats) or :class:`_VectorOps` (arrays of any shape):
+    the target goes into the base frame (``p_b = R^T (p - b)`` with ``k`` =
+    :attr:`ArmModel.constants`), its plan-view radius is clamped into ``[|L1 - L2|, L1 + L2]``
+    (a stretched or folded arm pointing at it) and::
+
+        cos(theta2) = (r^2 - L1^2 - L2^2) / (2 L1 L2),   theta2_up = arccos(...) >= 0
+        theta1 = atan2(y_b, x_b) -+ atan2(L2 sin(theta2_up), L1 + L2 cos(theta2_up))
+
+    :return: ``(theta1_up, theta1_down, theta2_up, d3, r^2, (x_b, y_b, z_b))``; elbow down
+        has ``theta2 = -theta2_up``.
+    """
+    l1, l2, z0 = k[0], k[1], k[2]
     r00, r01, r02, r10, r11, r12, r20, r21, r22, bx, by, bz = k[5:17]
-    lo1, hi1, lo2, hi2, lo3, hi3 = k[17:23]
     dx, dy, dz = x - bx, y - by, z - bz  # world -> base: p_b = R^T (p_w - b)
     xb = r00 * dx + r10 * dy + r20 * dz
     yb = r01 * dx + r11 * dy + r21 * dz
@@ -148,9 +164,20 @@ def _ik_core(ops, k, x, y, z, c1, c2, has_current):
     t2 = ops.arccos(cos2)  # elbow up: theta2 >= 0
     alpha = ops.arctan2(yb, xb)
     beta = ops.arctan2(l2 * ops.sqrt(1.0 - cos2 * cos2), l1 + l2 * cos2)
-    t1_up = (alpha - beta + _PI) % _TWO_PI - _PI
-    t1_dn = (alpha + beta + _PI) % _TWO_PI - _PI
-    d3 = z0 - zb
+    return _wrap(alpha - beta), _wrap(alpha + beta), t2, z0 - zb, r2, (xb, yb, zb)
+
+
+def _ik_core(ops, k, x, y, z, c1, c2, has_current):
+    """Both elbow solutions (:func:`_elbows`), the checks and the choice.
+
+    Written once for ``ops`` = :class:`_ScalarOps` (floats) or :class:`_VectorOps` (arrays):
+    only arithmetic, comparisons, ``&``/``|`` and the ops' functions, which both backends
+    support. ``k`` is :attr:`ArmModel.constants`; ``c1, c2`` the current (theta1, theta2).
+    Non-finite inputs propagate as NaN through the formula and are flagged by their code.
+    """
+    rmin, rmax = k[3], k[4]
+    lo1, hi1, lo2, hi2, lo3, hi3 = k[17:23]
+    t1_up, t1_dn, t2, d3, r2, (xb, yb, zb) = _elbows(ops, k, x, y, z)
     in_up = (lo1 <= t1_up) & (t1_up <= hi1) & (lo2 <= t2) & (t2 <= hi2)
     in_dn = (lo1 <= t1_dn) & (t1_dn <= hi1) & (lo2 <= -t2) & (-t2 <= hi2)
     cost_up = (t1_up - c1) ** 2 + (t2 - c2) ** 2
@@ -182,11 +209,7 @@ def ik(arm: ArmModel, target: ArrayLike, q_current: Optional[ArrayLike] = None,
     :param frame: ``'world'`` or ``'base'`` (the arm's base frame).
     :return: :class:`IKResult`.
     """
-    if frame not in ('world', 'base'):
-        raise ValueError(f"frame must be 'world' or 'base', got {frame!r}")
-    k = arm.constants
-    if frame == 'base':  # identity base: same formula, base-frame numbers
-        k = k[:5] + (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0) + k[17:]
+    k = _constants(arm, frame)
     tgt = target if type(target) in (tuple, list) else np.asarray(target, dtype=float)
     if len(tgt) == 3 and (tgt.ndim == 1 if type(tgt) is np.ndarray
                           else not hasattr(tgt[0], '__len__')):
@@ -220,19 +243,14 @@ def ik_both(arm: ArmModel, target: ArrayLike, frame: str = 'world') -> np.ndarra
     """Both elbow solutions without limit checks: ``(..., 2, 3)``, elbow up first.
 
     Targets out of reach are clamped to the nearest reachable radius (a stretched or folded
-    arm pointing at them): check reachability with :func:`ik` first.
+    arm pointing at them): check reachability with :func:`ik` first. The formula is
+    :func:`ik`'s (:func:`_elbows`).
     """
     tgt = np.asarray(target, dtype=float)
-    pb = world_to_base(arm, tgt) if frame == 'world' else tgt
-    l1, l2 = arm.l1, arm.l2
-    r2 = np.sum(pb[..., :2] ** 2, axis=-1)
-    cos2 = np.clip((r2 - l1 * l1 - l2 * l2) / (2 * l1 * l2), -1.0, 1.0)
-    t2 = np.arccos(cos2)
-    alpha = np.arctan2(pb[..., 1], pb[..., 0])
-    beta = np.arctan2(l2 * np.sin(t2), l1 + l2 * cos2)
-    d3 = arm.tool_z0 - pb[..., 2]
-    up = np.stack((_wrap(alpha - beta), t2, d3), axis=-1)
-    down = np.stack((_wrap(alpha + beta), -t2, d3), axis=-1)
+    t1_up, t1_dn, t2, d3, _, _ = _elbows(_VectorOps, _constants(arm, frame), tgt[..., 0],
+                                         tgt[..., 1], tgt[..., 2])
+    up = np.stack((t1_up, t2, d3), axis=-1)
+    down = np.stack((t1_dn, -t2, d3), axis=-1)
     return np.stack((up, down), axis=-2)
 
 

@@ -20,6 +20,7 @@ from typing import Union
 
 import numpy as np
 
+from scara_collab.core.kinematics import base_to_world, world_to_base
 from scara_collab.core.model import ArmModel
 
 ArrayLike = Union[np.ndarray, list, tuple]
@@ -33,9 +34,25 @@ def mirror_point(src: ArmModel, dst: ArmModel, p: ArrayLike) -> np.ndarray:
     ``p_dst_base = diag(1, -1, 1) p_src_base``. Applying it twice (src -> dst -> src) is the
     identity.
     """
-    p = np.asarray(p, dtype=float)
-    local = (p - src.base[:3, 3]) @ src.base[:3, :3]
-    return (local * _REFLECT) @ dst.base[:3, :3].T + dst.base[:3, 3]
+    return base_to_world(dst, world_to_base(src, p) * _REFLECT)
+
+
+def mirror_error(src: ArmModel, dst: ArmModel, p_src: ArrayLike, p_dst: ArrayLike) -> np.ndarray:
+    """Distance of ``dst``'s tool from the mirror image of ``src``'s tool, m.
+
+    :param src: the arm that is mirrored (the leader).
+    :param dst: the arm that mirrors it (the follower).
+    :param p_src: ``(..., 3)`` tool positions of ``src`` in world, m.
+    :param p_dst: ``(..., 3)`` tool positions of ``dst`` in world, m (same leading shape).
+    :return: ``(...)`` ``|p_dst - mirror_point(src, dst, p_src)|``, m.
+
+    >>> from scara_collab.core.model import load_cell
+    >>> cell = load_cell()
+    >>> mirror_error(cell.leader, cell.follower, [[2.0, -1.0, 0.3]], [[2.0, 1.0, 0.4]])
+    array([0.1])
+    """
+    p_dst = np.asarray(p_dst, dtype=float)
+    return np.linalg.norm(p_dst - mirror_point(src, dst, p_src), axis=-1)
 
 
 def mirror_joints(q: ArrayLike) -> np.ndarray:

@@ -141,12 +141,11 @@ class BeltModel:
 class CellModel:
     """Both arms, the belt, the bins and the rules of the cell.
 
-    :ivar arms: the arms, leader first (the leader has priority in the shared zone).
+    :ivar arms: the arms, leader first (the leader has priority).
     :ivar profile: link profile the model was built with.
     :ivar urdf: the expanded cell URDF (XML string), as the simulator loads it.
     :ivar reach_min, reach_max: reach window from the shoulder axis, with the safety epsilon.
     :ivar safety_margin: required distance between the arms' capsule surfaces, m.
-    :ivar shared_zone_half_width: |y - belt centre| below this is the shared zone, m.
     :ivar bins: ``{(robot, item_class): (3,) bin floor centre in world}``.
     :ivar item_classes: the two item classes.
     :ivar item_size, item_mass: cube edge (m) and mass (kg) of a sorted item.
@@ -159,7 +158,6 @@ class CellModel:
     reach_min: float
     reach_max: float
     safety_margin: float
-    shared_zone_half_width: float
     belt: BeltModel
     bins: Dict[Tuple[str, str], np.ndarray]
     item_classes: Tuple[str, str]
@@ -280,7 +278,6 @@ def _load_cell(profile: Optional[str], config_path: str) -> CellModel:
         reach_min=float(cfg['reach']['min_radius']),
         reach_max=float(cfg['reach']['max_radius']),
         safety_margin=float(cfg['collision']['safety_margin']),
-        shared_zone_half_width=float(cfg['shared_zone_half_width']),
         belt=belt, bins=bins, item_classes=classes,
         item_size=float(cfg['items']['size']), item_mass=float(cfg['items']['mass']),
         config=cfg)

@@ -65,9 +65,7 @@ def first_breach(arm_a: ArmModel, a: Timeline, arm_b: ArmModel, b: Timeline, mar
     grid = np.linspace(t_from, t_end, int(np.ceil((t_end - t_from) / step)) + 1)
     times = np.unique(np.concatenate([grid, a.t[(a.t > t_from) & (a.t < t_end)],
                                       b.t[(b.t > t_from) & (b.t < t_end)]]))
-    qa = np.stack([np.interp(times, a.t, a.q[:, j]) for j in range(3)], -1)
-    qb = np.stack([np.interp(times, b.t, b.q[:, j]) for j in range(3)], -1)
-    close = collision.arm_distance(arm_a, qa, arm_b, qb) < margin
+    close = collision.arm_distance(arm_a, a.at(times), arm_b, b.at(times)) < margin
     return float(times[np.argmax(close)]) if np.any(close) else None
 
 

@@ -37,6 +37,26 @@ from scara_collab.core.model import ArmModel
 ArrayLike = Union[np.ndarray, list, tuple]
 
 
+def interp_rows(x: ArrayLike, xp: ArrayLike, fp: ArrayLike) -> np.ndarray:
+    """Interpolate the rows ``fp`` ``(N, k)``, given at ``xp`` ``(N,)``, linearly at ``x``.
+
+    Each column is :func:`numpy.interp`: ``xp`` increasing, the first row held before
+    ``xp[0]`` and the last after ``xp[-1]``; e.g. joint states ``(N, 3)`` stamped ``xp`` at
+    times ``x``.
+
+    :param x: a scalar or ``(M,)`` points.
+    :param xp: ``(N,)`` increasing abscissae, ``N >= 1``.
+    :param fp: ``(N, k)`` rows.
+    :return: ``(k,)`` for a scalar ``x``, else ``(M, k)``.
+
+    >>> interp_rows([0.5, 2.0], [0.0, 1.0], [[0.0, 10.0], [1.0, 20.0]])
+    array([[ 0.5, 15. ],
+           [ 1. , 20. ]])
+    """
+    fp = np.asarray(fp, dtype=float)
+    return np.stack([np.interp(x, xp, fp[:, j]) for j in range(fp.shape[1])], axis=-1)
+
+
 @dataclass(frozen=True)
 class Trajectory:
     """A timed joint trajectory of one arm, sampled at a fixed period.
@@ -59,8 +79,7 @@ class Trajectory:
 
     def sample(self, t: ArrayLike) -> np.ndarray:
         """Joint positions at time(s) ``t`` (held before the start and after the end)."""
-        t = np.asarray(t, dtype=float)
-        return np.stack([np.interp(t, self.t, self.q[:, j]) for j in range(3)], axis=-1)
+        return interp_rows(t, self.t, self.q)
 
 
 @dataclass(frozen=True)
@@ -200,11 +219,6 @@ def time_optimal_scaling(s: np.ndarray, dq: np.ndarray, d2q: np.ndarray, vmax: A
     return np.sqrt(np.maximum(np.asarray(x), 0.0))
 
 
-def _interp_rows(x, xp, fp):
-    """Linear interpolation of each column of ``fp`` ``(M, 3)`` at ``x``."""
-    return np.stack([np.interp(x, xp, fp[:, j]) for j in range(fp.shape[1])], axis=-1)
-
-
 def _timed(arm: ArmModel, s, q_of_s, dq, d2q, dt: float, refine=None) -> Trajectory:
     """Time a geometric path ``q(s)``, sample it every ``dt``, and check the limits.
 
@@ -231,10 +245,10 @@ def _timed(arm: ArmModel, s, q_of_s, dq, d2q, dt: float, refine=None) -> Traject
         sd_t = np.maximum(sdot[i] + u[i] * h, 0.0) / stretch
         sdd_t = u[i] / stretch ** 2
         sd_t[[0, -1]] = 0.0
-        q = _interp_rows(s_t, s, q_of_s)
+        q = interp_rows(s_t, s, q_of_s)
         if refine is not None:
             q = refine(s_t, q)
-        dq_t, d2q_t = _interp_rows(s_t, s, dq), _interp_rows(s_t, s, d2q)
+        dq_t, d2q_t = interp_rows(s_t, s, dq), interp_rows(s_t, s, d2q)
         qd = dq_t * sd_t[:, None]
         qdd = dq_t * sdd_t[:, None] + d2q_t * (sd_t ** 2)[:, None]
         ratio = max(np.max(np.abs(qd) / vmax), np.sqrt(np.max(np.abs(qdd) / amax)))
@@ -319,6 +333,22 @@ def _follow_line_base(arm: ArmModel, q0: np.ndarray, points: np.ndarray, thresho
     return out
 
 
+def _follow_line_numpy(arm: ArmModel, q0: np.ndarray, points: np.ndarray, threshold: float,
+                       max_damping: float, iterations: int) -> np.ndarray:
+    """Run the Newton loop of :func:`follow_line` with numpy, in the world frame.
+
+    :return: ``(M, 3)`` joint states, ``q0`` first.
+    """
+    q = np.empty((len(points), 3))
+    q[0] = q0
+    for i in range(1, len(points)):
+        qi = q[i - 1]
+        for _ in range(iterations):
+            qi = qi + dls_solve(arm, qi, points[i] - fk(arm, qi), threshold, max_damping)
+        q[i] = qi
+    return q
+
+
 def follow_line(arm: ArmModel, q0: np.ndarray, points: np.ndarray, velocity_dir: np.ndarray,
                 threshold: float, max_damping: float, iterations: int = 3):
     """Track world points along a line with min-norm (DLS) steps and Newton correction.
@@ -327,9 +357,10 @@ def follow_line(arm: ArmModel, q0: np.ndarray, points: np.ndarray, velocity_dir:
     ``q += J^T (J J^T + lambda^2 I)^-1 (p - fk(q))``: the Lagrange-multiplier (minimum-norm)
     solution of :func:`scara_collab.core.kinematics.dls_solve`. The loop runs in the arm's
     base frame on plain floats (:func:`_follow_line_base`: the same maths, without numpy's
-    per-call overhead on one 3-vector, which dominated); the numpy loop remains for a base
-    rotation that is not orthogonal and for the arithmetic errors only floats raise (e.g. an
-    exactly singular, undamped ``J``, where numpy returns what its solver gives).
+    per-call overhead on one 3-vector, which dominated); the numpy loop
+    (:func:`_follow_line_numpy`) remains for a base rotation that is not orthogonal and for
+    the arithmetic errors only floats raise (e.g. an exactly singular, undamped ``J``, where
+    numpy returns what its solver gives).
 
     :param q0: ``(3,)`` joint state at ``points[0]``.
     :param points: ``(M, 3)`` desired tool positions.
@@ -345,13 +376,7 @@ def follow_line(arm: ArmModel, q0: np.ndarray, points: np.ndarray, velocity_dir:
         except (ArithmeticError, ValueError):
             q = None
     if q is None:
-        q = np.empty((len(points), 3))
-        q[0] = q0
-        for i in range(1, len(points)):
-            qi = q[i - 1]
-            for _ in range(iterations):
-                qi = qi + dls_solve(arm, qi, points[i] - fk(arm, qi), threshold, max_damping)
-            q[i] = qi
+        q = _follow_line_numpy(arm, q0, points, threshold, max_damping, iterations)
     dq = dls_solve(arm, q, np.broadcast_to(velocity_dir, q.shape), threshold, max_damping)
     return q, dq
 

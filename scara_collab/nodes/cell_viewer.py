@@ -40,6 +40,7 @@ from visualization_msgs.msg import MarkerArray
 import yourdfpy
 
 from scara_collab.core import collision
+from scara_collab.core.kinematics import base_to_world
 from scara_collab.core.model import CellModel, load_cell
 from scara_collab.core.palette import class_colour_255
 from scara_collab.nodes import conversions as conv
@@ -389,8 +390,7 @@ class CellViewer(Node):
         points = conv.path_points(msg)
         frame = msg.header.frame_id
         if frame == f'{robot}_base':
-            base = self.cell.arm(robot).base
-            points = points @ base[:3, :3].T + base[:3, 3]
+            points = base_to_world(self.cell.arm(robot), points)
         elif frame not in ('', 'world'):
             self.get_logger().warning(f'{robot}/planned_path in unknown frame {frame!r}; '
                                       'not drawn', throttle_duration_sec=5.0)

@@ -15,8 +15,9 @@ are apart again and the state is fresh. ``~/status``
 (:class:`~scara_collab.nodes.protocol.MonitorStatus`, 1 Hz and on every change) carries the
 smallest distance seen and when: the run's one source of the minimum separation. Capsule
 markers coloured by distance go to ``~/capsules`` while something subscribes to it.
+Its own parameters (:data:`PARAMETERS`) are checked at start and on every change; only
+``marker_rate`` and ``stop_latency`` may change while it runs.
 """
-import math
 from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -30,6 +31,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
 from scara_collab.core import collision, safety
+from scara_collab.core.config import Rule
 from scara_collab.core.model import load_cell
 from scara_collab.core.planning import Timeline
 from scara_collab.nodes import conversions as conv, lockstep
@@ -38,6 +40,22 @@ from scara_collab.nodes.qos import LATCHED, LATEST
 from scara_collab.nodes.runner import guarded, run_node
 
 PARTS = ('link 1', 'link 2', 'quill')
+#: the monitor's own parameters and their defaults
+PARAMETERS = {
+    'profile': '',
+    'safety_margin': -1.0,  # m; < 0: the cell's margin
+    'marker_rate': 10.0,    # Hz of sim time, at most, for ~/capsules
+    'stale_after': 0.2,     # sim s without a valid state: stop
+    # s from a state to the bridge braking on the stop it causes: a state period (20 ms at
+    # simulation.yaml's 50 Hz), the lockstep window (20 ms) and the monitor's own turn
+    'stop_latency': 0.05,
+}
+RULES = (Rule('profile', 'text'), Rule('safety_margin', 'number'),
+         Rule('marker_rate', 'positive'), Rule('stale_after', 'positive'),
+         Rule('stop_latency', 'nonneg'))
+#: the parameters that may change while the monitor runs (the margin and the watch's period
+#: may not)
+DYNAMIC = ('marker_rate', 'stop_latency')
 #: rad or m: a prediction is used only while both arms are this close to it
 TRACKING = 0.02
 
@@ -49,26 +67,17 @@ class CollisionMonitor(Node):
         """Declare and check the parameters, load the cell and create the watch.
 
         :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``).
-        :raises ValueError: a marker rate, stale time or margin out of range.
+        :raises ConfigError: a marker rate, stale time, latency or margin out of range.
         """
         super().__init__('collision_monitor', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
-        self.declare_parameter('profile', '')
-        self.declare_parameter('safety_margin', -1.0)  # < 0: the cell's margin
-        self.declare_parameter('marker_rate', 10.0)
-        self.declare_parameter('stale_after', 0.2)     # sim s without a valid state: stop
-        # s from a state to the bridge braking on the stop it causes: a state period (20 ms at
-        # simulation.yaml's 50 Hz), the lockstep window (20 ms) and the monitor's own turn
-        self.declare_parameter('stop_latency', 0.05)
-        self.cell = load_cell(self.get_parameter('profile').value or None)
-        margin = float(self.get_parameter('safety_margin').value)
+        params = conv.declare_checked(self, PARAMETERS, RULES, dynamic=DYNAMIC,
+                                      on_change=self._set_params)
+        self.cell = load_cell(params['profile'] or None)
+        margin = float(params['safety_margin'])
         self.margin = self.cell.safety_margin if margin < 0 else margin
-        rate = float(self.get_parameter('marker_rate').value)
-        self.stale_after = float(self.get_parameter('stale_after').value)
-        if not (rate > 0 and self.stale_after > 0 and math.isfinite(self.margin)):
-            raise ValueError('marker_rate and stale_after must be > 0 and the margin finite')
-        self.marker_period = 1.0 / rate
-        self.latency = float(self.get_parameter('stop_latency').value)
+        self.stale_after = float(params['stale_after'])
+        self._set_params(params)
         # what the bridge runs, per arm: (move id, Timeline, start) or None (it holds); the one
         # before (a refused trajectory leaves it running)
         self._running = {arm.name: None for arm in self.cell.arms}
@@ -110,8 +119,10 @@ class CollisionMonitor(Node):
         self.get_logger().info(f'watching {self.cell.leader.name} vs '
                                f'{self.cell.follower.name}, margin {self.margin} m')
 
-    def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+    def _set_params(self, params: dict) -> None:
+        """Take the values of the dynamic parameters (at start and on a change)."""
+        self.marker_period = 1.0 / float(params['marker_rate'])
+        self.latency = float(params['stop_latency'])
 
     def _stop(self, text: str) -> None:
         if self.stopped:
@@ -130,7 +141,7 @@ class CollisionMonitor(Node):
         # as the bridge does it: a new trajectory replaces the running one, stamp 0 or a
         # past stamp = start now; its execution status corrects this when it comes
         stamp = conv.to_sec(msg.header.stamp)
-        start = max(stamp, self._now()) if stamp > 0 else self._now()
+        start = max(stamp, conv.now(self)) if stamp > 0 else conv.now(self)
         early = self._early.pop(robot, None)
         if early is not None and early[0] == msg.header.frame_id:
             start = early[1]  # the bridge's own start, heard first
@@ -198,7 +209,7 @@ class CollisionMonitor(Node):
         pairs = collision.arm_pair_distances(a, qa, b, qb)
         d = float(pairs.min())
         stamp = conv.to_sec(msg.header.stamp)
-        now = self._now()
+        now = conv.now(self)
         # the watchdog runs on sim time: a state heard before the first /clock has no time
         self.last, self.last_time = d, (now if now > 0 else None)
         if self.minimum is None or d < self.minimum:
@@ -228,7 +239,7 @@ class CollisionMonitor(Node):
         the state that came with it; one look would stop the arms for the monitor's delay,
         not for missing states (seen at start-up, 0.32-0.34 s, in 3 of 16 launcher runs).
         """
-        now = self._now()
+        now = conv.now(self)
         if self.last_time is None or now - self.last_time <= self.stale_after:
             self._stale_since = None
         elif self._stale_since is None:
@@ -237,7 +248,7 @@ class CollisionMonitor(Node):
             self._stop(f'no valid joint state for {now - self.last_time:.3f} s (sim)')
 
     def _on_clear(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
-        fresh = self.last_time is not None and self._now() - self.last_time <= self.stale_after
+        fresh = self.last_time is not None and conv.now(self) - self.last_time <= self.stale_after
         if not self.stopped:
             res.success, res.message = True, 'no emergency stop to clear'
         elif self.last is None or not fresh or self.last < self.margin:
@@ -256,7 +267,7 @@ class CollisionMonitor(Node):
 
     def status(self) -> proto.MonitorStatus:
         """Return the monitor's figures so far."""
-        return proto.MonitorStatus(round(self._now(), 6), self.last, self.minimum,
+        return proto.MonitorStatus(round(conv.now(self), 6), self.last, self.minimum,
                                    self.minimum_time, self.margin, self.stopped, self.reason)
 
     def _publish_status(self) -> None:

@@ -1,7 +1,10 @@
 """Planner node (executables ``left_planner`` and ``right_planner``): one per arm.
 
 Parameter ``mode``: ``line`` (straight lines only), ``joint``, or ``line_or_joint`` (default:
-the line, or a joint move when the goal is reachable but the straight line is not).
+the line, or a joint move when the goal is reachable but the straight line is not). The
+planner's own parameters (``robot`` and ``profile``, read only; ``mode`` and the times of
+:data:`TIMES`, which may change while it runs) are checked at start and on every change: an
+invalid value stops the node, or is refused, with the reason.
 
 Keeps its arm's state from ``/joint_states``; on ``/<robot>/target`` (PointStamped, frame
 ``world`` or ``<robot>_base``; a non-zero stamp is the requested start time) it plans the
@@ -26,7 +29,7 @@ the planner reports WARN "waiting", retries whenever the other arm commits a new
 refuses after ``max_wait`` seconds.
 """
 from collections import OrderedDict
-from typing import Optional, Tuple
+from typing import Optional, Sequence, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
@@ -36,9 +39,10 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
+from scara_collab.core.config import load_config, Rule
 from scara_collab.core.kinematics import IKError
 from scara_collab.core.model import load_cell
-from scara_collab.core.planning import MODES, Plan, plan_path, schedule, Timeline
+from scara_collab.core.planning import committed, MODES, Plan, plan_path, schedule, Timeline
 from scara_collab.core.trajectory import path_metrics
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
@@ -48,6 +52,18 @@ from scara_collab.nodes.qos import EVENTS, LATEST
 from scara_collab.nodes.runner import guarded, run_node
 
 HISTORY = 64  # requests whose last status is kept, to answer a re-sent one
+#: the planner's own time parameters and their defaults, s: a move starts at least
+#: ``planning_lead`` after it is planned, waits at most ``max_delay`` for the other arm's
+#: committed motion, and is refused after ``max_wait`` blocked by its resting pose
+TIMES = {'planning_lead': 0.05, 'max_delay': 30.0, 'max_wait': 60.0}
+
+
+def _rules(robots: Sequence[str]) -> Tuple[Rule, ...]:
+    """Return the checks of the planner's own parameters (``robots``: the cell's arm names)."""
+    return (Rule('robot', 'str', lambda v: v in robots, f'must be one of {list(robots)}'),
+            Rule('profile', 'text'),
+            Rule('mode', 'str', lambda v: v in MODES, f'must be one of {MODES}'),
+            *(Rule(key, 'positive') for key in TIMES))
 
 
 class Planner(Node):
@@ -59,37 +75,22 @@ class Planner(Node):
         :param robot: the arm this planner plans for (the ``robot`` parameter's default).
         :param node_name: default ``<left|right>_planner`` from ``robot``.
         :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``).
-        :raises ValueError: an unknown robot or mode, or a time parameter that is not > 0.
+        :raises ConfigError: an unknown robot or mode, or a time parameter that is not > 0.
         """
         super().__init__(node_name or f'{robot.split("_")[-1]}_planner', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         cfg = declare_config(self, ('controllers',))['controllers']
-        self.declare_parameter('robot', robot)
-        self.declare_parameter('profile', '')
-        self.declare_parameter('mode', 'line_or_joint')
-        self.declare_parameter('planning_lead', 0.05)
-        self.declare_parameter('max_delay', 30.0)
-        self.declare_parameter('max_wait', 60.0)
-        self.cell = load_cell(self.get_parameter('profile').value or None)
-        robot = self.get_parameter('robot').value
-        names = [a.name for a in self.cell.arms]
-        if robot not in names:
-            raise ValueError(f'parameter robot must be one of {names}, got {robot!r}')
-        self.arm = self.cell.arm(robot)
-        self.other = next(a for a in self.cell.arms if a.name != robot)
+        params = conv.declare_checked(
+            self, {'robot': robot, 'profile': '', 'mode': 'line_or_joint', **TIMES},
+            _rules(load_config('cell')['robots']['names']), dynamic=('mode', *TIMES),
+            on_change=self._set_params)
+        self.cell = load_cell(params['profile'] or None)
+        self.arm = self.cell.arm(params['robot'])
+        self.other = next(a for a in self.cell.arms if a is not self.arm)
         self.leader = self.arm is self.cell.leader
-        self.mode = self.get_parameter('mode').value
-        if self.mode not in MODES:
-            raise ValueError(f'parameter mode must be one of {MODES}, got {self.mode!r}')
         self.traj_cfg = cfg['trajectory']
-        self.lead = float(self.get_parameter('planning_lead').value)
         self.margin = self.cell.safety_margin + float(cfg['planning_buffer'])
-        self.max_delay = float(self.get_parameter('max_delay').value)
-        self.max_wait = float(self.get_parameter('max_wait').value)
-        for key, value in (('planning_lead', self.lead), ('max_delay', self.max_delay),
-                           ('max_wait', self.max_wait)):
-            if not value > 0:
-                raise ValueError(f'parameter {key} must be > 0, got {value}')
+        self._set_params(params)
 
         self.q: Optional[np.ndarray] = None
         self.q_stamp = 0.0  # sim time of the state in self.q
@@ -126,8 +127,13 @@ class Planner(Node):
                                f'{"leader" if self.leader else "follower, yields to " + o})')
 
     # --- helpers ----------------------------------------------------------------------------
-    def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
+    def _now(self) -> float:  # the node clock, s (bench/graph.py reads it too)
+        return conv.now(self)
+
+    def _set_params(self, params: dict) -> None:
+        """Take the values of the dynamic parameters (at start and on a change)."""
+        self.mode = params['mode']
+        self.lead, self.max_delay, self.max_wait = (float(params[k]) for k in TIMES)
 
     def _status(self, state: str, request: int, reason: str = '', plan: Optional[Plan] = None,
                 kind: str = '') -> None:
@@ -143,22 +149,6 @@ class Planner(Node):
             while len(self.history) > HISTORY:
                 self.history.popitem(last=False)
         self.status_pub.publish(st.to_msg())
-
-    def _other_timeline(self) -> Timeline:
-        """Return the other arm's motion as far as it is committed.
-
-        While its committed move has not ended *now*, that move (a timeline holds its last
-        pose after its end, which is where the arm will be); otherwise a hold where it is
-        measured. Judging "ended" at my planned start instead would hold the other arm at
-        its measured pose in the middle of its move: a stale pose (the margin breach at
-        saturation of issue 14 came from that). Only the part from *now* on counts: its past
-        motion may have passed close to where I stand, and checking that against my start
-        pose would block every start (both arms then wait for each other).
-        """
-        now = self._now()
-        if self.theirs is not None and self.theirs.end > now:
-            return self.theirs.since(now)
-        return Timeline.hold(now, self.q_other)
 
     def _publish(self, plan: Plan, request: int, note: str = '') -> None:
         t = plan.traj
@@ -205,7 +195,7 @@ class Planner(Node):
             self._status('superseded', held[-1], why)
 
     def _on_target(self, msg: PointStamped) -> None:
-        frame, xyz, stamp = conv.point_stamped(msg)
+        frame_id, xyz, stamp = conv.point_stamped(msg)
         request = self._request_of(proto.stamp_ns(msg.header.stamp))
         if self._known(request):
             return
@@ -215,11 +205,10 @@ class Planner(Node):
         if not conv.finite(xyz):
             self._status('refused', request, f'non-finite target {xyz.tolist()}')
             return
-        frames = {'world': 'world', f'{self.arm.name}_base': 'base',
-                  f'{self.arm.name}_base_link': 'base'}
-        if frame not in frames:
-            self._status('refused', request, f'unknown frame {frame!r}; use world or '
-                         f'{self.arm.name}_base')
+        try:
+            frame = conv.target_frame(frame_id, self.arm.name)
+        except conv.MessageError as exc:
+            self._status('refused', request, str(exc))
             return
         # a new target supersedes one that was waiting or queued
         self._supersede(self.waiting, f'replaced by request {request}')
@@ -227,11 +216,11 @@ class Planner(Node):
         self.waiting = self.queued = None
         if self.mine is not None and self.mine.end > self._now():
             # the bridge replaces a running trajectory: hold this one until mine has ended
-            self.queued = (xyz, frames[frame], stamp, request)
+            self.queued = (xyz, frame, stamp, request)
             self._status('queued', request, f'behind the running move (ends '
                          f't={self.mine.end:.3f} s)')
             return
-        self._plan(xyz, frames[frame], stamp, request)
+        self._plan(xyz, frame, stamp, request)
 
     def _plan(self, xyz: np.ndarray, frame: str, stamp: float, request: int,
               asked: Optional[float] = None) -> None:
@@ -246,9 +235,11 @@ class Planner(Node):
         except (IKError, ValueError) as exc:
             self._status('refused', request, str(exc))
             return
-        start = max(start, self._now() + self.lead)  # planning took (sim) time too
-        plan = schedule(self.arm, traj, start, self.other, self._other_timeline(),
-                        self.margin, self.leader, self.max_delay)
+        now = self._now()
+        start = max(start, now + self.lead)  # planning took (sim) time too
+        other = committed(self.theirs, now, self.q_other)  # from now on: the past is past
+        plan = schedule(self.arm, traj, start, self.other, other, self.margin, self.leader,
+                        self.max_delay)
         if plan is None:
             self._wait(xyz, frame, asked, request)
             return
@@ -304,10 +295,8 @@ class Planner(Node):
         except conv.MessageError:
             return  # the bridge refuses and reports it; nothing committed
         now = self._now()
-        start = stamp if stamp > 0 else now
-        if t[0] > 0 and self.q_other is not None:
-            t, q = np.concatenate(([0.0], t)), np.vstack([self.q_other, q])
-        self.theirs_before, self.theirs = self.theirs, Timeline(start + t, q)
+        self.theirs_before, self.theirs = self.theirs, Timeline.commanded(stamp, t, q, now,
+                                                                          self.q_other)
         if self.waiting is not None:  # the other arm moves: maybe it clears the way
             xyz, frame, asked, request = self.waiting
             self._plan(xyz, frame, 0.0, request, asked)

@@ -22,14 +22,13 @@ from typing import Dict, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
-import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool
 
 from scara_collab.core.kinematics import base_to_world, fk
-from scara_collab.core.mirror import mirror_point
+from scara_collab.core.mirror import mirror_error, mirror_point
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
@@ -88,9 +87,6 @@ class ReplicationManager(Node):
         self.get_logger().info(f'replicating {lead.name} -> {foll.name} '
                                f'({"on" if self.enabled else "off"})')
 
-    def _now(self) -> float:
-        return self.get_clock().now().nanoseconds * 1e-9
-
     def _set_enabled(self, on: bool) -> None:
         self.enabled = on
         if on and self._state_sub is None:
@@ -108,17 +104,15 @@ class ReplicationManager(Node):
         return res
 
     def _on_target(self, msg: PointStamped) -> None:
-        frame, xyz, _ = conv.point_stamped(msg)
+        frame_id, xyz, _ = conv.point_stamped(msg)
         lead, foll = self.cell.leader, self.cell.follower
         if not conv.finite(xyz):
             raise ValueError(f'non-finite target {xyz.tolist()}')
-        if frame in (f'{lead.name}_base', f'{lead.name}_base_link'):
+        if conv.target_frame(frame_id, lead.name) == 'base':
             xyz = base_to_world(lead, xyz)
-        elif frame != 'world':
-            raise ValueError(f'unknown frame {frame!r}; use world or {lead.name}_base')
         stamp = msg.header.stamp
         if proto.stamp_ns(stamp) == 0:  # "now": one common start for both arms
-            stamp = conv.to_time(self._now() + self.lead)
+            stamp = conv.to_time(conv.now(self) + self.lead)
         out = conv.make_point_stamped(xyz, 'world')
         out.header.stamp = stamp  # passed through exactly: it is the move's id
         self.lead_pub.publish(out)
@@ -165,7 +159,7 @@ class ReplicationManager(Node):
         lead, foll = self.cell.leader, self.cell.follower
         ql, _ = conv.joint_state_arrays(msg, lead.joint_names)
         qf, _ = conv.joint_state_arrays(msg, foll.joint_names)
-        err = float(np.linalg.norm(fk(foll, qf) - mirror_point(lead, foll, fk(lead, ql))))
+        err = float(mirror_error(lead, foll, fk(lead, ql), fk(foll, qf)))
         self.error = err
         self.error_pub.publish(Float64(data=err))
         t = conv.to_sec(msg.header.stamp)
@@ -184,7 +178,7 @@ class ReplicationManager(Node):
 
     def status(self) -> proto.MirrorStatus:
         """Return the mirror figures so far."""
-        return proto.MirrorStatus(self.enabled, round(self._now(), 3), self.error,
+        return proto.MirrorStatus(self.enabled, round(conv.now(self), 3), self.error,
                                   self.error_max, self.error_max_time, self.in_step_moves,
                                   self.not_in_step, self.last_reason)
 

@@ -5,7 +5,7 @@
 - ``timeseries.csv``: one row per joint state: ``t`` (sim s), the six joint positions (leader
   then follower, each ``joint_1, joint_2, gripper_joint``), both tool tips in ``world``
   (:func:`scara_collab.core.kinematics.fk`), the mirror error ``|p_follower - mirror(p_leader)|``
-  (:func:`scara_collab.core.mirror.mirror_point`) and the arm-to-arm capsule surface distance
+  (:func:`scara_collab.core.mirror.mirror_error`) and the arm-to-arm capsule surface distance
   (:func:`scara_collab.core.collision.arm_distance`), in metres;
 - ``events.csv``: the conveyor events ``time, kind, item, class, robot``.
 
@@ -34,7 +34,7 @@ import numpy as np
 
 from scara_collab.core.collision import arm_distance
 from scara_collab.core.kinematics import fk
-from scara_collab.core.mirror import mirror_point
+from scara_collab.core.mirror import mirror_error
 from scara_collab.core.model import CellModel
 
 TIMESERIES = 'timeseries.csv'
@@ -92,7 +92,7 @@ def state_metrics(cell: CellModel, q_leader, q_follower
     q_follower = np.asarray(q_follower, dtype=float)
     p_lead = fk(lead, q_leader)
     p_foll = fk(foll, q_follower)
-    error = np.linalg.norm(p_foll - mirror_point(lead, foll, p_lead), axis=-1)
+    error = mirror_error(lead, foll, p_lead, p_foll)
     distance = arm_distance(lead, q_leader, foll, q_follower)
     return p_lead, p_foll, error, distance
 
