@@ -2,7 +2,7 @@
 
 The config files' keys go through :func:`scara_collab.nodes.params.declare_config`
 (``test_params``); the planner's own (``robot``, ``profile``, ``mode`` and the times) are
-declared and checked by :func:`scara_collab.nodes.conversions.declare_checked`.
+declared and checked by :func:`scara_collab.nodes.params.declare_checked`.
 """
 import pytest
 from rclpy.parameter import Parameter

@@ -36,6 +36,7 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.planning import Timeline
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.params import declare_checked
 from scara_collab.nodes.qos import LATCHED, LATEST
 from scara_collab.nodes.runner import guarded, run_node
 
@@ -71,8 +72,8 @@ class CollisionMonitor(Node):
         """
         super().__init__('collision_monitor', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
-        params = conv.declare_checked(self, PARAMETERS, RULES, dynamic=DYNAMIC,
-                                      on_change=self._set_params)
+        params = declare_checked(self, PARAMETERS, RULES, dynamic=DYNAMIC,
+                                 on_change=self._set_params)
         self.cell = load_cell(params['profile'] or None)
         margin = float(params['safety_margin'])
         self.margin = self.cell.safety_margin if margin < 0 else margin

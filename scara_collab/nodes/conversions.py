@@ -1,23 +1,20 @@
 """Message <-> numpy conversions, in one place so no node repeats them.
 
-Also the node clock in seconds (:func:`now`) and a node's own parameters as checked values
-(:func:`declare_checked`). The statuses the nodes exchange (DiagnosticStatus key-values) are
-:mod:`scara_collab.nodes.protocol`'s, not this module's.
+Also the node clock in seconds (:func:`now`). The statuses the nodes exchange
+(DiagnosticStatus key-values) are :mod:`scara_collab.nodes.protocol`'s, not this module's.
 """
 import math
-from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, PointStamped, Pose, PoseStamped
 from nav_msgs.msg import Path
 import numpy as np
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from sensor_msgs.msg import JointState
 from std_msgs.msg import ColorRGBA, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
 
-from scara_collab.core.config import check_rules, ConfigError, Rule
 from scara_collab.core.palette import class_colour
 
 
@@ -314,53 +311,3 @@ def path_points(msg: Path) -> np.ndarray:
 def finite(xyz) -> bool:
     """Return ``True`` if every coordinate is finite."""
     return all(math.isfinite(float(v)) for v in xyz)
-
-
-def declare_checked(node, defaults: Dict[str, object], rules: Sequence[Rule],
-                    dynamic: Iterable[str] = (),
-                    on_change: Optional[Callable[[Dict[str, object]], None]] = None
-                    ) -> Dict[str, object]:
-    """Declare a node's own parameters and refuse values that break ``rules``.
-
-    What :func:`scara_collab.nodes.params.declare_config` does for the config files' keys,
-    for parameters that are not in a file: each is declared with its default (any type, so
-    the rule gives the reason for a wrong one) and read only unless it is in ``dynamic``; an
-    invalid value stops the node at start, and is refused by an on-set-parameters callback
-    at run time. An accepted change updates the returned dict and calls ``on_change`` with
-    it.
-
-    :param node: the node that owns the parameters.
-    :param defaults: ``{name: default}``.
-    :param rules: the checks (:class:`scara_collab.core.config.Rule`), one per name.
-    :param dynamic: the names that may change while the node runs.
-    :param on_change: called with all the values after an accepted change.
-    :return: ``{name: value}``, the values in force.
-    :raises ConfigError: ``'<node>: <name> must be ..., got ...'`` for an invalid value.
-    """
-    dynamic = set(dynamic)
-    for name, value in defaults.items():
-        node.declare_parameter(name, value, ParameterDescriptor(
-            dynamic_typing=True, read_only=name not in dynamic))
-    values = check_rules(rules, {name: node.get_parameter(name).value for name in defaults},
-                         node.get_name())
-
-    def proposed(params) -> Dict[str, object]:
-        return {p.name: p.value for p in params if p.name in values}
-
-    def check(params) -> SetParametersResult:
-        try:
-            check_rules(rules, {**values, **proposed(params)}, node.get_name())
-        except ConfigError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
-
-    def apply(params) -> None:
-        changed = proposed(params)
-        if changed:
-            values.update(changed)
-            if on_change is not None:
-                on_change(values)
-
-    node.add_on_set_parameters_callback(check)
-    node.add_post_set_parameters_callback(apply)
-    return values

@@ -7,6 +7,9 @@ overrides it. The values are re-assembled into the nested tree the core expects 
 validated with :func:`scara_collab.core.config.validate`; an invalid value stops the node
 with the file's error message. Later changes go through the same validation in an
 on-set-parameters callback and are refused unless the key is listed as dynamic.
+
+A node's own parameters (not in a file) get the same treatment from :func:`declare_checked`,
+with the rules of :class:`scara_collab.core.config.Rule`.
 """
 import copy
 from typing import Callable, Dict, Iterable, Optional, Sequence
@@ -14,7 +17,7 @@ from typing import Callable, Dict, Iterable, Optional, Sequence
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 
-from scara_collab.core.config import ConfigError, load_config, validate
+from scara_collab.core.config import check_rules, ConfigError, load_config, Rule, validate
 
 
 def flatten(tree: dict, prefix: str = '') -> Dict[str, object]:
@@ -98,3 +101,53 @@ def declare_config(node: Node, names: Sequence[str], dynamic: Iterable[str] = ()
 
     node.add_on_set_parameters_callback(check)
     return trees
+
+
+def declare_checked(node, defaults: Dict[str, object], rules: Sequence[Rule],
+                    dynamic: Iterable[str] = (),
+                    on_change: Optional[Callable[[Dict[str, object]], None]] = None
+                    ) -> Dict[str, object]:
+    """Declare a node's own parameters and refuse values that break ``rules``.
+
+    What :func:`declare_config` does for the config files' keys,
+    for parameters that are not in a file: each is declared with its default (any type, so
+    the rule gives the reason for a wrong one) and read only unless it is in ``dynamic``; an
+    invalid value stops the node at start, and is refused by an on-set-parameters callback
+    at run time. An accepted change updates the returned dict and calls ``on_change`` with
+    it.
+
+    :param node: the node that owns the parameters.
+    :param defaults: ``{name: default}``.
+    :param rules: the checks (:class:`scara_collab.core.config.Rule`), one per name.
+    :param dynamic: the names that may change while the node runs.
+    :param on_change: called with all the values after an accepted change.
+    :return: ``{name: value}``, the values in force.
+    :raises ConfigError: ``'<node>: <name> must be ..., got ...'`` for an invalid value.
+    """
+    dynamic = set(dynamic)
+    for name, value in defaults.items():
+        node.declare_parameter(name, value, ParameterDescriptor(
+            dynamic_typing=True, read_only=name not in dynamic))
+    values = check_rules(rules, {name: node.get_parameter(name).value for name in defaults},
+                         node.get_name())
+
+    def proposed(params) -> Dict[str, object]:
+        return {p.name: p.value for p in params if p.name in values}
+
+    def check(params) -> SetParametersResult:
+        try:
+            check_rules(rules, {**values, **proposed(params)}, node.get_name())
+        except ConfigError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def apply(params) -> None:
+        changed = proposed(params)
+        if changed:
+            values.update(changed)
+            if on_change is not None:
+                on_change(values)
+
+    node.add_on_set_parameters_callback(check)
+    node.add_post_set_parameters_callback(apply)
+    return values

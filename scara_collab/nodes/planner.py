@@ -47,7 +47,7 @@ from scara_collab.core.trajectory import path_metrics
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.faults import declare_faults, FaultyPublisher
-from scara_collab.nodes.params import declare_config
+from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import EVENTS, LATEST
 from scara_collab.nodes.runner import guarded, run_node
 
@@ -80,7 +80,7 @@ class Planner(Node):
         super().__init__(node_name or f'{robot.split("_")[-1]}_planner', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         cfg = declare_config(self, ('controllers',))['controllers']
-        params = conv.declare_checked(
+        params = declare_checked(
             self, {'robot': robot, 'profile': '', 'mode': 'line_or_joint', **TIMES},
             _rules(load_config('cell')['robots']['names']), dynamic=('mode', *TIMES),
             on_change=self._set_params)
