@@ -11,11 +11,10 @@ runs the same code).
 Usage: bench_core.py [--quick] [--json FILE]
 """
 import argparse
-import json
 import sys
 
 from scara_collab.bench import paths, solvers
-from scara_collab.bench.util import machine, stderr_log
+from scara_collab.bench.util import machine, stderr_log, write_json
 from scara_collab.core.model import load_cell
 from scara_collab.core.trajectory import path_metrics
 
@@ -78,8 +77,7 @@ def main(argv=None) -> int:
         print('  '.join(str(v).ljust(w) for v, w in zip(
             (r['what'], r['ours'], r['reference'], r['ratio'], target), widths)))
     if args.json:
-        with open(args.json, 'w') as f:
-            json.dump(res, f, indent=2)
+        write_json(args.json, res)
     return 0
 
 

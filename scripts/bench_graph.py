@@ -12,12 +12,10 @@ runs it on more moves).
 Usage: bench_graph.py [--moves N] [--json FILE]
 """
 import argparse
-import json
 import sys
 
 from scara_collab.bench import graph
-from scara_collab.bench.suite import jsonable
-from scara_collab.bench.util import stderr_log
+from scara_collab.bench.util import stderr_log, write_json
 
 
 def main(argv=None) -> int:
@@ -61,8 +59,7 @@ def main(argv=None) -> int:
     for r in rows:
         print(f'{r[0]:42s}{r[1]:34s}{r[2]:18s}{r[3]}')
     if args.json:
-        with open(args.json, 'w') as f:
-            json.dump(jsonable({'line': line, 'joint': joint}), f, indent=2)
+        write_json(args.json, {'line': line, 'joint': joint})
     return 0
 
 

@@ -11,11 +11,10 @@ Usage: bench_job.py [--modes single collaborative mirrored] [--duration 120] [--
                     [--feed S] [--json FILE]
 """
 import argparse
-import json
 import sys
 
 from scara_collab.bench import job
-from scara_collab.bench.util import stderr_log
+from scara_collab.bench.util import stderr_log, write_json
 
 
 def main(argv=None) -> int:
@@ -52,8 +51,7 @@ def main(argv=None) -> int:
             results['single']['items_per_minute']
         print(f'pair / single: {ratio:.2f} (target >= 1.9)')
     if args.json:
-        with open(args.json, 'w') as f:
-            json.dump(results, f, indent=2)
+        write_json(args.json, results)
     return 0
 
 

@@ -22,6 +22,7 @@ import sys
 import tempfile
 
 from scara_collab.bench import report, suite
+from scara_collab.bench.sections import SECTIONS
 from scara_collab.bench.util import Progress
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,9 +40,9 @@ def main(argv=None) -> int:
     parser.add_argument('--out', type=Path, default=None,
                         help='folder for RESULTS.md and figures/ (default: docs/, or a '
                         'temporary folder with --smoke)')
-    parser.add_argument('--only', nargs='+', choices=list(suite.SECTIONS), default=None,
-                        metavar='SECTION',
-                        help=f'run only these sections ({", ".join(suite.SECTIONS)})')
+    keys = [s.key for s in SECTIONS]
+    parser.add_argument('--only', nargs='+', choices=keys, default=None, metavar='SECTION',
+                        help=f'run only these sections ({", ".join(keys)})')
     parser.add_argument('--json', type=Path, default=None,
                         help='also write every measured value here')
     parser.add_argument('--no-readme', action='store_true',
@@ -55,13 +56,12 @@ def main(argv=None) -> int:
     if out is None:
         out = Path(tempfile.mkdtemp(prefix='scara_bench_smoke_')) if args.smoke \
             else ROOT / 'docs'
-    sizes = suite.SMOKE if args.smoke else suite.FULL
     given = list(sys.argv[1:] if argv is None else argv)
     command = ' '.join(['scripts/benchmark.py'] + ([shlex.join(given)] if given else []))
     progress = Progress()
     progress.note(f'writing {out / "RESULTS.md"} and {out / "figures"}/'
                   + (' (smoke run)' if args.smoke else ''))
-    results = suite.run(out, sizes, only=args.only, progress=progress, smoke=args.smoke,
+    results = suite.run(out, smoke=args.smoke, only=args.only, progress=progress,
                         json_path=args.json, command=command)
     readme = ROOT / 'README.md'
     if not (args.smoke or args.only or args.no_readme) and out.resolve() == (ROOT / 'docs'):

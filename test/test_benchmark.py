@@ -7,10 +7,11 @@ import sys
 
 import pytest
 
-from scara_collab.bench import report, suite
+from scara_collab.bench import report
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.figures import FIGURES
-from scara_collab.bench.util import fmt_seconds, md_table, spread
+from scara_collab.bench.markdown import md_table
+from scara_collab.bench.sections import SECTIONS, SUMMARY_ORDER
+from scara_collab.bench.util import fmt_seconds, spread
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = ROOT.parent / 'shared' / 'seeds'
@@ -37,9 +38,10 @@ def _sections(text):
 def test_every_section_reports_progress_with_elapsed_time(smoke):
     """Every benchmark section prints its progress line with the elapsed time on stderr."""
     _, proc, _ = smoke
-    for title, _ in suite.SECTIONS.values():
-        assert re.search(rf'^\[\s*\d+\.\d s\] {re.escape(title)} done in \d+\.\d s$',
-                         proc.stderr, re.M), f'no progress line for {title!r}'
+    for section in SECTIONS:
+        title = re.escape(section.title)
+        assert re.search(rf'^\[\s*\d+\.\d s\] {title} done in \d+\.\d s$',
+                         proc.stderr, re.M), f'no progress line for {section.title!r}'
 
 
 def test_results_md_has_every_section_with_the_claims_beside(smoke):
@@ -48,7 +50,7 @@ def test_results_md_has_every_section_with_the_claims_beside(smoke):
     text = (out / 'RESULTS.md').read_text()
     sections = _sections(text)
     assert 'Summary' in sections
-    for title in report.TITLES.values():
+    for title in report.headings():
         assert title in sections, f'section {title!r} missing'
         body = sections[title]
         assert 'This section failed' not in body, body[:300]
@@ -61,7 +63,7 @@ def test_figures_exist_are_small_pngs_and_are_linked(smoke):
     """Every figure is a PNG of 5-200 kB, and RESULTS.md links it."""
     out, _, results = smoke
     text = (out / 'RESULTS.md').read_text()
-    for key in FIGURES:
+    for key in (s.key for s in SECTIONS):
         png = out / 'figures' / f'{key}.png'
         assert png.is_file(), f'{png} missing ({results["figures"].get(key)})'
         data = png.read_bytes()
@@ -86,7 +88,7 @@ def test_numbers_come_from_the_run(smoke):
     assert paths['executed']['line']['max_deviation'] < 5e-3
     assert f'{paths["planned"]["joint"]["max_deviation"]:.3g} m' in text
     jobs = results['throughput']['runs']
-    assert jobs and all(r['sim_seconds'] >= results['meta']['sizes']['job_duration']
+    assert jobs and all(r['sim_seconds'] >= results['meta']['sizes']['throughput']['job_duration']
                         for r in jobs)
     sync = results['sync']
     assert sync['moves'] and sync['mirror_error_max_m'] < 0.01
@@ -113,6 +115,28 @@ def test_update_readme_replaces_only_the_marked_block(tmp_path, smoke):
     unmarked.write_text('no markers\n')
     assert not report.update_readme(unmarked, results)
     assert unmarked.read_text() == 'no markers\n'
+
+
+def test_sections_are_registered_once_each():
+    """Each section has its own key and sizes of one kind; the summary names each at most once."""
+    keys = [s.key for s in SECTIONS]
+    assert len(set(keys)) == len(keys)
+    assert len(set(SUMMARY_ORDER)) == len(SUMMARY_ORDER) and set(SUMMARY_ORDER) <= set(keys)
+    for s in SECTIONS:
+        assert type(s.sizes(smoke=True)) is type(s.sizes(smoke=False)), s.key
+
+
+def test_render_reports_failed_and_skipped_sections_and_keeps_other_blocks(smoke):
+    """A failed section shows its error, a skipped one says so; other scripts' blocks stay."""
+    _, _, results = smoke
+    results = dict(results, paths={'error': 'RuntimeError: boom'}, solvers={'skipped': True})
+    block = '<!-- faults:begin -->\n| case |\n<!-- faults:end -->'
+    sections = _sections(report.render(results, f'# old\n\n{block}\n'))
+    first, second = report.headings()[:2]
+    assert sections[first].strip() == '**This section failed:** `RuntimeError: boom`'
+    assert sections[second].strip() == '*Not run in this invocation (`--only`).*'
+    assert sections['Faults against the launcher'].strip() == block
+    assert '| IK latency |' not in sections['Summary']
 
 
 def test_helpers():

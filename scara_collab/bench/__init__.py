@@ -1,7 +1,7 @@
 """Benchmarks: measure what the design documents claim, on this machine, in one run.
 
-Each module measures one thing and returns plain data (dicts of floats, lists, strings) that
-the scripts print and :mod:`scara_collab.bench.report` turns into ``docs/RESULTS.md``:
+Each measurement module measures one thing and returns plain data (dicts of floats, lists,
+strings) that the ``scripts/bench_*.py`` print:
 
 - :mod:`~scara_collab.bench.solvers`: IK, Jacobian, dynamics, collision distance, against
   reference implementations (a textbook numpy IK, Pinocchio, coal) in the same process;
@@ -13,8 +13,18 @@ the scripts print and :mod:`scara_collab.bench.report` turns into ``docs/RESULTS
 - :mod:`~scara_collab.bench.singularity`: pseudo-inverse vs damped least squares near the
   singularities;
 - :mod:`~scara_collab.bench.foresight`: conflict detection and resolution for crossing moves;
-- :mod:`~scara_collab.bench.job`: the sorting job, in one process or through the launcher;
-- :mod:`~scara_collab.bench.suite`: all of them with progress lines, figures and the report.
+- :mod:`~scara_collab.bench.job`, :mod:`~scara_collab.bench.capacity`: the sorting job, in
+  one process or through the launcher, and what bounds its capacity.
+
+The one-command benchmark (``scripts/benchmark.py``) is made of sections,
+:mod:`scara_collab.bench.sections`, one module each: a section runs its measurement with its
+sizes and holds its summary rows, its Markdown and its figure.
+:mod:`~scara_collab.bench.suite` runs them with progress lines;
+:mod:`~scara_collab.bench.report` writes the page around them (``docs/RESULTS.md``) with
+:mod:`~scara_collab.bench.markdown` and :mod:`~scara_collab.bench.figures`, the helpers they
+share. The launcher's fault matrix, soak and job protocol (:mod:`~scara_collab.bench.faults`,
+:mod:`~scara_collab.bench.soak`, :mod:`~scara_collab.bench.protocol`) have scripts of their
+own that write their blocks into the same page.
 
 Figures are measurements, never assertions: nothing here fails because a number is slow.
 """

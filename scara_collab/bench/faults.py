@@ -103,7 +103,10 @@ class Run:
 
 
 class Probe:
-    """A node in this process that talks to the launched graph (publish, listen)."""
+    """A node in this process that talks to the launched graph (publish, listen).
+
+    A context manager: ``with Probe() as probe:`` closes it however the block ends.
+    """
 
     def __init__(self):
         """Join the graph with a node of its own context that keeps the newest /joint_states."""
@@ -156,6 +159,15 @@ class Probe:
         self.node.destroy_node()
         self.rclpy.try_shutdown(context=self.ctx)
 
+    def __enter__(self) -> 'Probe':
+        """Return the probe; it is closed when the ``with`` block ends."""
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        """Close the probe (:meth:`close`); an exception goes on."""
+        self.close()
+        return False
+
 
 # --- injections -------------------------------------------------------------------------------
 def _names() -> List[str]:
@@ -173,8 +185,7 @@ def nan_state_then_target(run: Run) -> None:
     from geometry_msgs.msg import PointStamped
     from sensor_msgs.msg import JointState
     from scara_collab.nodes import conversions as conv
-    probe = Probe()
-    try:
+    with Probe() as probe:
         pub = probe.publisher(JointState, '/joint_states')
         probe.wait_state()
         for _ in range(5):
@@ -187,22 +198,17 @@ def nan_state_then_target(run: Run) -> None:
         target = probe.publisher(PointStamped, '/scara_left/target')
         target.publish(conv.make_point_stamped([2.4, -0.6, 0.5], 'world', 0.0))
         probe.spin(1.0)
-    finally:
-        probe.close()
 
 
 def wall_clock_states(run: Run) -> None:
     """Publish states stamped with wall time (1.79e9 s) for 3 s."""
     from sensor_msgs.msg import JointState
     from scara_collab.nodes import conversions as conv
-    probe = Probe()
-    try:
+    with Probe() as probe:
         pub = probe.publisher(JointState, '/joint_states')
         for _ in range(60):
             pub.publish(conv.joint_state(1.79e9, _names(), [0.0] * 6, [0.0] * 6, [0.0] * 6))
             probe.spin(0.05)
-    finally:
-        probe.close()
 
 
 def raw_crossing(run: Run) -> None:
@@ -215,8 +221,7 @@ def raw_crossing(run: Run) -> None:
     from scara_collab.nodes import conversions as conv
     cell = load_cell()
     left, right = cell.leader, cell.follower
-    probe = Probe()
-    try:
+    with Probe() as probe:
         goal = np.array([1.8, -0.2, 0.4])  # over the belt, in both arms' reach
         target = probe.publisher(PointStamped, '/scara_left/target')
         target.publish(conv.make_point_stamped(goal, 'world', 0.0))
@@ -232,8 +237,6 @@ def raw_crossing(run: Run) -> None:
         pub.publish(conv.trajectory_msg(right.joint_names, move.t, move.q, move.qd, move.qdd,
                                         frame_id='raw/crossing'))
         probe.spin(2.0)
-    finally:
-        probe.close()
 
 
 def rogue_input(run: Run) -> None:
@@ -242,8 +245,7 @@ def rogue_input(run: Run) -> None:
     from geometry_msgs.msg import PointStamped
     from trajectory_msgs.msg import JointTrajectory
     from scara_collab.nodes import conversions as conv
-    probe = Probe()
-    try:
+    with Probe() as probe:
         target = probe.publisher(PointStamped, '/scara_left/target')
         traj = probe.publisher(JointTrajectory, '/scara_left/joint_trajectory')
         probe.wait_state()
@@ -266,8 +268,6 @@ def rogue_input(run: Run) -> None:
         end = time.monotonic() + 60.0  # 100,001 points take a while to arrive: stay till then
         while time.monotonic() < end and not any('points' in m.message for m in heard):
             probe.spin(0.1)
-    finally:
-        probe.close()
 
 
 def sigstop_monitor(run: Run) -> None:

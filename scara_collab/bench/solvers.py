@@ -12,7 +12,8 @@ repeated vectorised calls. For the references without a batch API, N is one call
 ``speedup`` is how many times faster ours is (``< 1`` = slower). Each reference is also
 checked to agree with ours on the same inputs, so the comparison is like for like.
 """
-from typing import Dict, List, Optional
+from functools import partial
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -57,6 +58,29 @@ def display(row: Dict[str, object]) -> Dict[str, str]:
         f'{fmt(row["reference"])} ({row["reference_name"]})'
     ratio = '' if row['speedup'] is None else f'{row["speedup"]:.2g}x'
     return {'ours': fmt(row['ours']), 'reference': ref, 'ratio': ratio}
+
+
+def _time_pair(ours: Callable, reference: Callable, states: Sequence[np.ndarray], number: int,
+               repeat: int) -> Tuple[float, float, float]:
+    """Time ``ours`` and ``reference`` on the first state, and ``ours`` on all at once.
+
+    :param states: the functions' arguments, each ``(N, ...)``: one state is a row of each.
+    :param number: calls per timing loop of the one-state calls.
+    :return: seconds per call: ``(ours, one state; reference, one state; ours, N states)``.
+    """
+    first = [x[0] for x in states]
+    return (per_call(lambda: ours(*first), number, repeat),
+            per_call(lambda: reference(*first), number, repeat),
+            per_call(lambda: ours(*states), 1, repeat))
+
+
+def _max_diff(ours: Callable, reference: Callable, states: Sequence[np.ndarray]) -> float:
+    """Return the largest difference of ``ours`` (N states at once) from ``reference`` (one each).
+
+    :param states: the functions' arguments, each ``(N, ...)``.
+    """
+    theirs = np.array([reference(*state) for state in zip(*states)])
+    return float(np.max(np.abs(ours(*states) - theirs)))
 
 
 def _coal_capsule_pose(coal, p0: np.ndarray, p1: np.ndarray):
@@ -143,33 +167,22 @@ def measure(quick: bool = False, log: Optional[Log] = None) -> Dict[str, object]
     model = pin.buildModelFromXML(expand_xacro('scara_arm.urdf.xacro', robot=arm.name))
     data = model.createData()
     fid = model.getFrameId(f'{arm.name}_quill')
-    q0, qd0, qdd0 = q[0], qd[0], qdd[0]
-    tau = dynamics.inverse_dynamics(arm, q, qd, qdd, with_friction=False)
-    tau0 = tau[0]
 
     def pin_jac(x):
         return pin.computeFrameJacobian(model, data, x, fid, pin.LOCAL_WORLD_ALIGNED)
 
-    t_j = per_call(lambda: kinematics.jacobian(arm, q0), n_call, repeat)
-    t_jp = per_call(lambda: pin_jac(q0), n_call, repeat)
-    t_jv = per_call(lambda: kinematics.jacobian(arm, q), 1, repeat)
+    jac = partial(kinematics.jacobian, arm)
+    ours_id = partial(dynamics.inverse_dynamics, arm, with_friction=False)
+    ours_fd = partial(dynamics.forward_dynamics, arm, with_friction=False)
+    rnea, aba = partial(pin.rnea, model, data), partial(pin.aba, model, data)
+    tau = ours_id(q, qd, qdd)
     k = min(200, n_vec)
-    jac_err = max(float(np.max(np.abs(kinematics.jacobian(arm, x) - pin_jac(x)[:3])))
-                  for x in q[:k])
-    t_id = per_call(lambda: dynamics.inverse_dynamics(arm, q0, qd0, qdd0, with_friction=False),
-                    n_call, repeat)
-    t_rnea = per_call(lambda: pin.rnea(model, data, q0, qd0, qdd0), n_call, repeat)
-    t_idv = per_call(lambda: dynamics.inverse_dynamics(arm, q, qd, qdd, with_friction=False),
-                     1, repeat)
-    id_err = float(np.max(np.abs(tau[:k] - np.array(
-        [pin.rnea(model, data, a, b, c) for a, b, c in zip(q[:k], qd[:k], qdd[:k])]))))
-    t_fd = per_call(lambda: dynamics.forward_dynamics(arm, q0, qd0, tau0, with_friction=False),
-                    n_call, repeat)
-    t_aba = per_call(lambda: pin.aba(model, data, q0, qd0, tau0), n_call, repeat)
-    t_fdv = per_call(lambda: dynamics.forward_dynamics(arm, q, qd, tau, with_friction=False),
-                     1, repeat)
-    fd_err = float(np.max(np.abs(qdd[:k] - np.array(
-        [pin.aba(model, data, a, b, c) for a, b, c in zip(q[:k], qd[:k], tau[:k])]))))
+    t_j, t_jp, t_jv = _time_pair(jac, pin_jac, (q,), n_call, repeat)
+    jac_err = _max_diff(jac, lambda x: pin_jac(x)[:3], (q[:k],))
+    t_id, t_rnea, t_idv = _time_pair(ours_id, rnea, (q, qd, qdd), n_call, repeat)
+    id_err = _max_diff(ours_id, rnea, (q[:k], qd[:k], qdd[:k]))
+    t_fd, t_aba, t_fdv = _time_pair(ours_fd, aba, (q, qd, tau), n_call, repeat)
+    fd_err = _max_diff(ours_fd, aba, (q[:k], qd[:k], tau[:k]))
     rows += [
         _latency('Jacobian, one state', t_j, t_jp, 'Pinocchio'),
         _rate(f'Jacobian, {n_vec} states', n_vec / t_jv, 1 / t_jp, 'Pinocchio, one by one',

@@ -1,11 +1,12 @@
-"""Shared helpers of the benchmarks: the machine, timing, progress lines, number formats."""
+"""Shared helpers of the benchmarks: the machine, timing, progress lines, number formats, JSON."""
+import json
 import math
 import os
 import platform
 import sys
 import time
 import timeit
-from typing import Callable, Dict, Iterable, Optional, Sequence, TextIO
+from typing import Callable, Dict, Iterable, Optional, TextIO
 
 import numpy as np
 
@@ -128,13 +129,25 @@ def spread(values: Iterable[float]) -> Dict[str, float]:
             'min': float(x.min()), 'max': float(x.max())}
 
 
-def md_table(head: Sequence[str], rows: Iterable[Sequence[object]],
-             align: Optional[str] = None) -> str:
-    """Return a Markdown table; ``align`` is one of ``l r c`` per column (default left)."""
-    align = align or 'l' * len(head)
-    marks = {'l': '---', 'r': '---:', 'c': ':---:'}
-    lines = ['| ' + ' | '.join(head) + ' |',
-             '|' + '|'.join(marks[a] for a in align) + '|']
-    for row in rows:
-        lines.append('| ' + ' | '.join(str(c) for c in row) + ' |')
-    return '\n'.join(lines)
+def _plain(x):
+    """Return a numpy array as a list, a numpy scalar as a Python number (``json``'s hook)."""
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    raise TypeError(f'{type(x).__name__} is not JSON serialisable')
+
+
+def write_json(path, data, indent: int = 2) -> None:
+    """Write ``data`` to ``path`` as JSON, numpy arrays and scalars as lists and numbers.
+
+    Example::
+
+        >>> import json, tempfile
+        >>> with tempfile.NamedTemporaryFile('r', suffix='.json') as f:
+        ...     write_json(f.name, {'q': np.zeros(2), 'n': np.int64(3)}, indent=None)
+        ...     json.load(f)
+        {'q': [0.0, 0.0], 'n': 3}
+    """
+    with open(path, 'w') as f:
+        json.dump(data, f, indent=indent, default=_plain)
