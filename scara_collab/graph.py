@@ -4,7 +4,10 @@ Every node of the cell is one :class:`NodeSpec`: its name (the node name, the co
 and the log file), the entry point of its executable, the class that builds it (for running
 several nodes in one process), the ``config/*.yaml`` files whose keys it declares as
 parameters, and what "ready" means for it on the graph. :func:`job_params` says what a job
-mode sets on which node, :func:`ros_args` is the one ``--ros-args`` builder.
+mode sets on which node, :func:`ros_args` is the one ``--ros-args`` builder. The topics the
+nodes publish are :data:`TOPICS` (name, type and the publisher's QoS, one of the named profiles
+of :data:`QOS`, which :mod:`scara_collab.nodes.qos` turns into rclpy profiles); the run
+recorder and its MCAP log subscribe what :func:`topics` lists.
 
 Everything that starts the graph reads this module: the launcher (one process per node, or
 all in one container), ``setup.py`` (the console scripts, so ``ros2 run`` has the same
@@ -25,8 +28,12 @@ the tests' graphs (``test/ros_harness.py``). In launch order::
 {'enabled': 'true'}
 >>> ros_args((), {'mode': 'joint'}, config_dir=Path('/cfg'))
 ['--ros-args', '-p', 'use_sim_time:=true', '-p', 'mode:=joint']
+>>> topic('/emergency_stop')
+Topic(name='/emergency_stop', type='std_msgs/msg/Bool', qos='latched')
+>>> QOS['latched']
+Qos(depth=1, latched=True)
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import importlib
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple
@@ -34,6 +41,7 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 PACKAGE = 'scara_collab'
 JOB_MODES = ('single', 'collaborative', 'mirrored')
 LAUNCH_MODES = ('idle',) + JOB_MODES  # idle: the graph without the sorting job
+ROBOTS = ('scara_left', 'scara_right')  # the arms' namespaces (config/cell.yaml), leader first
 
 
 @dataclass(frozen=True)
@@ -88,11 +96,11 @@ NODES: Tuple[NodeSpec, ...] = (
     NodeSpec('pybullet_bridge', _n('pybullet_bridge:main'), _n('pybullet_bridge:PyBulletBridge'),
              ('simulation', 'controllers'), Readiness('clock')),
     NodeSpec('left_planner', _n('planner:main_left'), _n('planner:Planner'), ('controllers',),
-             Readiness('subscribed', '/scara_left/target'),
-             {'robot': 'scara_left', 'node_name': 'left_planner'}),
+             Readiness('subscribed', f'/{ROBOTS[0]}/target'),
+             {'robot': ROBOTS[0], 'node_name': 'left_planner'}),
     NodeSpec('right_planner', _n('planner:main_right'), _n('planner:Planner'), ('controllers',),
-             Readiness('subscribed', '/scara_right/target'),
-             {'robot': 'scara_right', 'node_name': 'right_planner'}),
+             Readiness('subscribed', f'/{ROBOTS[1]}/target'),
+             {'robot': ROBOTS[1], 'node_name': 'right_planner'}),
     NodeSpec('replication_manager', _n('replication_manager:main'),
              _n('replication_manager:ReplicationManager'), (),
              Readiness('service', '/replication_manager/enable', 'std_srvs/srv/SetBool')),
@@ -107,6 +115,99 @@ NODES: Tuple[NodeSpec, ...] = (
 )
 BY_NAME: Dict[str, NodeSpec] = {n.name: n for n in NODES}
 BY_ENTRY: Dict[str, NodeSpec] = {n.entry: n for n in NODES}
+
+
+@dataclass(frozen=True)
+class Qos:
+    """A named QoS profile, as data: keep the last ``depth`` messages, reliable.
+
+    ``latched``: transient local, so a late subscriber gets the last value; else volatile.
+    """
+
+    depth: int
+    latched: bool = False
+
+
+#: the graph's QoS profiles by name (:mod:`scara_collab.nodes.qos` makes the rclpy profiles)
+QOS: Dict[str, Qos] = {
+    'default': Qos(10),                # rclpy's usual depth: states, targets, statuses
+    'latest': Qos(1),                  # only the newest matters (a backlog would be stale)
+    'events': Qos(100),                # a stream to keep whole (events, move statuses)
+    'latched': Qos(1, latched=True),   # latched state (/emergency_stop)
+    'recording': Qos(200),             # a recorder's queue: a burst while the launcher is busy
+}
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One topic of the graph: absolute name, full type name, the publisher's QoS profile."""
+
+    name: str
+    type: str                  # 'pkg/msg/Type'
+    qos: str = 'default'       # a name of QOS
+
+    @property
+    def latched(self) -> bool:
+        """Return True if the topic is latched: a late subscriber gets the last value."""
+        return QOS[self.qos].latched
+
+
+_STATUS = 'diagnostic_msgs/msg/DiagnosticStatus'
+_POINT = 'geometry_msgs/msg/PointStamped'
+#: the cell-wide topics the nodes publish (not /sim/lockstep: scara_collab.nodes.lockstep)
+TOPICS: Tuple[Topic, ...] = (
+    Topic('/clock', 'rosgraph_msgs/msg/Clock'),                    # pybullet_bridge
+    Topic('/joint_states', 'sensor_msgs/msg/JointState'),
+    Topic('/conveyor/items', 'visualization_msgs/msg/MarkerArray'),
+    Topic('/conveyor/events', _STATUS, 'events'),
+    Topic('/collab/target', _POINT),                               # automation_manager
+    Topic('/collision_monitor/min_distance', 'std_msgs/msg/Float64'),
+    Topic('/collision_monitor/status', _STATUS),
+    Topic('/collision_monitor/capsules', 'visualization_msgs/msg/MarkerArray'),
+    Topic('/replication_manager/mirror_error', 'std_msgs/msg/Float64'),
+    Topic('/replication_manager/status', _STATUS),
+    Topic('/automation_manager/stats', _STATUS),
+    Topic('/emergency_stop', 'std_msgs/msg/Bool', 'latched'),      # collision_monitor
+)
+#: the topics of each robot, ``{robot}`` standing for its namespace
+ROBOT_TOPICS: Tuple[Topic, ...] = (
+    Topic('/{robot}/target', _POINT),                              # the job or the mirror
+    Topic('/{robot}/joint_trajectory', 'trajectory_msgs/msg/JointTrajectory'),  # its planner
+    Topic('/{robot}/planned_path', 'nav_msgs/msg/Path'),
+    Topic('/{robot}/planner_status', _STATUS, 'events'),
+    Topic('/{robot}/execution_status', _STATUS, 'events'),         # pybullet_bridge
+)
+
+
+def topics(robots: Sequence[str] = ROBOTS) -> List[Topic]:
+    """Return the topics of a run: :data:`TOPICS`, then :data:`ROBOT_TOPICS` per robot.
+
+    :param robots: the robot namespaces, e.g. ``('scara_left', 'scara_right')``.
+    """
+    return list(TOPICS) + [replace(t, name=t.name.format(robot=robot))
+                           for robot in robots for t in ROBOT_TOPICS]
+
+
+def topic(name: str, robots: Sequence[str] = ROBOTS) -> Topic:
+    """Return the topic called ``name`` (absolute).
+
+    :raises KeyError: if the graph has no such topic.
+    """
+    try:
+        return next(t for t in topics(robots) if t.name == name)
+    except StopIteration:
+        raise KeyError(f'no topic {name!r} in the graph') from None
+
+
+def message_class(type_name: str):
+    """Return the Python class of a message type (imported on call, like :meth:`NodeSpec.build`).
+
+    :param type_name: ``'pkg/msg/Type'`` or ``'pkg/Type'``, e.g. ``'std_msgs/msg/Bool'``.
+    """
+    parts = type_name.split('/')
+    if len(parts) not in (2, 3) or (len(parts) == 3 and parts[1] != 'msg'):
+        raise ValueError(f'not a ROS 2 message type name: {type_name!r} (want pkg/msg/Type)')
+    return getattr(importlib.import_module(f'{parts[0]}.msg'), parts[-1])
 
 
 def node(name: str) -> NodeSpec:

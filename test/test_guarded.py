@@ -14,7 +14,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from scara_collab import graph
 from scara_collab.nodes import runner
-from scara_collab.run.recorder import RunRecorder
+from scara_collab.nodes.recorder import RunRecorder
 
 SIM = {'use_sim_time': 'true'}
 RCLPY_OWN = ('/clock', '/parameter_events')  # rclpy's time source and parameter events

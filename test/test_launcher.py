@@ -223,28 +223,14 @@ def test_the_container_reads_one_entry_and_its_arguments_per_node():
         assert callable(getattr(importlib.import_module(module), func)), spec.entry
         module, cls = spec.component.split(':')
         assert isinstance(getattr(importlib.import_module(module), cls), type), spec.component
-    from scara_collab.run import launcher
+    from scara_collab.run import launcher, stages as plan
     args = launcher.parse_args(['--one-process'])
     assert args.one_process
-    stages = launcher.stages(args, True)
+    stages = plan.stages(args, True)
     assert [s.name for s in stages] == [n.name for n in graph.job_nodes()]
-    cmd = launcher.command(launcher.one_process(stages), Path('/cfg'))
-    assert container.parse(cmd[3:])[0] == (stages[0].entry, launcher.node_args(stages[0],
-                                                                               Path('/cfg')))
-
-
-def test_the_cpu_meter_gives_cpu_seconds_per_sim_second_per_process():
-    """The CPU meter gives each process's CPU seconds per sim second, and their total."""
-    from scara_collab.run.telemetry import CpuMeter, process_cpu_seconds
-    own = process_cpu_seconds(os.getpid())
-    assert own is not None and own > 0
-    assert process_cpu_seconds(2 ** 22 + 7) is None  # no such process
-    meter = CpuMeter()
-    assert not meter.marked
-    meter.mark({'a': 1.0, 'b': 10.0, 'gone': None}, sim_time=5.0)
-    assert meter.marked
-    assert meter.close({'a': 3.0, 'b': 11.0, 'gone': 4.0}, sim_time=15.0) == {
-        'a': 0.2, 'b': 0.1, 'total': 0.3}
+    cmd = plan.command(plan.one_process(stages), Path('/cfg'))
+    assert container.parse(cmd[3:])[0] == (stages[0].entry, plan.node_args(stages[0],
+                                                                           Path('/cfg')))
 
 
 def test_sigint_mid_run_shuts_down_cleanly(launch, tmp_path):
@@ -436,12 +422,13 @@ def test_viewer_flag_adds_the_viewer_stage_last(monkeypatch):
     """``--viewer`` adds the viewer stage last; a busy or zero port is refused."""
     import socket
     from scara_collab.run import launcher
-    names = [s.name for s in launcher.stages(launcher.parse_args([]), True)]
+    from scara_collab.run.stages import stages
+    names = [s.name for s in stages(launcher.parse_args([]), True)]
     assert 'cell_viewer' not in names
     with socket.socket() as probe:
         probe.bind(('', 0))
         port = probe.getsockname()[1]  # free once closed
-    last = launcher.stages(launcher.parse_args(['--viewer', str(port)]), True)[-1]
+    last = stages(launcher.parse_args(['--viewer', str(port)]), True)[-1]
     assert last.name == 'cell_viewer' and last.params['port'] == str(port)
     assert f'http://localhost:{port}' in last.ready
     monkeypatch.setattr(launcher, 'port_free', lambda port: True)
@@ -459,8 +446,9 @@ def test_viewer_flag_adds_the_viewer_stage_last(monkeypatch):
 
 def test_the_lockstep_watch_names_only_a_node_that_leaves_a_clock_unanswered():
     """The lockstep watch names only a node that left a newer clock unanswered too long."""
+    from scara_collab.nodes.lockstep_watch import LockstepWatch
     from scara_collab.run import launcher
-    watch = launcher.LockstepWatch(['/a', '/b'], limit=10.0)
+    watch = LockstepWatch(['/a', '/b'], limit=10.0)
     for name in ('/a', '/b', '/not_launched'):
         watch.answer(name, 1.0, 0.0)
     assert set(watch.reached) == {'/a', '/b'}
@@ -497,10 +485,10 @@ def test_the_job_start_is_asked_again_while_the_manager_is_not_connected(tmp_pat
             return SimpleNamespace(success=ok, message='started' if ok else
                                    'not connected yet: /scara_right/target (no subscriber)')
 
-        slow = run.check
-        monkeypatch.setattr(run, 'call', call)
-        monkeypatch.setattr(run, 'check', lambda: (time.sleep(0.7), slow()))  # descheduled
-        monkeypatch.setattr(run, 'set_bridge', lambda **values: None)
+        slow = run.ros.check
+        monkeypatch.setattr(run.ros, 'call', call)
+        monkeypatch.setattr(run.ros, 'check', lambda: (time.sleep(0.7), slow()))  # descheduled
+        monkeypatch.setattr(run.ros, 'set_bridge', lambda **values: None)
         monkeypatch.setattr(run.recorder, 'start_job', lambda: 0.0)
         run.start_job()
         assert len(asked) == 3 and run.job_started

@@ -25,12 +25,13 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
 from scara_collab.core.trajectory import joint_move
+from scara_collab.graph import message_class, topics
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.mcap_recorder import McapLog
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
+from scara_collab.nodes.recorder import RunRecorder
 from scara_collab.run.mcap_log import (
-    iter_messages, McapLog, message_class, msg_file, Reading, ros2msg_definition, run_topics,
-    SEPARATOR)
-from scara_collab.run.recorder import RunRecorder
+    iter_messages, msg_file, Reading, ros2msg_definition, SEPARATOR)
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ('scara_left', 'scara_right')
@@ -126,7 +127,7 @@ def test_schema_text_is_the_main_msg_then_every_nested_type():
         ros2msg_definition('std_msgs/msg/NoSuchType')
 
 
-@pytest.mark.parametrize('topic', run_topics(ROBOTS), ids=lambda t: t.name)
+@pytest.mark.parametrize('topic', topics(ROBOTS), ids=lambda t: t.name)
 def test_every_schema_parses_with_mcap_ros2_and_decodes_real_bytes(topic):
     """Every recorded topic's schema parses with mcap_ros2 and decodes a message's bytes."""
     schema = Schema(id=1, name=topic.type, encoding='ros2msg',

@@ -16,8 +16,8 @@ from scara_collab.core.kinematics import fk
 from scara_collab.core.mirror import mirror_joints, mirror_point
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.recorder import RunRecorder
 from scara_collab.run import report
-from scara_collab.run.recorder import RunRecorder
 from scara_collab.run.telemetry import parse_value, RunLog, state_columns
 
 PNG = b'\x89PNG\r\n\x1a\n'

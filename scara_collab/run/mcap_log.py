@@ -1,43 +1,37 @@
-"""Record a run's ROS topics into an MCAP file that ``ros2 bag`` and Foxglove open.
+"""The MCAP file of a run, in the layout ``ros2 bag`` and Foxglove open: schemas, writing, reading.
 
-:class:`McapLog` subscribes the topics raw (``raw=True``: the CDR bytes as they came off the
-wire, never deserialized or re-encoded) on a node of its own that no executor spins; a
-wall-clock timer on the node it is given (the launcher's run recorder) drains their queues
-every ``period`` and writes every message, in receive order, into one MCAP file in the layout
-of rosbag2's MCAP storage plugin:
+:class:`McapWriter` writes messages that came off the wire as CDR bytes (never deserialized
+or re-encoded) into one MCAP file in the layout of rosbag2's MCAP storage plugin; the node
+side that takes them raw from the graph is :class:`scara_collab.nodes.mcap_recorder.McapLog`
+(the launcher's ``--record``). No rclpy here.
 
 - the ``ros2`` profile; per topic a channel with message encoding ``cdr`` and a schema named
   by the full type (``sensor_msgs/msg/JointState``) with encoding ``ros2msg``;
 - the schema text is the type's ``.msg`` file followed by every nested type's, each after a
   line of 80 ``=`` and ``MSG: pkg/Type`` (:func:`ros2msg_definition`, the concatenation
   rosbag2 writes), read at run time from the message packages' ``share/<pkg>/msg`` folders;
-- ``log_time`` is the receive time in sim time (as ``ros2 bag record --use-sim-time``): if
-  the given node has ``use_sim_time`` (the run recorder) and ``/clock`` is recorded, a
-  ``/clock`` message is logged at its own time and every other message at the last tick
-  received before it (receive order from the middleware's receive timestamps), so the file
-  is consistent in itself; otherwise the wall receive time. Log times never go backwards.
-  ``publish_time`` is the same (there is no sim-time send stamp); ``sequence`` counts the
-  messages of each channel.
+- ``log_time`` is the receive time in sim time (as ``ros2 bag record --use-sim-time``): with
+  ``sim_clock`` (the recording node is on sim time and ``/clock`` is recorded), a ``/clock``
+  message is logged at its own time and every other message at the last tick received before
+  it (receive order from the middleware's receive timestamps), so the file is consistent in
+  itself; otherwise the wall receive time. Log times never go backwards. ``publish_time`` is
+  the same (there is no sim-time send stamp); ``sequence`` counts the messages of each
+  channel.
 
 The channels carry no ``offered_qos_profiles`` metadata (rosbag2 reads its absence as
 "default QoS" when it plays the file back).
 
 The file is chunked (``chunk_size`` bytes of messages, zstd-compressed) and the stream is
 flushed at least every ``flush_period`` wall seconds, so a run that is killed without
-:meth:`McapLog.close` loses at most the last chunk; such a file has no footer but
-:func:`iter_messages` (and ``mcap recover``) still read it. :meth:`McapLog.close` (the run
-recorder calls it when the run ends) writes the summary and the footer.
+:meth:`McapWriter.close` loses at most the last chunk; such a file has no footer but
+:func:`iter_messages` (and ``mcap recover``) still read it. :meth:`McapWriter.close` writes the
+summary and the footer.
 
-Usage (a sketch, not a doctest: it needs a running node, e.g. the launcher's run
-recorder)::
+Reading (a sketch, not a doctest: it needs a recorded run)::
 
-    log = McapLog(node, 'runs/x/run.mcap', run_topics(('scara_left', 'scara_right')))
-    ...                                   # spin the node: its timer drains the topics
-    log.close()                           # {'mcap': {'file': ..., 'messages': ...}}
     for topic, type_name, log_time, data in iter_messages('runs/x/run.mcap'): ...
 """
 from functools import lru_cache
-import importlib
 import importlib.util
 import os
 from pathlib import Path
@@ -45,16 +39,13 @@ import re
 import struct
 import sys
 import time
-from typing import Dict, Iterable, Iterator, List, NamedTuple, Optional, Sequence, Tuple, Union
+from typing import Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple, Union
 
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
-from rclpy.clock import Clock, ClockType
-from rclpy.node import Node
-from rclpy.qos import QoSProfile
 
-from scara_collab.nodes.qos import LATCHED
+from scara_collab.graph import Topic
 
 MCAP_FILE = 'run.mcap'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
@@ -65,50 +56,8 @@ SEPARATOR = '=' * 80
 PRIMITIVES = frozenset((
     'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16', 'int32',
     'uint32', 'int64', 'uint64', 'string', 'wstring'))
-STREAM = QoSProfile(depth=200)  # a burst while the launcher is busy
 _TYPE = re.compile(r'^([A-Za-z][A-Za-z0-9_]*)/(?:msg/)?([A-Za-z][A-Za-z0-9_]*)$')
 _FIELD = re.compile(r'^([A-Za-z][A-Za-z0-9_/]*)')
-
-
-class Topic(NamedTuple):
-    """One recorded topic: absolute name, full type name, and whether it is latched."""
-
-    name: str
-    type: str
-    latched: bool = False
-
-
-def run_topics(robots: Sequence[str]) -> List[Topic]:
-    """Return the topics of a run (SPEC section 3 and what the nodes publish besides).
-
-    :param robots: the robot namespaces, e.g. ``('scara_left', 'scara_right')``.
-    :return: the cell-wide topics, then five per robot (target, joint_trajectory,
-        planned_path, planner_status, execution_status).
-    """
-    status = 'diagnostic_msgs/msg/DiagnosticStatus'
-    out = [
-        Topic('/clock', CLOCK_TYPE),
-        Topic('/joint_states', 'sensor_msgs/msg/JointState'),
-        Topic('/conveyor/items', 'visualization_msgs/msg/MarkerArray'),
-        Topic('/conveyor/events', status),
-        Topic('/collab/target', 'geometry_msgs/msg/PointStamped'),
-        Topic('/collision_monitor/min_distance', 'std_msgs/msg/Float64'),
-        Topic('/collision_monitor/status', status),
-        Topic('/collision_monitor/capsules', 'visualization_msgs/msg/MarkerArray'),
-        Topic('/replication_manager/mirror_error', 'std_msgs/msg/Float64'),
-        Topic('/replication_manager/status', status),
-        Topic('/automation_manager/stats', status),
-        Topic('/emergency_stop', 'std_msgs/msg/Bool', latched=True),
-    ]
-    for robot in robots:
-        out += [
-            Topic(f'/{robot}/target', 'geometry_msgs/msg/PointStamped'),
-            Topic(f'/{robot}/joint_trajectory', 'trajectory_msgs/msg/JointTrajectory'),
-            Topic(f'/{robot}/planned_path', 'nav_msgs/msg/Path'),
-            Topic(f'/{robot}/planner_status', status),
-            Topic(f'/{robot}/execution_status', status),
-        ]
-    return out
 
 
 # --- message definitions ---------------------------------------------------------------------
@@ -204,12 +153,6 @@ def ros2msg_definition(type_name: str) -> str:
     return expand(type_name, 0)
 
 
-def message_class(type_name: str):
-    """Return the Python class of a message type (``'std_msgs/msg/Bool'`` -> ``Bool``)."""
-    package, name = _split_type(type_name)
-    return getattr(importlib.import_module(f'{package}.msg'), name)
-
-
 # --- writing ---------------------------------------------------------------------------------
 def clock_nanoseconds(data: bytes) -> int:
     """Return the time in a serialized ``rosgraph_msgs/msg/Clock``, ns (0 if unreadable).
@@ -223,33 +166,26 @@ def clock_nanoseconds(data: bytes) -> int:
     return max(0, sec * 1_000_000_000 + nsec)
 
 
-class McapLog:
-    """Write the topics of a run into an MCAP file (see the module docstring).
+class McapWriter:
+    """Write the messages of a run into an MCAP file (see the module docstring).
 
-    :param node: the node whose executor drives the recording (a wall-clock timer on it drains
-        the subscriptions every ``period``) and whose ``use_sim_time`` selects sim log times.
     :param path: the ``.mcap`` file (its folder is created; an existing file is replaced).
-    :param topics: what to record; default :func:`run_topics` of ``robots``.
-    :param robots: robot namespaces for the default topics.
+    :param topics: the channels, in order (:class:`scara_collab.graph.Topic`: name and type).
+    :param sim_clock: log on the sim time of the recorded ``/clock`` (if it is among the
+        topics), else on the wall receive time.
     :param chunk_size: bytes of messages per chunk (an unclean kill loses at most one).
     :param compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
-    :param period: wall seconds between drains (each subscription queues ``depth`` messages:
-        200 = 2 sim s of a 100 Hz topic, enough up to 40x real time).
     :param flush_period: wall seconds between flushes of the file stream.
-    :raises FileNotFoundError: if a message definition is missing (nothing is subscribed).
+    :raises FileNotFoundError: if a message definition is missing (no file is opened).
     """
 
-    def __init__(self, node: Node, path: Union[str, Path],
-                 topics: Optional[Iterable[Topic]] = None,
-                 robots: Sequence[str] = ('scara_left', 'scara_right'),
+    def __init__(self, path: Union[str, Path], topics: Iterable[Topic], sim_clock: bool = False,
                  chunk_size: int = 256 * 1024, compression: str = 'zstd',
-                 period: float = 0.05, flush_period: float = 2.0):
-        """Open the file, register the schemas and channels, subscribe and start the timer."""
-        self.node = node
+                 flush_period: float = 2.0):
+        """Open the file and register a schema per type and a channel per topic."""
         self.path = Path(path)
-        self.topics = list(run_topics(robots) if topics is None else topics)
+        self.topics = list(topics)
         definitions = {t.type: ros2msg_definition(t.type) for t in self.topics}  # fail early
-        classes = {t.type: message_class(t.type) for t in self.topics}
         compressions = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
                         'none': CompressionType.NONE}
         if compression not in compressions:
@@ -267,58 +203,32 @@ class McapLog:
         self.first_log_time: Optional[int] = None
         self._flush_period = float(flush_period)
         self._next_flush = time.monotonic() + self._flush_period
-        self._clock = node.get_clock()
-        # on sim time the recorded /clock is the clock: every message is logged at the last
-        # tick received before it (by receive order, so the file is consistent in itself)
-        self.sim_clock = any(t.name == '/clock' and t.type == CLOCK_TYPE
-                             for t in self.topics) and bool(
-            node.get_parameter('use_sim_time').value)
-        # The subscriptions live on a node of their own that no executor spins: drain() takes
-        # their queues in one go (rclpy's take_message), which costs a fifth of an executor
-        # callback per message and leaves the recorder node's wait set as it was.
-        self._reader = Node(f'{node.get_name()}_mcap_log', context=node.context,
-                            start_parameter_services=False)
-        self._subs: List[tuple] = []
-        for topic in self.topics:
-            channel = self._writer.register_channel(topic.name, MESSAGE_ENCODING,
-                                                    schemas[topic.type])
-            sub = self._reader.create_subscription(
-                classes[topic.type], topic.name, _never_called,
-                LATCHED if topic.latched else STREAM, raw=True)
-            self._subs.append((sub, channel, topic.name, topic.type == CLOCK_TYPE))
-        self._timer = node.create_timer(float(period), self.drain,
-                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.sim_clock = bool(sim_clock) and any(t.name == '/clock' and t.type == CLOCK_TYPE
+                                                 for t in self.topics)
+        # per topic index: (channel id, topic name, is it /clock)
+        self._channels: List[Tuple[int, str, bool]] = [
+            (self._writer.register_channel(t.name, MESSAGE_ENCODING, schemas[t.type]), t.name,
+             t.type == CLOCK_TYPE) for t in self.topics]
 
     @property
     def messages(self) -> int:
         """Messages written so far."""
         return sum(self.counts.values())
 
-    def drain(self) -> int:
-        """Write every message waiting in the subscriptions, in receive order; return how many.
+    def write(self, batch: List[Tuple[int, int, bytes]], now: int = 0) -> int:
+        """Write a batch of received messages in receive order; return how many.
 
-        Log times: see the module docstring (receive order from the middleware's receive
-        timestamps; sim time from the ``/clock`` messages among them).
+        :param batch: ``(receive time ns or 0, topic index in topics, CDR bytes)`` each.
+        :param now: wall time, ns, for messages without a receive time (off sim time).
         """
-        if self.closed:
-            return 0
-        batch = []
-        for k, (sub, _, _, _) in enumerate(self._subs):
-            with sub.handle:
-                while True:
-                    taken = sub.handle.take_message(sub.msg_type, True)
-                    if taken is None:
-                        break
-                    batch.append((taken[1].get('received_timestamp') or 0, k, taken[0]))
-        if not batch:
+        if self.closed or not batch:
             return 0
         batch.sort(key=_receive_order)
         add = self._writer.add_message
-        counts, subs = self.counts, self._subs
+        counts, channels = self.counts, self._channels
         last = self.last_log_time
-        now = None if self.sim_clock else self._clock.now().nanoseconds
         for received, k, data in batch:
-            _, channel, topic, is_clock = subs[k]
+            channel, topic, is_clock = channels[k]
             if self.sim_clock:
                 t = max(clock_nanoseconds(data), last) if is_clock else last
             else:
@@ -340,31 +250,19 @@ class McapLog:
             self._stream.flush()
 
     def close(self) -> Dict[str, object]:
-        """Drain what is still queued, then write the summary and the footer (idempotent).
+        """Write the summary and the footer and close the file (idempotent).
 
         :return: ``{'mcap': {'file', 'messages', 'topics', 'bytes'}}`` for the run summary.
         """
         if not self.closed:
+            self.closed = True
             try:
-                self.drain()
+                self._writer.finish()
             finally:
-                self.closed = True
-                try:
-                    self.node.destroy_timer(self._timer)
-                    self._reader.destroy_node()
-                except Exception:  # noqa: BLE001 - the context may be gone; write the file
-                    pass
-                try:
-                    self._writer.finish()
-                finally:
-                    self._stream.close()
+                self._stream.close()
         return {'mcap': {'file': self.path.name, 'messages': self.messages,
                          'topics': {k: v for k, v in self.counts.items() if v},
                          'bytes': self.path.stat().st_size if self.path.exists() else 0}}
-
-
-def _never_called(_msg) -> None:
-    """Do nothing: the drained subscriptions' node is spun by no executor."""
 
 
 def _receive_order(entry: tuple) -> int:

@@ -108,6 +108,17 @@ def _job_line(ax, t0: Optional[float]) -> None:
         ax.axvline(t0, color='0.5', lw=0.8, ls=':', label=f'job start (t={t0:.1f} s)')
 
 
+def _save(fig, ax, path: Path, xlabel: str, ylabel: str, title: str, **legend) -> Path:
+    """Label the axes, title, grid and legend (``legend``: its keywords); save to ``path``."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    ax.grid(True, lw=0.3)
+    ax.legend(**legend)
+    fig.savefig(path, dpi=110)
+    return path
+
+
 def plot_tool_paths(cell: CellModel, ts: Dict[str, np.ndarray], path: Path) -> Path:
     """Top view: belt, bases and reach, bins, both tool paths; saved to ``path``."""
     from matplotlib.patches import Circle, Rectangle
@@ -146,13 +157,8 @@ def plot_tool_paths(cell: CellModel, ts: Dict[str, np.ndarray], path: Path) -> P
     ax.set_xlim(lo[0] - 0.2, hi[0] + 0.2)
     ax.set_ylim(lo[1] - 0.2, hi[1] + 0.2)
     ax.set_aspect('equal')
-    ax.set_xlabel('x (m)')
-    ax.set_ylabel('y (m)')
-    ax.set_title('Tool paths, top view (dashed: reach)')
-    ax.grid(True, lw=0.3)
-    ax.legend(loc='upper right', fontsize=7)
-    fig.savefig(path, dpi=110)
-    return path
+    return _save(fig, ax, path, 'x (m)', 'y (m)', 'Tool paths, top view (dashed: reach)',
+                 loc='upper right', fontsize=7)
 
 
 def plot_arm_distance(ts: Dict[str, np.ndarray], margin: float, path: Path,
@@ -170,13 +176,7 @@ def plot_arm_distance(ts: Dict[str, np.ndarray], margin: float, path: Path,
                     textcoords='offset points', fontsize=8)
     _job_line(ax, t0)
     ax.set_ylim(bottom=min(0.0, float(d.min()) if d.size else 0.0))
-    ax.set_xlabel('sim time (s)')
-    ax.set_ylabel('distance (m)')
-    ax.set_title('Arm separation')
-    ax.grid(True, lw=0.3)
-    ax.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
-    return path
+    return _save(fig, ax, path, 'sim time (s)', 'distance (m)', 'Arm separation', fontsize=8)
 
 
 def plot_item_counts(events: List[Dict[str, str]], path: Path, t_end: Optional[float] = None,
@@ -192,13 +192,8 @@ def plot_item_counts(events: List[Dict[str, str]], path: Path, t_end: Optional[f
         y = [0] + list(range(1, len(times) + 1)) + ([len(times)] if t_end is not None else [])
         ax.step(x, y, where='post', color=colour, label=f'{kind} ({len(times)})')
     _job_line(ax, t0)
-    ax.set_xlabel('sim time (s)')
-    ax.set_ylabel('items')
-    ax.set_title('Items over time (conveyor events)')
-    ax.grid(True, lw=0.3)
-    ax.legend(fontsize=8, loc='upper left')
-    fig.savefig(path, dpi=110)
-    return path
+    return _save(fig, ax, path, 'sim time (s)', 'items', 'Items over time (conveyor events)',
+                 fontsize=8, loc='upper left')
 
 
 def plot_mirror_error(ts: Dict[str, np.ndarray], path: Path, t0: Optional[float] = None,
@@ -212,13 +207,8 @@ def plot_mirror_error(ts: Dict[str, np.ndarray], path: Path, t0: Optional[float]
     _job_line(ax, t0)
     ax.set_yscale('symlog', linthresh=0.1)  # sub-mm detail and the large excursions together
     ax.set_ylim(bottom=0.0)
-    ax.set_xlabel('sim time (s)')
-    ax.set_ylabel('mirror error (mm, linear below 0.1)')
-    ax.set_title('Mirroring')
-    ax.grid(True, lw=0.3)
-    ax.legend(fontsize=8)
-    fig.savefig(path, dpi=110)
-    return path
+    return _save(fig, ax, path, 'sim time (s)', 'mirror error (mm, linear below 0.1)',
+                 'Mirroring', fontsize=8)
 
 
 def plot_run(directory: Union[str, Path], cell: CellModel, summary: Dict) -> List[Path]:

@@ -1,8 +1,8 @@
-"""``run_recorder``: the node inside the launcher that records a run (sim time).
+"""The record of one run: its files, the figures the graph reported, the job window, the summary.
 
-Subscribes ``/joint_states`` (every message becomes a row of ``timeseries.csv``),
-``/conveyor/events`` (``events.csv``), the latched ``/emergency_stop``, and the statuses that
-own the run's figures (:mod:`scara_collab.nodes.protocol`), one source per figure:
+No rclpy here: :class:`RunRecord` is fed by the ``run_recorder`` node
+(:class:`scara_collab.nodes.recorder.RunRecorder`, which is a RunRecord too), one source per
+figure of the summary:
 
 ================================  =====================================================
 summary field                     source
@@ -14,49 +14,47 @@ min_separation_m                  ``/collision_monitor/status`` (its minimum)
 mirror_error_max_m                ``/replication_manager/status`` (in-step moves)
 job (give-ups, retries, phases)   ``/automation_manager/stats``
 ================================  =====================================================
- The numbers are computed by
-:mod:`scara_collab.run.telemetry`; the summary and the plots are written by
-:mod:`scara_collab.run.report` when the run ends (:meth:`RunRecorder.finish`), or with
-``interrupted: true`` when the recorder is closed before that (:meth:`RunRecorder.close`).
 
-The launcher tells the recorder when the job window starts (:meth:`RunRecorder.start_job`)
-and ends (:meth:`RunRecorder.freeze`); ``sim_seconds``, ``wall_seconds``, the real-time factor
-and the item counts of the summary refer to that window. The handlers ``on_*`` are public so a
-test can feed them messages directly.
+The joint states and events go to the CSV files and their numbers
+(:class:`scara_collab.run.telemetry.RunLog`); the summary and the plots are written by
+:mod:`scara_collab.run.report` when the run ends (:meth:`RunRecord.finish`), or with
+``interrupted: true`` when the record is closed before that (:meth:`RunRecord.close`).
 
-Other recordings that live on this node (the launcher's ``--record``:
-:class:`scara_collab.run.mcap_log.McapLog`) go into :attr:`RunRecorder.sinks`; they record
-until the end of the run, past the window, and :meth:`RunRecorder.finish` closes them first.
+The launcher tells the record when the job window starts (:meth:`RunRecord.start_job`) and
+ends (:meth:`RunRecord.freeze`); ``sim_seconds``, ``wall_seconds``, the real-time factor and
+the item counts of the summary refer to that window.
+
+Other recordings of the run (the launcher's ``--record``:
+:class:`scara_collab.nodes.mcap_recorder.McapLog`) go into :attr:`RunRecord.sinks`; they
+record until the end of the run, past the window, and :meth:`RunRecord.finish` closes them
+first.
+
+>>> import tempfile
+>>> folder = tempfile.TemporaryDirectory()
+>>> record = RunRecord(folder.name, 'single')
+>>> record.add_state(1.0, [0.0, 1.57, 0.0], [0.0, -1.57, 0.0]); record.start_job()
+1.0
+>>> summary = record.finish('duration reached', False, plots=False)
+>>> summary['joint_state_rows'], round(summary['min_separation_m'], 3)
+(1, 1.9)
+>>> folder.cleanup()
 """
-import math
+import logging
 from pathlib import Path
 import time
-from typing import Dict, List, Optional, Union
-
-from diagnostic_msgs.msg import DiagnosticStatus
-import numpy as np
-from rclpy.node import Node
-from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool
+from typing import Dict, List, Optional, Sequence, Union
 
 from scara_collab.core.config import load_config
 from scara_collab.core.job import items_per_minute
 from scara_collab.core.model import CellModel, load_cell
-from scara_collab.nodes import conversions as conv
-from scara_collab.nodes import protocol as proto
-from scara_collab.nodes.qos import LATCHED
-from scara_collab.nodes.runner import guarded
+from scara_collab.graph import LAUNCH_MODES
 from scara_collab.run import report
-from scara_collab.run.telemetry import RunLog
+from scara_collab.run.telemetry import COUNTED, RunLog
 
-STATE_QOS = QoSProfile(depth=200)   # a burst of joint states while the launcher is busy
-EVENTS_QOS = QoSProfile(depth=100)
-MODES = ('idle', 'single', 'collaborative', 'mirrored')
+MODES = LAUNCH_MODES
 
 
-class RunRecorder(Node):
+class RunRecord:
     """Record one run into ``directory``.
 
     :param directory: the run folder (created if needed).
@@ -64,16 +62,12 @@ class RunRecorder(Node):
     :param cell: the cell model; default ``load_cell(profile)``.
     :param profile: link profile for the default cell model (and the summary).
     :param batch: joint states per CSV write (see :class:`RunLog`).
-    :param kwargs: passed to :class:`rclpy.node.Node` (e.g. ``context``).
     """
 
     def __init__(self, directory: Union[str, Path], mode: str = 'idle',
                  cell: Optional[CellModel] = None, profile: Optional[str] = None,
-                 batch: int = 200, **kwargs):
-        """Create the node on sim time, open the run log and subscribe the topics it records."""
-        overrides = list(kwargs.pop('parameter_overrides', []))
-        overrides.append(Parameter('use_sim_time', Parameter.Type.BOOL, True))
-        super().__init__('run_recorder', parameter_overrides=overrides, **kwargs)
+                 batch: int = 200):
+        """Open the run log; nothing is heard yet and the window is not started."""
         if mode not in MODES:
             raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
         self.mode = mode
@@ -84,10 +78,11 @@ class RunRecorder(Node):
         self.directory = self.log.directory
         self.stats: Dict[str, object] = {}
         self.stats_time: Optional[float] = None
-        self.monitor: Optional[proto.MonitorStatus] = None
-        self.mirror: Optional[proto.MirrorStatus] = None
+        self.monitor = None   # the newest MonitorStatus (scara_collab.nodes.protocol)
+        self.mirror = None    # the newest MirrorStatus
         self.estops: List[float] = []
         self.estop_active = False
+        self.refused = 0      # joint states refused at the door (stamps, non-finite values)
         self.extra: Dict[str, object] = {}
         self.job_start: Optional[float] = None      # sim s
         self.job_start_wall: Optional[float] = None
@@ -95,110 +90,40 @@ class RunRecorder(Node):
         self.end_wall: Optional[float] = None
         self.first_state_wall: Optional[float] = None
         self.summary: Optional[Dict] = None
-        self.stamps = conv.StampGate()  # states must carry the sim clock's time
         self.plots: List[Path] = []
-        # more recordings on this node (e.g. mcap_log.McapLog): closed by finish(), first;
-        # close() returns a dict merged into the summary
+        # more recordings of the run (e.g. McapLog): closed by finish(), first; close() returns
+        # a dict merged into the summary
         self.sinks: List = []
-        self._index: Dict[tuple, np.ndarray] = {}
-        self._names = list(self.cell.leader.joint_names) + list(self.cell.follower.joint_names)
-        # no exception escapes a callback (runner.guarded: logged, the recording goes on)
-        for msg_type, topic, callback, qos in (
-                (JointState, '/joint_states', self.on_joint_state, STATE_QOS),
-                (DiagnosticStatus, '/conveyor/events', self.on_event, EVENTS_QOS),
-                (DiagnosticStatus, '/automation_manager/stats', self.on_stats, 10),
-                (DiagnosticStatus, '/collision_monitor/status', self.on_monitor, 10),
-                (DiagnosticStatus, '/replication_manager/status', self.on_mirror, 10),
-                (Bool, '/emergency_stop', self.on_estop, LATCHED)):
-            self.create_subscription(msg_type, topic, guarded(self, callback), qos)
 
     # --- time ------------------------------------------------------------------------------
     @property
     def sim_time(self) -> float:
-        """Latest sim time heard on ``/clock``, s; 0 before any.
-
-        The run's time is the bridge's clock, never a joint state's stamp: states are let
-        through only when their stamps agree with it (:class:`conversions.StampGate`).
-        """
-        return self.get_clock().now().nanoseconds * 1e-9
+        """The run's time now, sim s: the last state's stamp (the node's clock, on a node)."""
+        return self.log.t_last or 0.0
 
     @property
     def recording(self) -> bool:
         """True until :meth:`freeze` (or the end of the run)."""
         return self.end is None and not self.log.closed
 
-    # --- handlers --------------------------------------------------------------------------
-    def on_joint_state(self, msg: JointState) -> None:
-        """Queue a row for ``timeseries.csv``: the six joints of both arms at the stamp."""
-        if not self.recording or not conv.admit_state(self, self.stamps, msg):
-            return
-        key = tuple(msg.name)
-        idx = self._index.get(key)
-        if idx is None:
-            where = {n: i for i, n in enumerate(key)}
-            missing = [n for n in self._names if n not in where]
-            if missing:
-                self.get_logger().warning(f'joint_states lacks {missing}; not recorded',
-                                          throttle_duration_sec=10.0)
-                return
-            idx = self._index[key] = np.array([where[n] for n in self._names])
-        if len(msg.position) != len(key):
-            return
-        q = np.asarray(msg.position, dtype=float)[idx]
-        if not np.all(np.isfinite(q)):
-            self.stamps.refused += 1
-            self.get_logger().warning('joint_states with non-finite positions; not recorded',
-                                      throttle_duration_sec=10.0)
-            return
+    def report_error(self, text: str) -> None:
+        """Say that a part of the run's output failed (a node logs it as its own error)."""
+        logging.getLogger(__name__).error(text)
+
+    # --- input -----------------------------------------------------------------------------
+    def add_state(self, t: float, q_leader: Sequence[float], q_follower: Sequence[float]) -> None:
+        """Record one joint state of both arms at sim time ``t`` s (leader, follower)."""
         if self.first_state_wall is None:
             self.first_state_wall = time.monotonic()
-        self.log.add_state(conv.to_sec(msg.header.stamp), q[:3], q[3:])
+        self.log.add_state(t, q_leader, q_follower)
 
-    def on_event(self, msg: DiagnosticStatus) -> None:
-        """Record a conveyor event (:class:`~scara_collab.nodes.protocol.ItemEvent`)."""
-        if not self.recording:
-            return
-        try:
-            ev = proto.ItemEvent.from_msg(msg)
-        except proto.ProtocolError as exc:
-            self.get_logger().warning(f'ignoring an item event: {exc}', throttle_duration_sec=5.0)
-            return
-        t = ev.time if math.isfinite(ev.time) else self.sim_time
-        self.log.add_event(t, ev.kind, ev.item, ev.cls, ev.robot, ev.cause)
-
-    def on_stats(self, msg: DiagnosticStatus) -> None:
-        """Keep the job's own figures (:class:`~scara_collab.nodes.protocol.JobStats`)."""
-        if not self.recording:
-            return
-        try:
-            st = proto.JobStats.from_msg(msg)
-        except proto.ProtocolError as exc:
-            self.get_logger().warning(f'ignoring job stats: {exc}', throttle_duration_sec=5.0)
-            return
-        self.stats = {'give_ups': st.give_ups, 'retries': st.retries,
-                      'last_give_up': st.last_give_up, 'phases': st.phases,
-                      'running': st.running, 'time': st.time}
+    def add_stats(self, stats: Dict[str, object]) -> None:
+        """Keep the job's own figures (give-ups, retries, phases, ...), heard now."""
+        self.stats = stats
         self.stats_time = self.sim_time
 
-    def on_monitor(self, msg: DiagnosticStatus) -> None:
-        """Keep the collision monitor's figures (the minimum separation's source)."""
-        try:
-            self.monitor = proto.MonitorStatus.from_msg(msg)
-        except proto.ProtocolError as exc:
-            self.get_logger().warning(f'ignoring monitor status: {exc}',
-                                      throttle_duration_sec=5.0)
-
-    def on_mirror(self, msg: DiagnosticStatus) -> None:
-        """Keep the replication manager's figures (the mirror error's source)."""
-        try:
-            self.mirror = proto.MirrorStatus.from_msg(msg)
-        except proto.ProtocolError as exc:
-            self.get_logger().warning(f'ignoring mirror status: {exc}',
-                                      throttle_duration_sec=5.0)
-
-    def on_estop(self, msg: Bool) -> None:
-        """Count emergency stops (rising edges of ``/emergency_stop``)."""
-        on = bool(msg.data)
+    def add_estop(self, on: bool) -> None:
+        """Take the emergency stop's state now; a rising edge counts as a stop."""
         if on and not self.estop_active:
             self.estops.append(self.sim_time)
         self.estop_active = on
@@ -272,7 +197,7 @@ class RunRecorder(Node):
             'wall_seconds': wall,
             'real_time_factor': sim_seconds / wall if wall > 0 else None,
             **counts,
-            'in_progress': counts['spawned'] - sum(counts[k] for k in proto.COUNTED
+            'in_progress': counts['spawned'] - sum(counts[k] for k in COUNTED
                                                    if k != 'spawned'),
             'items_per_minute': items_per_minute(counts['sorted'], sim_seconds),
             'counts_source': 'pybullet_bridge /conveyor/events in the job window',
@@ -299,7 +224,7 @@ class RunRecorder(Node):
             'sim_time_end': t_end,
             'joint_state_rows': log.rows,
             'joint_states_missing': log.missing,
-            'joint_states_refused': self.stamps.refused,
+            'joint_states_refused': self.refused,
             'largest_gap_s': log.largest_gap,
             'events': counts,
             'job': dict(self.stats),
@@ -332,7 +257,7 @@ class RunRecorder(Node):
                 self.extra.update(sink.close() or {})
             except Exception as exc:  # noqa: BLE001 - the CSV files and summary come first
                 self.extra.setdefault('sink_errors', []).append(f'{type(exc).__name__}: {exc}')
-                self.get_logger().error(f'recording not closed cleanly: {exc}')
+                self.report_error(f'recording not closed cleanly: {exc}')
         summary = self.build_summary(exit_reason, interrupted)
         self.log.close()
         report.write_summary(self.directory, summary)  # first, so it exists whatever happens
@@ -342,7 +267,7 @@ class RunRecorder(Node):
                 summary['plots'] = [p.name for p in self.plots]
             except Exception as exc:  # noqa: BLE001 - the numbers matter more than a figure
                 summary['plot_error'] = f'{type(exc).__name__}: {exc}'
-                self.get_logger().error(f'plots not written: {summary["plot_error"]}')
+                self.report_error(f'plots not written: {summary["plot_error"]}')
             report.write_summary(self.directory, summary)
         self.summary = summary
         return summary
@@ -350,8 +275,3 @@ class RunRecorder(Node):
     def close(self) -> Dict:
         """Finish as interrupted unless :meth:`finish` ran; the files are complete either way."""
         return self.finish('recorder closed before the end of the run', True)
-
-    def destroy_node(self) -> bool:
-        """Close the recording with the node."""
-        self.close()
-        return super().destroy_node()

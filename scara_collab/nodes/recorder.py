@@ -1,0 +1,147 @@
+"""``run_recorder``: the node inside the launcher that records a run (sim time).
+
+Subscribes ``/joint_states`` (every message becomes a row of ``timeseries.csv``),
+``/conveyor/events`` (``events.csv``), the latched ``/emergency_stop``, and the statuses that
+own the run's figures (:mod:`scara_collab.nodes.protocol`); names, types and QoS are the
+graph's (:func:`scara_collab.graph.topic`, :func:`scara_collab.nodes.qos.recording`). The
+node is the subscriptions and the message conversions; what it hears is kept by the record it
+also is (:class:`scara_collab.run.record.RunRecord`: the files, the job window, the summary,
+the plots). The handlers ``on_*`` are public so a test can feed them messages directly.
+"""
+import math
+from pathlib import Path
+from typing import Dict, Optional, Union
+
+from diagnostic_msgs.msg import DiagnosticStatus
+import numpy as np
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
+
+from scara_collab import graph
+from scara_collab.core.model import CellModel
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
+from scara_collab.nodes import qos
+from scara_collab.nodes.runner import guarded
+from scara_collab.run.record import RunRecord
+
+
+class RunRecorder(Node, RunRecord):
+    """Record one run into ``directory``: the ``run_recorder`` node and its record.
+
+    :param directory: the run folder (created if needed).
+    :param mode: ``idle``, ``single``, ``collaborative`` or ``mirrored``.
+    :param cell: the cell model; default ``load_cell(profile)``.
+    :param profile: link profile for the default cell model (and the summary).
+    :param batch: joint states per CSV write (see :class:`RunLog`).
+    :param kwargs: passed to :class:`rclpy.node.Node` (e.g. ``context``).
+    """
+
+    def __init__(self, directory: Union[str, Path], mode: str = 'idle',
+                 cell: Optional[CellModel] = None, profile: Optional[str] = None,
+                 batch: int = 200, **kwargs):
+        """Create the node on sim time, open the record and subscribe the topics it records."""
+        overrides = list(kwargs.pop('parameter_overrides', []))
+        overrides.append(Parameter('use_sim_time', Parameter.Type.BOOL, True))
+        Node.__init__(self, 'run_recorder', parameter_overrides=overrides, **kwargs)
+        RunRecord.__init__(self, directory, mode, cell, profile, batch)
+        self.stamps = conv.StampGate()  # states must carry the sim clock's time
+        self._index: Dict[tuple, np.ndarray] = {}
+        self._names = list(self.cell.leader.joint_names) + list(self.cell.follower.joint_names)
+        # no exception escapes a callback (runner.guarded: logged, the recording goes on)
+        for name, callback in (('/joint_states', self.on_joint_state),
+                               ('/conveyor/events', self.on_event),
+                               ('/automation_manager/stats', self.on_stats),
+                               ('/collision_monitor/status', self.on_monitor),
+                               ('/replication_manager/status', self.on_mirror),
+                               ('/emergency_stop', self.on_estop)):
+            topic = graph.topic(name)
+            self.create_subscription(graph.message_class(topic.type), name,
+                                     guarded(self, callback), qos.recording(topic))
+
+    @property
+    def sim_time(self) -> float:
+        """Latest sim time heard on ``/clock``, s; 0 before any.
+
+        The run's time is the bridge's clock, never a joint state's stamp: states are let
+        through only when their stamps agree with it (:class:`conversions.StampGate`).
+        """
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def report_error(self, text: str) -> None:
+        """Log that a part of the run's output failed, as this node's error."""
+        self.get_logger().error(text)
+
+    # --- handlers --------------------------------------------------------------------------
+    def on_joint_state(self, msg: JointState) -> None:
+        """Queue a row for ``timeseries.csv``: the six joints of both arms at the stamp."""
+        if not self.recording:
+            return
+        if not conv.admit_state(self, self.stamps, msg):
+            self.refused += 1
+            return
+        key = tuple(msg.name)
+        idx = self._index.get(key)
+        if idx is None:
+            where = {n: i for i, n in enumerate(key)}
+            missing = [n for n in self._names if n not in where]
+            if missing:
+                self.get_logger().warning(f'joint_states lacks {missing}; not recorded',
+                                          throttle_duration_sec=10.0)
+                return
+            idx = self._index[key] = np.array([where[n] for n in self._names])
+        if len(msg.position) != len(key):
+            return
+        q = np.asarray(msg.position, dtype=float)[idx]
+        if not np.all(np.isfinite(q)):
+            self.refused += 1
+            self.get_logger().warning('joint_states with non-finite positions; not recorded',
+                                      throttle_duration_sec=10.0)
+            return
+        self.add_state(conv.to_sec(msg.header.stamp), q[:3], q[3:])
+
+    def _read(self, kind, msg: DiagnosticStatus, what: str):
+        """Return ``kind.from_msg(msg)``, or None (a throttled warning) if it breaks protocol."""
+        try:
+            return kind.from_msg(msg)
+        except proto.ProtocolError as exc:
+            self.get_logger().warning(f'ignoring {what}: {exc}', throttle_duration_sec=5.0)
+            return None
+
+    def on_event(self, msg: DiagnosticStatus) -> None:
+        """Record a conveyor event (:class:`~scara_collab.nodes.protocol.ItemEvent`)."""
+        ev = self._read(proto.ItemEvent, msg, 'an item event') if self.recording else None
+        if ev is not None:
+            t = ev.time if math.isfinite(ev.time) else self.sim_time
+            self.log.add_event(t, ev.kind, ev.item, ev.cls, ev.robot, ev.cause)
+
+    def on_stats(self, msg: DiagnosticStatus) -> None:
+        """Keep the job's own figures (:class:`~scara_collab.nodes.protocol.JobStats`)."""
+        st = self._read(proto.JobStats, msg, 'job stats') if self.recording else None
+        if st is not None:
+            self.add_stats({'give_ups': st.give_ups, 'retries': st.retries,
+                            'last_give_up': st.last_give_up, 'phases': st.phases,
+                            'running': st.running, 'time': st.time})
+
+    def on_monitor(self, msg: DiagnosticStatus) -> None:
+        """Keep the collision monitor's figures (the minimum separation's source)."""
+        status = self._read(proto.MonitorStatus, msg, 'monitor status')
+        if status is not None:
+            self.monitor = status
+
+    def on_mirror(self, msg: DiagnosticStatus) -> None:
+        """Keep the replication manager's figures (the mirror error's source)."""
+        status = self._read(proto.MirrorStatus, msg, 'mirror status')
+        if status is not None:
+            self.mirror = status
+
+    def on_estop(self, msg: Bool) -> None:
+        """Count emergency stops (rising edges of ``/emergency_stop``)."""
+        self.add_estop(bool(msg.data))
+
+    def destroy_node(self) -> bool:
+        """Close the recording with the node."""
+        self.close()
+        return super().destroy_node()

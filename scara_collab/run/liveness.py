@@ -1,0 +1,60 @@
+"""Whether every launched node still answers the lockstep: a hung process does not exit.
+
+The lockstep answers on ``/sim/lockstep`` (hundreds a second) go to a node
+(:class:`~scara_collab.nodes.lockstep_watch.LockstepWatchNode`) and an executor of their own,
+which :meth:`Liveness.silent` drains when the launcher looks (once a second): a look never
+waits, and a slow launcher is never a burden on the nodes (best effort, the newest 200).
+"""
+from typing import Iterable, Optional, Tuple
+
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+
+from scara_collab.nodes import lockstep
+from scara_collab.nodes.lockstep_watch import LockstepWatch, LockstepWatchNode, WATCH_QOS
+
+
+class Liveness:
+    """Watch the lockstep answers of the launched nodes.
+
+    :param names: the launched nodes' names (``collision_monitor``).
+    :param limit: wall seconds a node may leave a ``/clock`` unanswered (``--silent-timeout``).
+    :param context: the launcher's rclpy context.
+    """
+
+    def __init__(self, names: Iterable[str], limit: float, context: Context):
+        """Create the watch node and its executor."""
+        self.watch = LockstepWatch([lockstep.full_name(n) for n in names], limit)
+        self.silent_node: Optional[str] = None  # the node found silent, once one is
+        self._node = LockstepWatchNode(self.watch, context=context)
+        self._executor = SingleThreadedExecutor(context=context)
+        self._executor.add_node(self._node)
+
+    def take_answers(self) -> None:
+        """Take the answers kept since the last look (at most the queue, never waiting)."""
+        idle = 0  # spin_once(0) takes a message only every other call or so: not the end yet
+        for _ in range(4 * WATCH_QOS.depth):
+            before = self._node.answers
+            self._executor.spin_once(timeout_sec=0.0)
+            idle = idle + 1 if self._node.answers == before else 0
+            if idle >= 3:
+                break
+
+    def silent(self, sim_now: float, wall: float) -> Optional[Tuple[str, float, float]]:
+        """Take the answers; return ``(node, silent wall s, sim time it reached)`` or None.
+
+        :param sim_now: the newest sim time the launcher has heard on ``/clock``, s.
+        :param wall: now, s (``time.monotonic()``).
+        """
+        self.take_answers()
+        silent = self.watch.silent(sim_now, wall)
+        if silent is None:
+            return None
+        name, seconds, t = silent
+        self.silent_node = name.lstrip('/')
+        return self.silent_node, seconds, t
+
+    def close(self) -> None:
+        """Shut down the executor and destroy the watch node."""
+        self._executor.shutdown(timeout_sec=1.0)
+        self._node.destroy_node()

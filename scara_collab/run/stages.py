@@ -1,0 +1,81 @@
+"""The launcher's processes, planned from :mod:`scara_collab.graph`: one stage per node.
+
+A :class:`Stage` is one node process with its parameters and its command line
+(``python -m scara_collab.run.child <module>:<function> --ros-args ...``); with
+``--one-process`` one stage runs them all (:func:`one_process`, ``python -m
+scara_collab.run.container --node ... --node ...``).
+"""
+import argparse
+from dataclasses import dataclass, field
+from pathlib import Path
+import sys
+from typing import Dict, List, Sequence, Tuple
+
+from scara_collab import graph
+
+CONTAINER = 'cell'  # --one-process: the one process's name (logs/cell.log)
+
+
+@dataclass
+class Stage:
+    """One node process of the graph and what "ready" means for it."""
+
+    name: str                   # node name = log file name
+    entry: str                  # module:function
+    configs: Tuple[str, ...]    # config/<name>.yaml files passed with --params-file
+    ready: str                  # what the launcher waits for, for messages
+    params: Dict[str, str] = field(default_factory=dict)
+    members: Tuple['Stage', ...] = ()  # --one-process: the stages this process runs
+
+
+def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
+    """Return the graph for ``args``, in launch order (the nodes of :mod:`scara_collab.graph`)."""
+    common = {} if args.profile is None else {'profile': args.profile}
+    by_mode = graph.job_params(args.mode)
+    own: Dict[str, Dict[str, str]] = {
+        'pybullet_bridge': {'real_time_factor': repr(float(args.launch_rtf)),
+                            # the belt feeds from when the job starts (Launcher.start_job)
+                            'feed_interval': '0.0'},
+        'automation_manager': {'auto_start': 'false'},  # the launcher starts the job
+    }
+    bridge = own['pybullet_bridge']
+    if args.step_chunk is not None:
+        bridge['step_chunk'] = repr(float(args.step_chunk))
+    if args.gui:
+        bridge['gui'] = 'true'
+    if args.seed is not None:
+        bridge['item_seed'] = str(args.seed)
+    port = getattr(args, 'viewer', None)
+    if port is not None:
+        own['cell_viewer'] = {'port': str(port)}
+    faults = getattr(args, 'fault', [])
+    out = []
+    for spec in graph.job_nodes(automation=with_automation, viewer=port is not None):
+        params = dict(common, **by_mode[spec.name], **own.get(spec.name, {}))
+        if faults:  # every node applies the entries naming its own publishers and clients
+            params['faults'] = graph.param_value(faults)
+        out.append(Stage(spec.name, spec.entry, spec.configs,
+                         spec.ready.describe(spec.name, params), params))
+    return out
+
+
+def node_args(stage: Stage, config_dir: Path) -> List[str]:
+    """Return the ``--ros-args`` of one stage's node."""
+    return graph.ros_args(stage.configs, stage.params, config_dir=config_dir)
+
+
+def command(stage: Stage, config_dir: Path) -> List[str]:
+    """Return the command line of one stage (or of the one process running ``members``)."""
+    if stage.members:
+        cmd = [sys.executable, '-m', stage.entry]
+        for member in stage.members:
+            cmd += ['--node', member.entry] + node_args(member, config_dir)
+        return cmd
+    return [sys.executable, '-m', 'scara_collab.run.child', stage.entry] + node_args(
+        stage, config_dir)
+
+
+def one_process(members: Sequence[Stage]) -> Stage:
+    """Return the stage running ``members`` in one process (:mod:`scara_collab.run.container`)."""
+    return Stage(CONTAINER, 'scara_collab.run.container', (),
+                 f'{len(members)} nodes on one executor', {}, tuple(members))
