@@ -17,7 +17,7 @@ import pybullet
 import pytest
 from test_mcap_log import record_run
 
-from scara_collab.run import report
+from scara_collab.records import report
 from scara_collab.run.animation import (
     CAPTION_HEIGHT, decode_items, frame_times, load_items, render_after_run, render_gif,
     RenderScene)

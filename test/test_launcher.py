@@ -164,7 +164,7 @@ def test_idle_run_writes_report_and_files(launch, tmp_path):
 
 def assert_complete_mcap(out: Path, summary: dict) -> set:
     """``run.mcap`` has its footer, the summary's counts, /clock and /joint_states."""
-    from scara_collab.run.mcap_log import iter_messages, Reading
+    from scara_collab.records.mcap_log import iter_messages, Reading
     reading = Reading()
     counts: dict = {}
     for msg in iter_messages(out / 'run.mcap', reading=reading):

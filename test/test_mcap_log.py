@@ -30,7 +30,7 @@ from scara_collab.nodes import conversions as conv
 from scara_collab.nodes.mcap_recorder import McapLog
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 from scara_collab.nodes.recorder import RunRecorder
-from scara_collab.run.mcap_log import (
+from scara_collab.records.mcap_log import (
     iter_messages, msg_file, Reading, ros2msg_definition, SEPARATOR)
 
 ROOT = Path(__file__).resolve().parents[1]

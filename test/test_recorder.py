@@ -17,8 +17,8 @@ from scara_collab.core.mirror import mirror_joints, mirror_point
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.recorder import RunRecorder
-from scara_collab.run import report
-from scara_collab.run.telemetry import parse_value, RunLog, state_columns
+from scara_collab.records import report
+from scara_collab.records.telemetry import parse_value, RunLog, state_columns
 
 PNG = b'\x89PNG\r\n\x1a\n'
 SUMMARY_KEYS = ('mode', 'sim_seconds', 'wall_seconds', 'sorted', 'missed', 'wrong_bin',

@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from scara_collab.run.telemetry import (
+from scara_collab.records.telemetry import (
     ARM_DISTANCE, COUNTED, CpuMeter, EVENT_COLUMNS, EVENTS, MIRROR_ERROR, parse_value,
     process_cpu_seconds, RunLog, state_columns, state_metrics, TIMESERIES)
 

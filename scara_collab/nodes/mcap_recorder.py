@@ -3,7 +3,7 @@
 :class:`McapLog` subscribes the topics raw (``raw=True``: the CDR bytes as they came off the
 wire) on a node of its own that no executor spins; a wall-clock timer on the node it is given
 (the launcher's run recorder) drains their queues every ``period`` and hands every message,
-with its receive time, to the file (:class:`scara_collab.run.mcap_log.McapWriter`, which says
+with its receive time, to the file (:class:`scara_collab.records.mcap_log.McapWriter`, which says
 how the file is laid out and timed). The topics and their QoS are the graph's
 (:func:`scara_collab.graph.topics`, :func:`scara_collab.nodes.qos.recording`).
 
@@ -22,7 +22,7 @@ from rclpy.node import Node
 
 from scara_collab import graph
 from scara_collab.nodes import qos
-from scara_collab.run.mcap_log import McapWriter
+from scara_collab.records.mcap_log import McapWriter
 
 
 class McapLog(McapWriter):
@@ -65,7 +65,7 @@ class McapLog(McapWriter):
     def drain(self) -> int:
         """Write every message waiting in the subscriptions, in receive order; return how many.
 
-        Log times: see :mod:`scara_collab.run.mcap_log` (receive order from the middleware's
+        Log times: see :mod:`scara_collab.records.mcap_log` (receive order from the middleware's
         receive timestamps; sim time from the ``/clock`` messages among them).
         """
         if self.closed:

@@ -5,7 +5,7 @@ Subscribes ``/joint_states`` (every message becomes a row of ``timeseries.csv``)
 own the run's figures (:mod:`scara_collab.nodes.protocol`); names, types and QoS are the
 graph's (:func:`scara_collab.graph.topic`, :func:`scara_collab.nodes.qos.recording`). The
 node is the subscriptions and the message conversions; what it hears is kept by the record it
-also is (:class:`scara_collab.run.record.RunRecord`: the files, the job window, the summary,
+also is (:class:`scara_collab.records.record.RunRecord`: the files, the job window, the summary,
 the plots). The handlers ``on_*`` are public so a test can feed them messages directly.
 """
 import math
@@ -25,7 +25,7 @@ from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes import qos
 from scara_collab.nodes.runner import guarded
-from scara_collab.run.record import RunRecord
+from scara_collab.records.record import RunRecord
 
 
 class RunRecorder(Node, RunRecord):

@@ -1,8 +1,14 @@
-"""Running the cell: the launcher, the run recorder and the run report.
+"""Running the cell: the launcher and the run's processes.
 
-- :mod:`scara_collab.run.telemetry`: the files of one run and their numbers (no rclpy);
-- :mod:`scara_collab.run.recorder`: the ``run_recorder`` node that feeds them from the graph;
-- :mod:`scara_collab.run.report`: ``summary.json``, the plots and the printed report;
-- :mod:`scara_collab.run.launcher`: ``scripts/launch_cell.py``, the whole graph in order;
-- :mod:`scara_collab.run.child`: how the launcher starts one node executable.
+- :mod:`scara_collab.run.launcher`: ``scripts/launch_cell.py``, the whole graph in order, the
+  run (:mod:`~scara_collab.run.stages`, :mod:`~scara_collab.run.supervisor` for the child
+  processes, :mod:`~scara_collab.run.liveness` for their lockstep answers,
+  :mod:`~scara_collab.run.graph_client` for waits, calls and readiness,
+  :mod:`~scara_collab.run.console`);
+- :mod:`scara_collab.run.child`: how the launcher starts one node executable;
+- :mod:`scara_collab.run.container`: the graph in one process;
+- :mod:`scara_collab.run.animation`: a run's GIF from its MCAP recording.
+
+The run's files (CSV, summary, plots, MCAP) are :mod:`scara_collab.records`' (no rclpy); the
+``run_recorder`` node that writes them is :mod:`scara_collab.nodes.recorder`.
 """

@@ -35,8 +35,8 @@ import pybullet
 
 from scara_collab.core.config import load_config
 from scara_collab.core.model import CellModel, load_cell
-from scara_collab.run import report
-from scara_collab.run.mcap_log import iter_messages, MCAP_FILE, Reading
+from scara_collab.records import report
+from scara_collab.records.mcap_log import iter_messages, MCAP_FILE, Reading
 from scara_collab.sim.cell_sim import CellSim
 
 GIF_FILE = 'run.gif'

@@ -38,7 +38,7 @@ process dies or a node stops answering: the bridge is slowed back to the launch 
 is stopped (``/automation_manager/stop``, short timeouts; skipped if the automation manager is
 the node that stopped answering), the children get SIGINT in reverse order (SIGTERM if still
 starting) and SIGCONT (so a stopped one can exit), what remains after a grace period is
-killed, and the run files are written (:mod:`scara_collab.run.record`; the reason is
+killed, and the run files are written (:mod:`scara_collab.records.record`; the reason is
 ``exit_reason`` in ``summary.json``). Exit status: 0 clean run, 1 a node died / stopped
 answering / was not ready / refused to start, 2 bad arguments, 130 SIGINT, 143 SIGTERM.
 
@@ -79,13 +79,13 @@ from scara_collab.nodes import lockstep
 from scara_collab.nodes.faults import FaultPlan, parse_faults
 from scara_collab.nodes.recorder import RunRecorder
 from scara_collab.nodes.runner import localhost_by_default
+from scara_collab.records.report import format_progress, format_report
+from scara_collab.records.telemetry import CpuMeter
 from scara_collab.run.console import Console
 from scara_collab.run.graph_client import GraphClient
 from scara_collab.run.liveness import Liveness
-from scara_collab.run.report import format_progress, format_report
 from scara_collab.run.stages import one_process, stages
 from scara_collab.run.supervisor import EXIT_FAILED, EXIT_USAGE, RunEnd, Supervisor
-from scara_collab.run.telemetry import CpuMeter
 
 RUN_MODES = graph.LAUNCH_MODES
 AUTOMATION_MODULE = graph.node('automation_manager').entry.split(':')[0]
@@ -245,7 +245,7 @@ class Launcher:
                                     context=self.context)
         if getattr(args, 'record', False):  # raw subscriptions on the recorder; finish() closes
             from scara_collab.nodes.mcap_recorder import McapLog
-            from scara_collab.run.mcap_log import MCAP_FILE
+            from scara_collab.records.mcap_log import MCAP_FILE
             mcap = McapLog(self.recorder, output / MCAP_FILE,
                            robots=[a.name for a in self.recorder.cell.arms])
             self.recorder.sinks.append(mcap)

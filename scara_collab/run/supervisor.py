@@ -16,9 +16,9 @@ import sys
 import time
 from typing import Dict, IO, List, Optional
 
+from scara_collab.records.telemetry import process_cpu_seconds
 from scara_collab.run.console import Console
 from scara_collab.run.stages import command, Stage
-from scara_collab.run.telemetry import process_cpu_seconds
 
 EXIT_FAILED = 1
 EXIT_USAGE = 2

@@ -1,7 +1,7 @@
 """What a run leaves for people: ``summary.json``, the plots and the printed report.
 
 Plots are drawn from the run folder's CSV files (so they can be redrawn later with
-``python -m scara_collab.run.report RUN_DIR``) with matplotlib's Agg canvas (no display, no
+``python -m scara_collab.records.report RUN_DIR``) with matplotlib's Agg canvas (no display, no
 pyplot state):
 
 - ``tool_paths.png``: top view of the cell (belt band, bases with their reach, bins per class)
@@ -22,7 +22,7 @@ from typing import Dict, List, Optional, Union
 import numpy as np
 
 from scara_collab.core.model import CellModel
-from scara_collab.run.telemetry import ARM_DISTANCE, EVENTS, MIRROR_ERROR, TIMESERIES
+from scara_collab.records.telemetry import ARM_DISTANCE, EVENTS, MIRROR_ERROR, TIMESERIES
 
 SUMMARY = 'summary.json'
 PLOTS = ('tool_paths.png', 'arm_distance.png', 'item_counts.png', 'mirror_error.png')

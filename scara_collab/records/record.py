@@ -16,8 +16,8 @@ job (give-ups, retries, phases)   ``/automation_manager/stats``
 ================================  =====================================================
 
 The joint states and events go to the CSV files and their numbers
-(:class:`scara_collab.run.telemetry.RunLog`); the summary and the plots are written by
-:mod:`scara_collab.run.report` when the run ends (:meth:`RunRecord.finish`), or with
+(:class:`scara_collab.records.telemetry.RunLog`); the summary and the plots are written by
+:mod:`scara_collab.records.report` when the run ends (:meth:`RunRecord.finish`), or with
 ``interrupted: true`` when the record is closed before that (:meth:`RunRecord.close`).
 
 The launcher tells the record when the job window starts (:meth:`RunRecord.start_job`) and
@@ -48,8 +48,8 @@ from scara_collab.core.config import load_config
 from scara_collab.core.job import items_per_minute
 from scara_collab.core.model import CellModel, load_cell
 from scara_collab.graph import LAUNCH_MODES
-from scara_collab.run import report
-from scara_collab.run.telemetry import COUNTED, RunLog
+from scara_collab.records import report
+from scara_collab.records.telemetry import COUNTED, RunLog
 
 MODES = LAUNCH_MODES
 
