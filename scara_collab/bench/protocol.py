@@ -9,7 +9,7 @@ Three measurements (``scripts/bench_job_protocol.py`` runs them and writes the t
 - :func:`robustness`: the demo's run repeated while CPU hogs compete: how many complete.
 
 Each launcher run has its own ROS domain and run folder; every figure is read from the run's
-``summary.json`` (one source per figure, see :mod:`scara_collab.run.recorder`).
+``summary.json`` (one source per figure, see :mod:`scara_collab.records.record`).
 """
 from contextlib import contextmanager
 import os

@@ -1,1 +1,1 @@
-"""The rclpy nodes: thin layers that convert messages, call the core and the simulator."""
+"""The rclpy nodes: thin layers that convert messages and call the core, sim or records."""
