@@ -12,7 +12,8 @@ the run's counts) and ``/<robot>/execution_status``
 ``header.frame_id``: accepted, refused, finished, preempted, held). Subscribes
 ``/<robot>/joint_trajectory`` (executed like ros2_control's joint trajectory controller: stamp
 zero = start now, else at the stamp; a new trajectory replaces the running one; a bad one is
-refused with the reason and the arm keeps its current command) and ``/emergency_stop``
+refused with the reason and the arm keeps its current command:
+:mod:`scara_collab.nodes.execution`) and ``/emergency_stop``
 (transient local; true = both arms hold). Serves ``/<robot>/gripper`` (std_srvs/SetBool:
 true = grasp, false = release), idempotent: a grasp while holding an item and a release with
 an empty gripper succeed and say so, so a client may repeat a request whose answer was lost.
@@ -53,6 +54,7 @@ from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.execution import Execution
 from scara_collab.nodes.faults import declare_faults, FaultyPublisher
 from scara_collab.nodes.lockstep import LockstepGate, parse_timeouts
 from scara_collab.nodes.params import declare_config
@@ -112,7 +114,7 @@ class PyBulletBridge(Node):
         self._anchor: Optional[tuple] = None  # (wall, sim) at the last rate change
 
         self.faults = declare_faults(self)
-        self.running: Dict[str, tuple] = {}  # robot -> (move id, end) of what it executes
+        self.execution = Execution(self.cell, self.sim, self._report, self.get_logger().warning)
         self.clock_pub = self.create_publisher(ClockMsg, '/clock', STATE_QOS)
         self.state_pub = self.create_publisher(JointState, 'joint_states', STATE_QOS)
         self.items_pub = self.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
@@ -199,10 +201,8 @@ class PyBulletBridge(Node):
         for arm in self.cell.arms:
             if present:
                 self._report(arm.name, 'cleared', '', f'{name} {why}')
-            else:
-                self.sim.brake(arm.name)  # at the acceleration limits, as for an e-stop
-                move = self.running.pop(arm.name, ('', 0.0))[0]
-                self._report(arm.name, 'held', move, f'{name} {why}: holding')
+            else:  # braked at the acceleration limits, as for an e-stop
+                self.execution.hold(arm.name, f'{name} {why}: holding')
 
     def _on_trajectory_watched(self, robot: str, msg: JointTrajectory) -> None:
         if self.gate.absent:
@@ -210,7 +210,7 @@ class PyBulletBridge(Node):
             self._report(robot, 'refused', msg.header.frame_id,
                          f'{name} {why}: no move until it answers again')
             return
-        self._on_trajectory(robot, msg)
+        self.execution.run(robot, msg)
 
     def _tick(self) -> None:
         if self.control.paused:
@@ -266,10 +266,7 @@ class PyBulletBridge(Node):
         for ev in self.sim.pop_events():
             self.events_pub.publish(proto.ItemEvent(ev.kind, ev.item, ev.cls, ev.time, ev.robot,
                                                     ev.cause).to_msg())
-        for robot, (move, end) in list(self.running.items()):
-            if self.sim.time >= end - 1e-9:
-                del self.running[robot]
-                self._report(robot, 'finished', move)
+        self.execution.poll()
 
     def _publish_all(self) -> None:
         for k in self._next:
@@ -283,44 +280,6 @@ class PyBulletBridge(Node):
         if st.level() != 'OK':
             self.get_logger().warning(f'{robot}: {st.text()}')
         self.status_pub[robot].publish(st.to_msg())
-
-    _keeps = 'not executed: the arm keeps its current command'
-
-    def _on_trajectory(self, robot: str, msg: JointTrajectory) -> None:
-        arm = self.cell.arm(robot)
-        move = msg.header.frame_id
-        try:
-            stamp, t, q, qd, qdd = conv.trajectory_arrays(msg, arm.joint_names)
-        except conv.MessageError as exc:
-            self._report(robot, 'refused', move, f'{exc}; {self._keeps}')
-            return
-        now = self.sim.time
-        start = now if stamp == 0.0 else stamp
-        if start + t[-1] < now:
-            self._report(robot, 'refused', move, f'it ended {now - start - t[-1]:.3f} s ago; '
-                         f'{self._keeps}')
-            return
-        if start < now - self.dt:
-            self.get_logger().warning(f'{robot}: move {move or "(no id)"} start {start:.3f} s '
-                                      f'is {now - start:.3f} s late; starting now')
-            start = now
-        if t[0] > 0.0:  # like ros2_control: move from the current state to the first point
-            q_now, qd_now = self.sim.arm_state(robot)
-            t = np.concatenate(([0.0], t))
-            q = np.vstack([q_now, q])
-            qd = None if qd is None else np.vstack([qd_now, qd])
-            qdd = None if qdd is None else np.vstack([np.zeros(3), qdd])
-        try:
-            self.sim.execute(robot, start + t, q, qd, qdd)
-        except ValueError as exc:
-            self._report(robot, 'refused', move, f'{exc}; {self._keeps}')
-            return
-        old = self.running.get(robot)
-        if old is not None and old[0] != move:
-            self._report(robot, 'preempted', old[0], f'replaced by move {move or "(no id)"}')
-        self.running[robot] = (move, start + t[-1])
-        self._report(robot, 'accepted', move, start=start, end=start + t[-1],
-                     stamp=stamp if stamp > 0 else None)
 
     def _on_gripper(self, robot: str, req: SetBool.Request, res: SetBool.Response):
         held = self.sim.held_item(robot)
@@ -342,8 +301,7 @@ class PyBulletBridge(Node):
         self.sim.set_estop(on)
         for arm in self.cell.arms:
             if on:
-                move = self.running.pop(arm.name, ('', 0.0))[0]
-                self._report(arm.name, 'held', move, 'emergency stop: holding')
+                self.execution.drop(arm.name, 'emergency stop: holding')
             else:
                 self._report(arm.name, 'cleared', '', 'emergency stop cleared')
 

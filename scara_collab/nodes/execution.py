@@ -1,0 +1,92 @@
+"""The bridge's trajectory execution: what each arm runs, and the statuses that say so.
+
+Executed like ros2_control's joint trajectory controller: a header stamp of zero starts the
+trajectory now, else at the stamp (a stamp in the past starts it at once, with a warning); a
+first point after ``t = 0`` is reached from the current state; a new trajectory replaces the
+running one (status ``preempted`` for the old one); a bad one is refused with the reason and
+the arm keeps its current command. Every outcome is an
+:class:`~scara_collab.nodes.protocol.ExecutionStatus` for the move named by the trajectory's
+``header.frame_id``: ``accepted`` (with its start and end), ``refused``, ``preempted``,
+``finished`` (:meth:`Execution.poll`, when its end has passed), ``held`` (:meth:`Execution.hold`).
+"""
+from typing import Callable, Dict, Optional, Tuple
+
+import numpy as np
+from trajectory_msgs.msg import JointTrajectory
+
+from scara_collab.core.model import CellModel
+from scara_collab.nodes import conversions as conv
+from scara_collab.sim.cell_sim import CellSim
+
+KEEPS = 'not executed: the arm keeps its current command'
+
+#: ``report(robot, state, move, reason='', **times)`` publishes one status
+Report = Callable[..., None]
+
+
+class Execution:
+    """The arms' running trajectories in ``sim`` (see the module docstring).
+
+    :param cell: the cell model; :param sim: the simulator that executes.
+    :param report: publishes a status (:data:`Report`).
+    :param warn: logs a warning.
+    """
+
+    def __init__(self, cell: CellModel, sim: CellSim, report: Report,
+                 warn: Callable[[str], None]):
+        """Nothing runs yet."""
+        self.cell, self.sim, self.report, self.warn = cell, sim, report, warn
+        self.running: Dict[str, Tuple[str, float]] = {}  # robot -> (move id, end)
+
+    def run(self, robot: str, msg: JointTrajectory) -> Optional[Tuple[float, float]]:
+        """Execute ``msg`` on ``robot``; return its ``(start, end)``, or None if refused."""
+        move = msg.header.frame_id
+        try:
+            stamp, t, q, qd, qdd = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
+        except conv.MessageError as exc:
+            self.report(robot, 'refused', move, f'{exc}; {KEEPS}')
+            return None
+        now = self.sim.time
+        start = now if stamp == 0.0 else stamp
+        if start + t[-1] < now:
+            self.report(robot, 'refused', move, f'it ended {now - start - t[-1]:.3f} s ago; '
+                        f'{KEEPS}')
+            return None
+        if start < now - self.sim.dt:
+            self.warn(f'{robot}: move {move or "(no id)"} start {start:.3f} s is '
+                      f'{now - start:.3f} s late; starting now')
+            start = now
+        if t[0] > 0.0:  # like ros2_control: move from the current state to the first point
+            q_now, qd_now = self.sim.arm_state(robot)
+            t = np.concatenate(([0.0], t))
+            q = np.vstack([q_now, q])
+            qd = None if qd is None else np.vstack([qd_now, qd])
+            qdd = None if qdd is None else np.vstack([np.zeros(3), qdd])
+        try:
+            self.sim.execute(robot, start + t, q, qd, qdd)
+        except ValueError as exc:
+            self.report(robot, 'refused', move, f'{exc}; {KEEPS}')
+            return None
+        old = self.running.get(robot)
+        if old is not None and old[0] != move:
+            self.report(robot, 'preempted', old[0], f'replaced by move {move or "(no id)"}')
+        self.running[robot] = (move, start + t[-1])
+        self.report(robot, 'accepted', move, start=start, end=start + t[-1],
+                    stamp=stamp if stamp > 0 else None)
+        return start, start + t[-1]
+
+    def poll(self) -> None:
+        """Report every move whose end has passed as ``finished``."""
+        for robot, (move, end) in list(self.running.items()):
+            if self.sim.time >= end - 1e-9:
+                del self.running[robot]
+                self.report(robot, 'finished', move)
+
+    def hold(self, robot: str, reason: str) -> None:
+        """Brake ``robot`` at its acceleration limits and hold; its move is reported ``held``."""
+        self.sim.brake(robot)
+        self.report(robot, 'held', self.running.pop(robot, ('', 0.0))[0], reason)
+
+    def drop(self, robot: str, reason: str) -> None:
+        """Forget ``robot``'s move (the simulator already holds the arm): ``held``."""
+        self.report(robot, 'held', self.running.pop(robot, ('', 0.0))[0], reason)
