@@ -404,9 +404,11 @@ def test_an_arm_takes_no_item_the_other_arms_booked_move_would_make_it_wait_for(
         busy = next(la for la in job.lanes if la.robot == lead.name)
         assert job._chase(busy, near, 0.0)
         cmd = job._out[-1]
+        track = busy.moves[lead.name]
         if booked:  # the leader's planner timed it: the job now knows the motion
             job.on_planner(lead.name, cmd.request, 'planned', cmd.start, cmd.start + 2.0)
-        track = busy.moves[lead.name]
+        else:  # blind: as if the job had not planned the leader's intercept itself
+            track.timeline = None
         assert (track.timeline is not None) == booked
         lane = next(la for la in job.lanes if la.robot == foll.name)
         job._out = []
@@ -439,9 +441,10 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
     """The other arm's booked motion is the planner's own trajectory, not planned again.
 
     Published before or after the planner's ``planned`` status, it becomes the booking, shifted
-    to the start the bridge reports; only without it (the message lost) does the job plan the
-    move itself. Trajectories of moves the job did not ask for, and any in single mode, are
-    ignored.
+    to the start the bridge reports. Until then a chase is booked as the job planned its
+    intercept (the other lane must not take the arm for standing still meanwhile); a move the
+    job did not plan itself (to a bin, to park) is planned once only if the trajectory is lost.
+    Trajectories of moves the job did not ask for, and any in single mode, are ignored.
     """
     from scara_collab.core import planning
     lead = cell.leader
@@ -454,6 +457,8 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
         busy = next(la for la in job.lanes if la.robot == lead.name)
         assert job._chase(busy, job.items[98], 0.0)
         cmd, calls[:] = job._out[-1], []
+        intended = job._committed(lead.name, 0.0)  # asked, not yet answered: the job's plan
+        assert intended.start == pytest.approx(cmd.start) and intended.end > cmd.start
         traj = plan(lead.name, job.q[lead.name], cmd.target)
         published = traj.t + cmd.start + 0.05, traj.q + 1e-3  # the planner's, not the job's
         if published_first:
@@ -467,14 +472,15 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
         job.on_execution(lead.name, cmd.request, 'accepted', cmd.start + 0.25,
                          cmd.start + 0.25 + traj.duration)
         np.testing.assert_allclose(job._committed(lead.name, 0.0).t, published[0] + 0.2)
-        assert calls == [] if published_first else len(calls) == 1  # planned only if missing
+        assert calls == []  # never planned again
         job.on_trajectory(lead.name, cmd.request + 1, *published)  # not a move it asked for
         assert job._committed(lead.name, 0.0).start == pytest.approx(published[0][0] + 0.2)
-    lost = make_job(cell)  # the trajectory lost: the job plans the move itself
-    lost.on_items([item_on_belt(cell, 98, x=1.07, y=0.27)])
+    lost = make_job(cell)  # a park move's trajectory lost: the job plans the move itself
     busy = lost.lanes[0]
-    assert lost._chase(busy, lost.items[98], 0.0)
+    lost._park(busy, 0.0)
     cmd = lost._out[-1]
+    assert cmd.purpose == 'to_park' and busy.moves[lead.name].timeline is None
+    assert lost._committed(lead.name, 0.0).end == 0.0  # asked, not planned by the job: holds
     lost.on_planner(lead.name, cmd.request, 'planned', cmd.start, cmd.start + 2.0)
     assert isinstance(busy.moves[lead.name].timeline, planning.Timeline)
     single = make_job(cell, mode='single')
@@ -483,6 +489,34 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
     cmd = single._out[-1]
     single.on_trajectory(lead.name, cmd.request, *published)
     assert single.lanes[0].moves[lead.name].timeline is None  # one arm: nothing to book
+
+
+def test_a_chase_asked_in_the_same_tick_is_respected_before_its_answer(cell):
+    """Both lanes decide in one tick: the second respects the first's asked, unanswered move.
+
+    The job books its own intercept of the leader's chase until the planner answers, so the
+    follower's chase beside it is met later or left, exactly as against the planned move.
+    """
+    from scara_collab.core import planning
+    lead, foll = cell.leader, cell.follower
+    near, ours = item_on_belt(cell, 98, x=1.07, y=0.27), item_on_belt(cell, 97, x=1.12, y=0.01)
+    job = make_job(cell)
+    job.on_items([near, ours])
+    busy = next(la for la in job.lanes if la.robot == lead.name)
+    assert job._chase(busy, near, 0.0)
+    intended = job._committed(lead.name, 0.0)
+    assert busy.moves[lead.name].state == 'asked' and intended.end > intended.start
+    lane = next(la for la in job.lanes if la.robot == foll.name)
+    job._out = []
+    tolerance = 0.5 * job.s.grasp_reach / cell.belt.speed
+    if job._chase(lane, ours, 0.0):
+        cmd = job._out[-1]
+        traj = job.plan(foll.name, job.q[foll.name], cmd.target)
+        timed = planning.schedule(foll, traj, cmd.start, lead, intended, job.s.pair_margin,
+                                  leader=False)
+        assert timed is not None and timed.delay <= tolerance
+    else:
+        assert lane.phase == 'idle' and 97 not in job.claimed
 
 
 def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):

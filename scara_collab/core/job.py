@@ -265,6 +265,7 @@ class SortingJob(SharedBelt):
                 lane.route = [('via', p) for p in route[1:]]
                 return True
         self._move(lane, 'to_item', hit.target, hit.start, now)
+        self._intend(lane, hit.traj, hit.start)
         return True
 
     def _to_bin(self, lane: Lane, now: float) -> None:

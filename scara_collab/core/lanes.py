@@ -255,13 +255,27 @@ class LaneProtocol:
         track.timeline = planning.Timeline.of(traj, track.start)
 
     def _committed(self, robot: str, now: float) -> planning.Timeline:
-        """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds)."""
+        """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds).
+
+        Booked: a move the planner timed (``planned``, ``accepted``), or one just asked for
+        whose motion the job planned itself (:meth:`_intend`): in the ticks before the
+        planner's answer, the other lane must not decide as if the arm stood still.
+        """
         for lane in self.lanes:
             track = lane.moves.get(robot) if lane.phase in MOVING else None
             if (track is not None and track.timeline is not None
-                    and track.state in ('planned', 'accepted') and track.timeline.end > now):
+                    and track.state in ('asked', 'planned', 'accepted')
+                    and track.timeline.end > now):
                 return track.timeline
         return planning.Timeline.hold(now, self.q[robot])
+
+    def _intend(self, lane: Lane, traj: Trajectory, start: float) -> None:
+        """Book the move just asked for ``lane``'s arm as the job planned it, from ``start``.
+
+        Two lanes only; the planner's trajectory replaces it (:meth:`on_trajectory`).
+        """
+        if len(self.lanes) > 1:
+            lane.moves[lane.robot].timeline = planning.Timeline.of(traj, start)
 
     def phases(self) -> Dict[str, str]:
         """Each lane's phase, by its robot."""
