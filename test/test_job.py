@@ -441,10 +441,10 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
     """The other arm's booked motion is the planner's own trajectory, not planned again.
 
     Published before or after the planner's ``planned`` status, it becomes the booking, shifted
-    to the start the bridge reports. Until then a chase is booked as the job planned its
-    intercept (the other lane must not take the arm for standing still meanwhile); a move the
-    job did not plan itself (to a bin, to park) is planned once only if the trajectory is lost.
-    Trajectories of moves the job did not ask for, and any in single mode, are ignored.
+    to the start the bridge reports. Until then a move is booked as the job planned it when it
+    asked (a chase: its intercept), so the other lane does not take the arm for standing still
+    meanwhile; a move the job could not plan then is planned once it is timed. Trajectories of
+    moves the job did not ask for, and any in single mode, are ignored.
     """
     from scara_collab.core import planning
     lead = cell.leader
@@ -475,12 +475,18 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
         assert calls == []  # never planned again
         job.on_trajectory(lead.name, cmd.request + 1, *published)  # not a move it asked for
         assert job._committed(lead.name, 0.0).start == pytest.approx(published[0][0] + 0.2)
-    lost = make_job(cell)  # a park move's trajectory lost: the job plans the move itself
+    lost = make_job(cell)  # a park move: booked as the job plans it when it asks
     busy = lost.lanes[0]
     lost._park(busy, 0.0)
     cmd = lost._out[-1]
-    assert cmd.purpose == 'to_park' and busy.moves[lead.name].timeline is None
-    assert lost._committed(lead.name, 0.0).end == 0.0  # asked, not planned by the job: holds
+    assert cmd.purpose == 'to_park' and lost._committed(lead.name, 0.0).end > cmd.start
+    plan = lost.plan
+    lost.plan = lambda *a: (_ for _ in ()).throw(ValueError('no plan now'))
+    lost._park(busy, 1.0)  # the job cannot plan it: not booked until timed, then planned once
+    cmd = lost._out[-1]
+    assert busy.moves[lead.name].timeline is None
+    assert lost._committed(lead.name, 1.0).end == 1.0  # asked, unplanned: the arm holds
+    lost.plan = plan
     lost.on_planner(lead.name, cmd.request, 'planned', cmd.start, cmd.start + 2.0)
     assert isinstance(busy.moves[lead.name].timeline, planning.Timeline)
     single = make_job(cell, mode='single')

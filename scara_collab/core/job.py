@@ -264,8 +264,7 @@ class SortingJob(SharedBelt):
                 self._move(lane, 'via', route[0], start, now)
                 lane.route = [('via', p) for p in route[1:]]
                 return True
-        self._move(lane, 'to_item', hit.target, hit.start, now)
-        self._intend(lane, hit.traj, hit.start)
+        self._move(lane, 'to_item', hit.target, hit.start, now, hit.traj)
         return True
 
     def _to_bin(self, lane: Lane, now: float) -> None:

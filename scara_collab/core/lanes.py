@@ -33,6 +33,11 @@ MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
 #: planner / bridge answers about a move, in the order a move goes through them
 MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
 FAILED_MOVE = ('refused', 'superseded', 'held')
+#: the state a planner's status puts a move in (a state not listed changes nothing)
+PLANNER_STATUS = {s: s for s in ('planned', 'queued', 'waiting', 'refused', 'superseded')}
+#: the same for the bridge's; ``preempted``: the planner took it back and says what comes next
+BRIDGE_STATUS = {'accepted': 'accepted', 'finished': 'finished', 'preempted': 'waiting',
+                 'refused': 'refused', 'held': 'held'}
 
 PlanFn = Callable[[str, np.ndarray, np.ndarray], Trajectory]
 
@@ -161,34 +166,32 @@ class LaneProtocol:
     def on_planner(self, robot: str, request: int, state: str, start: Optional[float],
                    end: Optional[float], reason: str = '') -> None:
         """Take a planner status about ``robot``'s move for ``request`` (others are ignored)."""
-        track = self._open_track(robot, request)
-        if track is None:
-            return
-        if state == 'planned':
-            if track.state == 'accepted' and abs(start - track.start) < 1e-6:
-                return  # the bridge already runs it (its start is the one that counts)
-            self._timed(robot, request, track, 'planned', start, end)
-        elif state in ('queued', 'waiting'):  # not (or no longer) committed
-            if track.state != state:
-                track.since = self._now
-            track.state, track.start, track.end = state, None, None
-        elif state in ('refused', 'superseded'):
-            track.state, track.reason = state, reason
+        self._on_status(robot, request, PLANNER_STATUS.get(state), start, end, reason)
 
     def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
                      end: Optional[float], reason: str = '') -> None:
         """Take a bridge execution status about ``robot``'s move for ``request``."""
+        self._on_status(robot, request, BRIDGE_STATUS.get(state), start, end, reason)
+
+    def _on_status(self, robot: str, request: int, new: Optional[str], start: Optional[float],
+                   end: Optional[float], reason: str) -> None:
+        """Move the track of ``robot``'s move ``request`` to the state ``new``."""
         track = self._open_track(robot, request)
-        if track is None:
+        if track is None or new is None:
             return
-        if state == 'accepted':
-            self._timed(robot, request, track, 'accepted', start, end)
-        elif state == 'finished':
-            track.state = 'finished'
-        elif state == 'preempted':  # the planner took it back (it says what comes next)
-            track.state, track.start, track.end = 'waiting', None, None
-        elif state in ('refused', 'held'):
-            track.state, track.reason = state, reason or state
+        if new in ('planned', 'accepted'):
+            if new == 'planned' and track.state == 'accepted' and abs(start - track.start) < 1e-6:
+                return  # the bridge already runs it (its start is the one that counts)
+            track.state, track.start, track.end = new, start, end
+            self._book(robot, request, track)
+        elif new in ('queued', 'waiting'):  # not (or no longer) committed
+            if track.state != new:
+                track.since = self._now
+            track.state, track.start, track.end = new, None, None
+        elif new == 'finished':
+            track.state = new
+        else:
+            track.state, track.reason = new, reason or new
 
     def on_trajectory(self, robot: str, request: int, t: np.ndarray, q: np.ndarray) -> None:
         """Take the trajectory a planner published for ``robot``'s move ``request``.
@@ -228,11 +231,6 @@ class LaneProtocol:
                 return None if track.state in ('finished',) + FAILED_MOVE else track
         return None
 
-    def _timed(self, robot: str, request: int, track: MoveTrack, state: str,
-               start: float, end: float) -> None:
-        track.state, track.start, track.end = state, start, end
-        self._book(robot, request, track)
-
     def _book(self, robot: str, request: int, track: MoveTrack) -> None:
         """Keep the motion a timed move commits ``robot`` to (two lanes: each one's look-ahead).
 
@@ -257,9 +255,9 @@ class LaneProtocol:
     def _committed(self, robot: str, now: float) -> planning.Timeline:
         """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds).
 
-        Booked: a move the planner timed (``planned``, ``accepted``), or one just asked for
-        whose motion the job planned itself (:meth:`_intend`): in the ticks before the
-        planner's answer, the other lane must not decide as if the arm stood still.
+        Booked: a move the planner timed (``planned``, ``accepted``), or one just asked for,
+        as the job planned it when it asked (:meth:`_move`): in the ticks before the planner's
+        answer the other lane must not decide as if the arm stood still.
         """
         for lane in self.lanes:
             track = lane.moves.get(robot) if lane.phase in MOVING else None
@@ -268,14 +266,6 @@ class LaneProtocol:
                     and track.timeline.end > now):
                 return track.timeline
         return planning.Timeline.hold(now, self.q[robot])
-
-    def _intend(self, lane: Lane, traj: Trajectory, start: float) -> None:
-        """Book the move just asked for ``lane``'s arm as the job planned it, from ``start``.
-
-        Two lanes only; the planner's trajectory replaces it (:meth:`on_trajectory`).
-        """
-        if len(self.lanes) > 1:
-            lane.moves[lane.robot].timeline = planning.Timeline.of(traj, start)
 
     def phases(self) -> Dict[str, str]:
         """Each lane's phase, by its robot."""
@@ -288,13 +278,26 @@ class LaneProtocol:
             self._last_request[r] = req
         return req
 
-    def _move(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
+    def _move(self, lane: Lane, phase: str, target, start: float, now: float,
+              traj: Optional[Trajectory] = None) -> None:
+        """Ask for ``lane``'s move to ``target`` from ``start``; with two lanes, book it.
+
+        Booked as the job plans it (``traj`` if the caller has planned it already) until the
+        planner's own trajectory comes (:meth:`on_trajectory`); a move the job cannot plan is
+        booked once the planner has timed it (:meth:`_book`).
+        """
         lane.phase, lane.target = phase, np.asarray(target, dtype=float)
         lane.request = self._request(lane.robots, max(start, now + 1e-3))
         lane.moves = {r: MoveTrack() for r in lane.robots}
         lane.since = lane.sent = now
         lane.sends = 1
         self._send(lane)
+        if len(self.lanes) > 1 and lane.robot in self.q:
+            try:
+                traj = traj or self.plan(lane.robot, self.q[lane.robot], lane.target)
+            except ValueError:
+                return  # the planner will refuse it with the reason
+            lane.moves[lane.robot].timeline = planning.Timeline.of(traj, lane.request * 1e-9)
 
     def _soon(self, lane: Lane, now: float) -> float:
         """Return the start to ask for a move that should start as soon as possible.

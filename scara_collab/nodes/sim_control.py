@@ -57,21 +57,20 @@ class SimControl:
         return f'sim t={self.sim.time:.3f} s'
 
     def _pause(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
-        was, self.paused = self.paused, True
-        if not was:
-            self._on_pause(True)
-            self.node.get_logger().info(f'simulation paused at {self._at()}')
-        res.success, res.message = True, ('already paused' if was else 'paused') + \
-            f' at {self._at()}'
-        return res
+        return self._set_paused(True, res)
 
     def _resume(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
-        was, self.paused = self.paused, False
-        if was:
-            self._on_pause(False)
-            self.node.get_logger().info(f'simulation resumed at {self._at()}')
-        res.success, res.message = True, ('resumed' if was else 'already running') + \
-            f' at {self._at()}'
+        return self._set_paused(False, res)
+
+    def _set_paused(self, paused: bool, res: Trigger.Response) -> Trigger.Response:
+        """Pause or resume (idempotent); the answer says which and the sim time."""
+        changed = paused != self.paused
+        self.paused = paused
+        done, already = ('paused', 'already paused') if paused else ('resumed', 'already running')
+        if changed:
+            self._on_pause(paused)
+            self.node.get_logger().info(f'simulation {done} at {self._at()}')
+        res.success, res.message = True, f'{done if changed else already} at {self._at()}'
         return res
 
     def _step(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
