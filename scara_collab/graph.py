@@ -49,9 +49,9 @@ class Readiness:
     """What a node shows on the graph once it is ready.
 
     ``kind``: ``'clock'`` (sim time runs: ``/clock`` is published), ``'subscribed'`` (the node
-    subscribes to the topic ``name``), ``'service'`` (the service ``name`` of type
-    ``srv_type``, ``'package/srv/Type'``, answers), ``'page'`` (subscribed to ``name`` and its
-    web page answers on the node's ``port`` parameter).
+    subscribes to the topic ``name``), ``'published'`` (it publishes it), ``'service'`` (the
+    service ``name`` of type ``srv_type``, ``'package/srv/Type'``, answers), ``'page'``
+    (subscribed to ``name`` and its web page answers on the node's ``port`` parameter).
     """
 
     kind: str
@@ -80,7 +80,7 @@ class NodeSpec:
     configs: Tuple[str, ...]   # config/<name>.yaml files whose keys it declares
     ready: Readiness
     fixed: Mapping[str, str] = field(default_factory=dict)  # the class's own keywords
-    optional: bool = False     # started only when asked for (the viewer)
+    optional: bool = False     # started only when asked for (the viewer, transforms)
 
     def build(self, **kwargs):
         """Build the node in this process: ``Class(**fixed, **kwargs)`` (``context``, ...)."""
@@ -112,6 +112,9 @@ NODES: Tuple[NodeSpec, ...] = (
              Readiness('service', '/automation_manager/start', 'std_srvs/srv/Trigger')),
     NodeSpec('cell_viewer', _n('cell_viewer:main'), _n('cell_viewer:CellViewer'), (),
              Readiness('page', '/joint_states'), optional=True),
+    NodeSpec('state_publisher', _n('state_publisher:main'),
+             _n('state_publisher:StatePublisher'), (),
+             Readiness('published', '/robot_description'), optional=True),
 )
 BY_NAME: Dict[str, NodeSpec] = {n.name: n for n in NODES}
 BY_ENTRY: Dict[str, NodeSpec] = {n.entry: n for n in NODES}
@@ -221,10 +224,17 @@ def node(name: str) -> NodeSpec:
         raise KeyError(f'no node {name!r} in the graph; one of: {", ".join(BY_NAME)}') from None
 
 
-def job_nodes(automation: bool = True, viewer: bool = False) -> List[NodeSpec]:
-    """Return the nodes a run starts, in launch order (with the job, with the viewer)."""
+def job_nodes(automation: bool = True, viewer: bool = False,
+              transforms: bool = False) -> List[NodeSpec]:
+    """Return the nodes a run starts, in launch order.
+
+    :param automation: with the job (the automation manager).
+    :param viewer: with the live 3D view (``cell_viewer``).
+    :param transforms: with ``state_publisher`` (``/robot_description``, ``/tf``).
+    """
+    wanted = {'cell_viewer': viewer, 'state_publisher': transforms}
     return [n for n in NODES if (automation or n.name != 'automation_manager')
-            and (viewer or not n.optional)]
+            and (not n.optional or wanted.get(n.name, False))]
 
 
 def job_params(mode: str) -> Dict[str, Dict[str, str]]:

@@ -32,7 +32,7 @@ def test_every_callback_survives_a_garbage_message(tmp_path):
         own = {'pybullet_bridge': {'feed_interval': 0.0}}
         nodes = [spec.build(context=ctx, cli_args=params_args(
                      *spec.configs, overrides=dict(SIM, **own.get(spec.name, {}))))
-                 for spec in graph.job_nodes()]
+                 for spec in graph.job_nodes(transforms=True)]
         nodes += [
             RunRecorder(tmp_path / 'run', 'collaborative', context=ctx),
         ]

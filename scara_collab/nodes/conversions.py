@@ -7,7 +7,7 @@ import math
 from typing import Dict, List, Optional, Sequence, Tuple
 
 from builtin_interfaces.msg import Duration, Time
-from geometry_msgs.msg import Point, PointStamped, Pose, PoseStamped
+from geometry_msgs.msg import Point, PointStamped, Pose, PoseStamped, TransformStamped
 from nav_msgs.msg import Path
 import numpy as np
 from sensor_msgs.msg import JointState
@@ -15,6 +15,7 @@ from std_msgs.msg import ColorRGBA, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
 
+from scara_collab.core.frames import quaternion
 from scara_collab.core.palette import class_colour
 
 
@@ -234,6 +235,24 @@ def point_stamped(msg: PointStamped) -> Tuple[str, np.ndarray, float]:
     """``PointStamped`` -> ``(frame_id, xyz (3,), stamp s)`` (the point may be non-finite)."""
     p = msg.point
     return msg.header.frame_id, np.array([p.x, p.y, p.z], dtype=float), to_sec(msg.header.stamp)
+
+
+def transform_stamped(parent: str, child: str, pose: np.ndarray,
+                      stamp: float) -> TransformStamped:
+    """Return the ``TransformStamped`` of ``child`` in ``parent`` (``pose`` ``(4, 4)``).
+
+    >>> t = transform_stamped('world', 'a', np.eye(4), 1.5)
+    >>> t.header.frame_id, t.child_frame_id, t.transform.rotation.w, t.header.stamp.sec
+    ('world', 'a', 1.0, 1)
+    """
+    msg = TransformStamped()
+    msg.header.stamp = to_time(stamp)
+    msg.header.frame_id, msg.child_frame_id = parent, child
+    tr = msg.transform.translation
+    tr.x, tr.y, tr.z = (float(v) for v in pose[:3, 3])
+    rot = msg.transform.rotation
+    rot.x, rot.y, rot.z, rot.w = quaternion(pose[:3, :3])
+    return msg
 
 
 def make_point_stamped(xyz, frame_id: str = 'world', stamp: float = 0.0) -> PointStamped:

@@ -160,6 +160,13 @@ class GraphClient:
             return False
         return any(name == topic for name, _ in subs)
 
+    def _published(self, node_name: str, topic: str) -> bool:
+        try:
+            pubs = self.node.get_publisher_names_and_types_by_node(node_name, '/')
+        except NodeNameNonExistentError:
+            return False
+        return any(name == topic for name, _ in pubs)
+
     def ready_check(self, stage: Stage) -> Callable[[], bool]:
         """Return the readiness predicate of a stage (from :mod:`scara_collab.graph`)."""
         name, ready = stage.name, graph.node(stage.name).ready
@@ -167,6 +174,8 @@ class GraphClient:
             return lambda: self.node.get_clock().now().nanoseconds > 0
         if ready.kind == 'subscribed':
             return lambda: self._subscribed(name, ready.name)
+        if ready.kind == 'published':
+            return lambda: self._published(name, ready.name)
         if ready.kind == 'service':
             return self.client(SERVICE_TYPES[ready.srv_type], ready.name).service_is_ready
         if ready.kind == 'page':  # on the graph, and its page answers

@@ -135,6 +135,9 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument('--viewer', type=int, nargs='?', const=VIEWER_PORT, default=None,
                    metavar='PORT', help='also start the live 3D view (cell_viewer) on '
                    f'http://localhost:PORT (default port: {VIEWER_PORT})')
+    p.add_argument('--tf', action='store_true',
+                   help='also start state_publisher: /robot_description, and /tf and '
+                   '/tf_static where tf2_msgs is installed (./scripts/build_interfaces)')
     p.add_argument('--output', type=Path, default=None, metavar='DIR',
                    help='run folder (default: runs/<timestamp>_<mode>)')
     p.add_argument('--profile', choices=profiles, default=None,

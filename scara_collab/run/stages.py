@@ -50,7 +50,8 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
         own['cell_viewer'] = {'port': str(port)}
     faults = getattr(args, 'fault', [])
     out = []
-    for spec in graph.job_nodes(automation=with_automation, viewer=port is not None):
+    for spec in graph.job_nodes(automation=with_automation, viewer=port is not None,
+                                transforms=bool(getattr(args, 'tf', False))):
         params = dict(common, **by_mode[spec.name], **own.get(spec.name, {}))
         if faults:  # every node applies the entries naming its own publishers and clients
             params['faults'] = graph.param_value(faults)

@@ -1,0 +1,83 @@
+"""state_publisher: /robot_description for late subscribers; /tf against FK of /joint_states.
+
+The TF test needs tf2_msgs (no PyPI wheel: ``./scripts/build_interfaces`` builds it, CI does);
+it composes the transforms itself, as a TF listener would, from ``world`` to each tool.
+"""
+import numpy as np
+import pytest
+from ros_harness import Graph
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from scara_collab.core.kinematics import fk
+from scara_collab.core.model import parse_urdf
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.qos import LATCHED
+
+try:
+    from tf2_msgs.msg import TFMessage
+except ImportError:
+    TFMessage = None
+
+
+@pytest.fixture
+def graph():
+    """Yield the bridge (unthrottled, no feed) and the state publisher."""
+    g = Graph()
+    g.bridge = g.add_node_of('pybullet_bridge', real_time_factor=0.0, feed_interval=0.0,
+                             lockstep_window=0.0, use_sim_time=True)
+    g.publisher = g.add_node_of('state_publisher', use_sim_time=True)
+    yield g
+    g.close()
+
+
+def test_the_description_reaches_a_late_subscriber_and_names_the_six_joints(graph):
+    """Subscribed after it was published, ``/robot_description`` still arrives: the cell URDF."""
+    got = graph.collect(String, '/robot_description', LATCHED)
+    assert graph.spin_until(lambda: got, timeout=20)
+    urdf = parse_urdf(got[-1].data)
+    moving = [j.name for j in urdf.robot.joints if j.type != 'fixed']
+    assert moving == [n for a in graph.bridge.cell.arms for n in a.joint_names]
+    assert got[-1].data == graph.bridge.cell.urdf  # the one model
+
+
+def transforms_by_child(messages):
+    """Return ``{child: (parent, pose (4, 4), stamp)}``, the newest of each."""
+    out = {}
+    for msg in messages:
+        for t in msg.transforms:
+            p, r = t.transform.translation, t.transform.rotation
+            x, y, z, w = r.x, r.y, r.z, r.w
+            pose = np.eye(4)
+            pose[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+            pose[:3, 3] = [p.x, p.y, p.z]
+            out[t.child_frame_id] = (t.header.frame_id, pose, conv.to_sec(t.header.stamp))
+    return out
+
+
+@pytest.mark.skipif(TFMessage is None, reason='tf2_msgs not built (./scripts/build_interfaces)')
+def test_the_tf_chain_from_world_to_each_tool_is_fk_of_the_joint_states(graph):
+    """Composed from ``/tf_static`` and ``/tf``, ``world`` -> ``<robot>_quill`` is FK to 1e-6 m."""
+    static = graph.collect(TFMessage, '/tf_static', LATCHED)
+    moving = graph.collect(TFMessage, '/tf', 100)
+    states = graph.collect(JointState, '/joint_states', 100)
+    cell = graph.bridge.cell
+    q0 = graph.bridge.sim.arm_state(cell.leader.name)[0]
+    graph.bridge.sim.execute(cell.leader.name, [0.5, 2.0], [q0, q0 + [0.5, -0.4, 0.2]])
+    assert graph.spin_until(lambda: static and graph.bridge.sim.time > 1.2, timeout=60)
+    assert graph.spin_until(lambda: moving and states and conv.to_sec(
+        moving[-1].transforms[0].header.stamp) >= conv.to_sec(states[-1].header.stamp) - 1e-9,
+        timeout=20)
+    tree = transforms_by_child(static + moving)
+    stamp = conv.to_sec(moving[-1].transforms[0].header.stamp)
+    state = next(m for m in states if abs(conv.to_sec(m.header.stamp) - stamp) < 1e-9)
+    for arm in cell.arms:
+        frame, pose = f'{arm.name}_quill', np.eye(4)
+        while frame != 'world':
+            parent, step, _ = tree[frame]
+            pose, frame = step @ pose, parent
+        q, _ = conv.joint_state_arrays(state, arm.joint_names)
+        np.testing.assert_allclose(pose[:3, 3], fk(arm, q), atol=1e-6)
+    assert {t.header.frame_id for m in static for t in m.transforms} == {'world'}
