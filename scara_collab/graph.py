@@ -171,6 +171,8 @@ TOPICS: Tuple[Topic, ...] = (
     Topic('/replication_manager/status', _STATUS),
     Topic('/automation_manager/stats', _STATUS),
     Topic('/emergency_stop', 'std_msgs/msg/Bool', 'latched'),      # collision_monitor
+    Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),  # bridge, monitor, managers
+    Topic('/robot_description', 'std_msgs/msg/String', 'latched'),  # state_publisher
 )
 #: the topics of each robot, ``{robot}`` standing for its namespace
 ROBOT_TOPICS: Tuple[Topic, ...] = (

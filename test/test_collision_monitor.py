@@ -79,6 +79,12 @@ def test_fails_closed_on_a_nan_state_and_on_silence_then_clears(graph):
     assert 'no valid joint state' in g.monitor.reason
     st = g.monitor.status()
     assert st.stopped and st.minimum is not None and st.minimum > 0.1
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    arrays = g.collect(DiagnosticArray, '/diagnostics')
+    tick(g, 2.05)  # the 1 Hz status: also on /diagnostics, where ROS tools look
+    assert g.spin_until(lambda: arrays)
+    assert [(d.name, d.level) for d in arrays[-1].status] == [
+        ('collision_monitor', DiagnosticStatus.ERROR)]
 
 
 def test_an_accepted_heard_before_its_trajectory_still_times_the_prediction(graph):

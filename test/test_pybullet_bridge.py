@@ -244,11 +244,17 @@ def test_pause_step_resume_and_reset_control_the_simulation(graph):
     Resume runs it again; reset refuses while an arm moves (a move would be lost) and then puts
     both arms back at home, at rest. Every service is idempotent and says the sim time.
     """
+    from diagnostic_msgs.msg import DiagnosticArray
     from std_srvs.srv import Trigger
     bridge, arm = graph.bridge, graph.bridge.cell.leader
-    assert graph.spin_until(lambda: sim_time(graph) > 0.2)
+    diagnostics = graph.collect(DiagnosticArray, '/diagnostics')
+    assert graph.spin_until(lambda: sim_time(graph) > 1.2 and diagnostics)
+    first = proto.SimStatus.from_msg(diagnostics[0].status[0])
+    assert diagnostics[0].status[0].level == DiagnosticStatus.OK and not first.paused
     res = graph.call(Trigger, '/sim/pause', Trigger.Request())
     assert res.success and res.message.startswith('paused at sim t=')
+    assert graph.spin_until(lambda: proto.SimStatus.from_msg(diagnostics[-1].status[0]).paused)
+    assert diagnostics[-1].status[0].level == DiagnosticStatus.WARN  # on /diagnostics too
     t0 = sim_time(graph)
     graph.spin_until(lambda: False, timeout=0.5)  # let the executor run: no step may happen
     assert sim_time(graph) == t0

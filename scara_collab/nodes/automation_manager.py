@@ -41,6 +41,7 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.planning import plan_path
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.faults import call_with_faults, declare_faults
 from scara_collab.nodes.params import declare_config
 from scara_collab.nodes.qos import LATCHED
@@ -84,6 +85,7 @@ class AutomationManager(Node):
                            for a in self.cell.arms}
         self.collab_pub = self.create_publisher(PointStamped, '/collab/target', 10)
         self.stats_pub = self.create_publisher(DiagnosticStatus, '~/stats', 10)
+        self.diagnostics = Diagnostics(self)  # the same status on /diagnostics
         self.grippers = {a.name: self.create_client(SetBool, f'/{a.name}/gripper')
                          for a in self.cell.arms}
         self.status_subs = {}
@@ -245,7 +247,9 @@ class AutomationManager(Node):
             last_give_up=job.last_give_up)
 
     def _publish_stats(self) -> None:
-        self.stats_pub.publish(self.stats().to_msg())
+        msg = self.stats().to_msg()
+        self.stats_pub.publish(msg)
+        self.diagnostics.publish(msg)
 
 
 def main(args=None) -> None:

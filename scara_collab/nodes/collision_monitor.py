@@ -36,6 +36,7 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.planning import Timeline
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.params import declare_checked
 from scara_collab.nodes.qos import LATCHED, LATEST
 from scara_collab.nodes.runner import guarded, run_node
@@ -102,6 +103,7 @@ class CollisionMonitor(Node):
         self.dist_pub = self.create_publisher(Float64, '~/min_distance', 10)
         self.estop_pub = self.create_publisher(Bool, '/emergency_stop', LATCHED)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
+        self.diagnostics = Diagnostics(self)  # the same status on /diagnostics
         self.marker_pub = self.create_publisher(MarkerArray, '~/capsules', 10)
         self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
                                  LATEST)
@@ -272,7 +274,9 @@ class CollisionMonitor(Node):
                                    self.minimum_time, self.margin, self.stopped, self.reason)
 
     def _publish_status(self) -> None:
-        self.status_pub.publish(self.status().to_msg())
+        msg = self.status().to_msg()
+        self.status_pub.publish(msg)
+        self.diagnostics.publish(msg)
 
     def _markers(self, qa, qb, d: float, header: Header) -> MarkerArray:
         colour = (ColorRGBA(r=0.9, g=0.1, b=0.1, a=0.6) if d < self.margin else

@@ -401,3 +401,37 @@ class MonitorStatus(_Status):
             return f'emergency stop: {self.reason}'
         d = 'n/a' if self.distance is None else f'{self.distance:.3f} m'
         return f'arms {d} apart (margin {self.margin} m)'
+
+
+@dataclass(frozen=True)
+class SimStatus(_Status):
+    """The simulator's state (the bridge, on ``/diagnostics`` once a second of sim time).
+
+    ``time``: sim s; ``paused``: ``/sim/pause`` holds the clock; ``estop``: the emergency
+    stop holds both arms; ``moving``: arms executing a trajectory; ``items``: on the belt or
+    held; ``absent``: lockstep guards missing (the arms are held until they answer).
+    """
+
+    time: float
+    paused: bool
+    estop: bool
+    moving: int
+    items: int
+    absent: str = ''
+
+    KIND: ClassVar[str] = 'pybullet_bridge'
+
+    def level(self) -> str:
+        """Return ``'ERROR'`` under the e-stop or a missing guard, ``'WARN'`` paused, else OK."""
+        if self.estop or self.absent:
+            return 'ERROR'
+        return 'WARN' if self.paused else 'OK'
+
+    def text(self) -> str:
+        """Return what holds the simulation, or that it runs."""
+        if self.estop:
+            return f'emergency stop: both arms held at sim t={self.time:.3f} s'
+        if self.absent:
+            return f'arms held: {self.absent} silent'
+        state = 'paused' if self.paused else 'running'
+        return f'{state} at sim t={self.time:.3f} s, {self.moving} arm(s) moving'

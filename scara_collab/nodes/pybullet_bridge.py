@@ -54,6 +54,7 @@ from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.execution import Execution
 from scara_collab.nodes.faults import declare_faults, FaultyPublisher
 from scara_collab.nodes.lockstep import LockstepGate, parse_timeouts
@@ -108,6 +109,7 @@ class PyBulletBridge(Node):
             'state': 1.0 / float(sim_cfg['state_rate']),
             'clock': 1.0 / float(sim_cfg['clock_rate']),
             'markers': 1.0 / float(self.get_parameter('markers_rate').value),
+            'diagnostics': 1.0,
         }
         self._next = {k: 0.0 for k in self._periods}
         self._chunk = max(1, int(round(float(self.get_parameter('step_chunk').value) / self.dt)))
@@ -119,6 +121,7 @@ class PyBulletBridge(Node):
         self.state_pub = self.create_publisher(JointState, 'joint_states', STATE_QOS)
         self.items_pub = self.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
         self.events_pub = self.create_publisher(DiagnosticStatus, 'conveyor/events', EVENTS)
+        self.diagnostics = Diagnostics(self)
         self.status_pub: Dict[str, object] = {}
         for arm in self.cell.arms:
             name = arm.name
@@ -242,6 +245,14 @@ class PyBulletBridge(Node):
         else:
             self._anchor, self._parked = None, False
             self._timer.reset()
+        self.diagnostics.publish(self.status().to_msg())  # no sim second passes while paused
+
+    def status(self) -> proto.SimStatus:
+        """Return the simulator's state now (:class:`~scara_collab.nodes.protocol.SimStatus`)."""
+        return proto.SimStatus(
+            round(self.sim.time, 6), self.control.paused, self.sim.estop,
+            sum(self.sim.active(r) for r in self.sim.robots), len(self.sim.items()),
+            ', '.join(self.gate.absent))
 
     def _busy(self) -> str:
         """Return why the arms cannot be reset now (a move runs, an item is held), or ''."""
@@ -263,6 +274,9 @@ class PyBulletBridge(Node):
             self.items_pub.publish(conv.item_markers(self.sim.items(), self.cell.item_classes,
                                                      self.cell.item_size, self.sim.time))
             self._next['markers'] += self._periods['markers']
+        if t >= self._next['diagnostics']:
+            self.diagnostics.publish(self.status().to_msg())
+            self._next['diagnostics'] += self._periods['diagnostics']
         for ev in self.sim.pop_events():
             self.events_pub.publish(proto.ItemEvent(ev.kind, ev.item, ev.cls, ev.time, ev.robot,
                                                     ev.cause).to_msg())

@@ -32,6 +32,7 @@ from scara_collab.core.mirror import mirror_error, mirror_point
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.qos import EVENTS, LATEST
 from scara_collab.nodes.runner import guarded, run_node
 
@@ -73,6 +74,7 @@ class ReplicationManager(Node):
         self.lead_pub = self.create_publisher(PointStamped, f'/{lead.name}/target', 10)
         self.foll_pub = self.create_publisher(PointStamped, f'/{foll.name}/target', 10)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
+        self.diagnostics = Diagnostics(self)  # the same status on /diagnostics
         self.error_pub = self.create_publisher(Float64, '~/mirror_error', 10)
         self.create_subscription(PointStamped, '/collab/target', guarded(self, self._on_target),
                                  10)
@@ -183,7 +185,9 @@ class ReplicationManager(Node):
                                   self.not_in_step, self.last_reason)
 
     def _publish_status(self) -> None:
-        self.status_pub.publish(self.status().to_msg())
+        msg = self.status().to_msg()
+        self.status_pub.publish(msg)
+        self.diagnostics.publish(msg)
 
 
 def main(args=None) -> None:
