@@ -20,9 +20,6 @@ from typing import Dict, List, Optional, Sequence
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 import numpy as np
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
@@ -35,7 +32,7 @@ from scara_collab.core.planning import plan_path
 from scara_collab.core.trajectory import segment_deviation
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
-from scara_collab.nodes.runner import close_graph
+from scara_collab.nodes.runner import InProcess
 
 ROBOTS = ('scara_left', 'scara_right')
 MOVE = (np.array([3.4, -1.15, 0.4]), np.array([2.2, -0.25, 0.4]))
@@ -82,18 +79,17 @@ def measure(mode: str = 'line', targets: Optional[Sequence[np.ndarray]] = None,
         summary keys (worst over the moves)}``.
     """
     targets = [np.asarray(p, float) for p in (targets if targets is not None else MOVE)]
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    ex = SingleThreadedExecutor(context=ctx)
+    g = InProcess('single')
     own = {'pybullet_bridge': {'real_time_factor': 0.0, 'feed_interval': 0.0},
            'left_planner': {'mode': mode}, 'right_planner': {'mode': mode}}
-    nodes = [spec.build(context=ctx, cli_args=graph.ros_args(spec.configs, own.get(spec.name)))
+    nodes = [spec.build(context=g.context,
+                        cli_args=graph.ros_args(spec.configs, own.get(spec.name)))
              for spec in map(graph.node, ('pybullet_bridge', 'left_planner', 'right_planner',
                                           'replication_manager'))]
-    nodes.append(Node('bench', context=ctx))
-    bridge, left_pl, right_pl, _, probe = nodes
     for n in nodes:
-        ex.add_node(n)
+        g.add(n)
+    bridge, left_pl, right_pl, _ = nodes
+    probe = g.probe('bench')
     states: List[JointState] = []
     trajs: Dict[str, JointTrajectory] = {}
     starts: Dict[str, float] = {}
@@ -111,7 +107,7 @@ def measure(mode: str = 'line', targets: Optional[Sequence[np.ndarray]] = None,
     def spin_until(pred, what: str) -> None:
         end = time.monotonic() + timeout
         while not pred() and time.monotonic() < end:
-            ex.spin_once(timeout_sec=0.005)
+            g.spin_once(timeout_sec=0.005)
         if not pred():
             raise RuntimeError(f'mirrored moves: timed out waiting for {what}')
 
@@ -119,7 +115,7 @@ def measure(mode: str = 'line', targets: Optional[Sequence[np.ndarray]] = None,
         cell = bridge.cell
         left, right = cell.leader, cell.follower
         spin_until(lambda: left_pl.q is not None and right_pl.q is not None
-                   and left_pl._now() > 0.1, 'the planners to see the arms')
+                   and conv.now(left_pl) > 0.1, 'the planners to see the arms')
         pub = probe.create_publisher(PointStamped, '/collab/target', 10)
         spin_until(lambda: pub.get_subscription_count() > 0, 'the replication manager')
         moves = []
@@ -152,7 +148,7 @@ def measure(mode: str = 'line', targets: Optional[Sequence[np.ndarray]] = None,
             if moves else None
         return out
     finally:
-        close_graph(ex, nodes, ctx)
+        g.close()
 
 
 def _move_metrics(left, right, states: List[JointState], t_send: float, start: np.ndarray,

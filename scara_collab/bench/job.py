@@ -21,15 +21,13 @@ import sys
 import time
 from typing import Dict, Optional, Sequence
 
-import rclpy
-
 from scara_collab import graph
 from scara_collab.bench.util import Log
 from scara_collab.core.config import load_config
 from scara_collab.nodes.automation_manager import AutomationManager
 from scara_collab.nodes.collision_monitor import CollisionMonitor
 from scara_collab.nodes.replication_manager import ReplicationManager
-from scara_collab.nodes.runner import close_graph, make_executor
+from scara_collab.nodes.runner import InProcess
 
 MODES = ('single', 'collaborative', 'mirrored')
 
@@ -55,27 +53,25 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
     """
     feed = default_feed() if feed is None else float(feed)
     seed = int(load_config('simulation')['item_seed'] if seed is None else seed)
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    ex = make_executor(context=ctx)  # the executables' executor ($SCARA_COLLAB_EXECUTOR)
+    g = InProcess()  # the executables' executor ($SCARA_COLLAB_EXECUTOR)
     params = graph.job_params(mode)  # as the launcher starts them
     params['pybullet_bridge'].update(real_time_factor=0.0, feed_interval=feed, item_seed=seed)
     params['automation_manager']['auto_start'] = 'true'
     built: Dict[str, object] = {}
     for spec in graph.job_nodes():
         own = dict(params[spec.name], **({'faults': list(faults)} if faults else {}))
-        built[spec.name] = spec.build(context=ctx,
+        built[spec.name] = spec.build(context=g.context,
                                       cli_args=graph.ros_args(spec.configs, own))
     nodes = list(built.values())
     bridge, job = built['pybullet_bridge'], built['automation_manager']
     replication, monitor = built['replication_manager'], built['collision_monitor']
     for n in nodes:
-        ex.add_node(n)
+        g.add(n)
     wall = time.monotonic()
     next_report = report_every
     try:
         while bridge.sim.time < duration:
-            ex.spin_once(timeout_sec=0.01)
+            g.spin_once(timeout_sec=0.01)
             if log and bridge.sim.time >= next_report:
                 c = job.job.counts
                 log(f'{mode} (seed {seed}): {bridge.sim.time:.0f}/{duration:.0f} sim s, sorted '
@@ -89,7 +85,7 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
                    feed_interval=feed, seed=seed)
         return out
     finally:
-        close_graph(ex, nodes, ctx)
+        g.close()
 
 
 def job_result(job: AutomationManager, monitor: CollisionMonitor,

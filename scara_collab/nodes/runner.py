@@ -161,3 +161,47 @@ def close_graph(executor, nodes, context) -> None:
         lockstep.leave(node)
         node.destroy_node()
     rclpy.try_shutdown(context=context)
+
+
+class InProcess:
+    """Nodes built in this process on one executor, for benchmarks and tests that drive them.
+
+    ``g = InProcess(); node = g.add(spec.build(context=g.context, ...)); g.spin_once(0.01)``
+    and :meth:`close` (or a ``with`` block) at the end. Its own rclpy context, so several can
+    live in one process one after another.
+
+    :param executor: ``'events'`` or ``'single'`` (default: :func:`make_executor`'s).
+    """
+
+    def __init__(self, executor: Optional[str] = None):
+        """Initialise a fresh context and its executor; no node yet."""
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.executor = make_executor(executor, context=self.context)
+        self.nodes: List[Node] = []
+
+    def add(self, node: Node) -> Node:
+        """Spin ``node`` (built in :attr:`context`) with the others; return it."""
+        self.executor.add_node(node)
+        self.nodes.append(node)
+        return node
+
+    def probe(self, name: str) -> Node:
+        """Add and return a plain node named ``name``, for the caller's own endpoints."""
+        return self.add(Node(name, context=self.context))
+
+    def spin_once(self, timeout_sec: float) -> None:
+        """Run at most one callback, waiting up to ``timeout_sec`` for it."""
+        self.executor.spin_once(timeout_sec=timeout_sec)
+
+    def close(self) -> None:
+        """Tear it all down (:func:`close_graph`)."""
+        close_graph(self.executor, self.nodes, self.context)
+
+    def __enter__(self) -> 'InProcess':
+        """Return itself."""
+        return self
+
+    def __exit__(self, *exc) -> None:
+        """Close it."""
+        self.close()
