@@ -173,6 +173,7 @@ TOPICS: Tuple[Topic, ...] = (
     Topic('/emergency_stop', 'std_msgs/msg/Bool', 'latched'),      # collision_monitor
     Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),  # bridge, monitor, managers
     Topic('/robot_description', 'std_msgs/msg/String', 'latched'),  # state_publisher
+    Topic('/rosout', 'rcl_interfaces/msg/Log', 'events'),  # rcl's (records.bag.ROSOUT_QOS)
 )
 #: the topics of each robot, ``{robot}`` standing for its namespace
 ROBOT_TOPICS: Tuple[Topic, ...] = (

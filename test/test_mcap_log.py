@@ -19,6 +19,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
 from ros_harness import Graph, params_args
+from rosbags.interfaces import QosDurability, QosHistory
+from rosbags.rosbag2 import Reader as BagReader
+from rosbags.typesys import get_typestore, Stores
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
@@ -31,7 +34,7 @@ from scara_collab.nodes.mcap_recorder import McapLog
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 from scara_collab.nodes.recorder import RunRecorder
 from scara_collab.records.mcap_log import (
-    iter_messages, msg_file, Reading, ros2msg_definition, SEPARATOR)
+    iter_messages, msg_file, Reading, ros2msg_definition, SEPARATOR, type_hash)
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ('scara_left', 'scara_right')
@@ -49,7 +52,8 @@ def _bridge(g: Graph, feed_interval: float = 0.0) -> PyBulletBridge:
 def record_run(directory: Path, cell, seconds: float = 3.0) -> dict:
     """Record a short run into ``directory`` (timeseries.csv, events.csv, run.mcap, ...).
 
-    The left arm makes a joint move; the three target topics get one message each.
+    The left arm makes a joint move; the three target topics get one message each; the probe
+    logs a line (``/rosout``).
 
     :return: ``{'summary', 'targets': {topic: msg}, 'trajectory': msg, 'mcap': path}``.
     """
@@ -74,9 +78,11 @@ def record_run(directory: Path, cell, seconds: float = 3.0) -> dict:
         for name, xyz in TARGETS.items():
             targets[name] = conv.make_point_stamped(xyz, 'world', rec.sim_time + 0.5)
             pubs[name].publish(targets[name])
+        assert g.spin_until(lambda: g.probe.count_subscribers('/rosout') > 0)
+        g.probe.get_logger().info('record_run: targets sent')  # a /rosout line
         end = rec.job_start + seconds
         assert g.spin_until(lambda: rec.sim_time > end and all(
-            log.counts[n] for n in TARGETS), timeout=40)
+            log.counts[n] for n in (*TARGETS, '/rosout')), timeout=40)
         summary = rec.finish('test', False, plots=False)
         assert log.closed and summary['mcap']['file'] == 'run.mcap'
     finally:
@@ -211,6 +217,57 @@ def test_the_recorded_run_reads_back_with_types_and_sim_timestamps(recorded):
     items = [deserialize_message(m.data, MarkerArray) for m, _ in by_topic['/conveyor/items']]
     cubes = [mk for arr in items for mk in arr.markers if mk.type == Marker.CUBE]
     assert cubes and {mk.ns for mk in cubes} <= {'red', 'blue'}
+
+
+def test_the_run_folder_is_a_rosbag2_bag_that_rosbags_reads(recorded):
+    """The rosbags reader opens the run folder as a rosbag2 (Jazzy) bag, reads every message.
+
+    Topics, types and counts are the run summary's; the offered QoS is the publisher's
+    (``/emergency_stop`` transient local, ``/clock`` volatile); ``/rosout`` is recorded; every
+    message deserialises with rosbags' own Jazzy typestore; the MCAP file carries the
+    ``rosbag2`` metadata record.
+    """
+    folder = recorded['mcap'].parent
+    counts = recorded['summary']['mcap']['topics']
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with BagReader(folder) as reader:
+        assert reader.ros_distro == 'jazzy' and not reader.compression_mode
+        assert reader.message_count == recorded['summary']['mcap']['messages']
+        conns = {c.topic: c for c in reader.connections}
+        assert set(conns) == {t.name for t in topics(ROBOTS)}
+        assert {n: c.msgcount for n, c in conns.items() if c.msgcount} == counts
+        for name, conn in conns.items():
+            assert conn.msgtype == message_class_type(name)
+            assert conn.digest == type_hash(conn.msgtype) and conn.digest.startswith('RIHS01_')
+        (estop,) = conns['/emergency_stop'].ext.offered_qos_profiles
+        assert estop.durability == QosDurability.TRANSIENT_LOCAL and estop.depth == 1
+        (clock,) = conns['/clock'].ext.offered_qos_profiles
+        assert clock.durability == QosDurability.VOLATILE
+        assert clock.history == QosHistory.KEEP_LAST and clock.depth == 10
+        (rosout,) = conns['/rosout'].ext.offered_qos_profiles
+        assert rosout.durability == QosDurability.TRANSIENT_LOCAL and rosout.depth == 1000
+        lines = [store.deserialize_cdr(raw, conn.msgtype).msg
+                 for conn, _, raw in reader.messages(connections=[conns['/rosout']])]
+        assert 'record_run: targets sent' in lines
+        seen = {}
+        for conn, timestamp, raw in reader.messages():
+            msg = store.deserialize_cdr(raw, conn.msgtype)
+            assert type(msg).__name__ == conn.msgtype.replace('/', '__')
+            seen[conn.topic] = seen.get(conn.topic, 0) + 1
+        assert seen == counts
+        sent = recorded['targets']['/collab/target']
+        (_, _, raw), = reader.messages(connections=[conns['/collab/target']])
+        assert store.deserialize_cdr(raw, 'geometry_msgs/msg/PointStamped').point.x == (
+            sent.point.x)
+    with open(recorded['mcap'], 'rb') as f:
+        records = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    assert records['rosbag2']['ROS_DISTRO'] == 'jazzy'
+    assert 'version: 9' in records['rosbag2']['serialized_metadata']
+
+
+def message_class_type(name: str) -> str:
+    """Return the type the graph gives the topic ``name``."""
+    return next(t.type for t in topics(ROBOTS) if t.name == name)
 
 
 def test_read_mcap_script_summarises_and_dumps(recorded):

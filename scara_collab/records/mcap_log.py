@@ -18,8 +18,11 @@ side that takes them raw from the graph is :class:`scara_collab.nodes.mcap_recor
   the same (there is no sim-time send stamp); ``sequence`` counts the messages of each
   channel.
 
-The channels carry no ``offered_qos_profiles`` metadata (rosbag2 reads its absence as
-"default QoS" when it plays the file back).
+The run folder is a rosbag2 bag (Jazzy, storage ``mcap``; :mod:`scara_collab.records.bag`):
+each channel carries the metadata ``offered_qos_profiles`` (the publisher's profile, so
+``ros2 bag play`` republishes ``/emergency_stop`` latched) and ``topic_type_hash``;
+:meth:`McapWriter.close` writes the MCAP metadata record ``rosbag2`` and ``metadata.yaml``
+next to the file.
 
 The file is chunked (``chunk_size`` bytes of messages, zstd-compressed) and the stream is
 flushed at least every ``flush_period`` wall seconds, so a run that is killed without
@@ -33,6 +36,7 @@ Reading (a sketch, not a doctest: it needs a recorded run)::
 """
 from functools import lru_cache
 import importlib.util
+import json
 import os
 from pathlib import Path
 import re
@@ -46,6 +50,7 @@ from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 
 from scara_collab.graph import Topic
+from scara_collab.records import bag
 
 MCAP_FILE = 'run.mcap'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
@@ -153,6 +158,24 @@ def ros2msg_definition(type_name: str) -> str:
     return expand(type_name, 0)
 
 
+@lru_cache(maxsize=None)
+def type_hash(type_name: str) -> str:
+    """Return the REP-2011 type hash of a message type (``RIHS01_...``), '' if not known.
+
+    Read from the ``<Type>.json`` type description that rosidl installs beside the ``.msg``
+    file (what rclpy reports as an endpoint's ``topic_type_hash``).
+
+    :param type_name: ``pkg/msg/Type``.
+    """
+    try:
+        description = msg_file(type_name).with_suffix('.json')
+        hashes = json.loads(description.read_text(encoding='utf-8'))['type_hashes']
+    except (OSError, ValueError, KeyError, TypeError):
+        return ''
+    full = '{}/msg/{}'.format(*_split_type(type_name))
+    return next((h['hash_string'] for h in hashes if h.get('type_name') == full), '')
+
+
 # --- writing ---------------------------------------------------------------------------------
 def clock_nanoseconds(data: bytes) -> int:
     """Return the time in a serialized ``rosgraph_msgs/msg/Clock``, ns (0 if unreadable).
@@ -207,8 +230,10 @@ class McapWriter:
                                                  for t in self.topics)
         # per topic index: (channel id, topic name, is it /clock)
         self._channels: List[Tuple[int, str, bool]] = [
-            (self._writer.register_channel(t.name, MESSAGE_ENCODING, schemas[t.type]), t.name,
-             t.type == CLOCK_TYPE) for t in self.topics]
+            (self._writer.register_channel(t.name, MESSAGE_ENCODING, schemas[t.type], {
+                'offered_qos_profiles': bag.qos_yaml(bag.topic_qos(t)),
+                'topic_type_hash': type_hash(t.type)}), t.name, t.type == CLOCK_TYPE)
+            for t in self.topics]
 
     @property
     def messages(self) -> int:
@@ -249,17 +274,31 @@ class McapWriter:
         if not self.closed:
             self._stream.flush()
 
+    def bag_metadata(self) -> Dict[str, object]:
+        """Return the rosbag2 metadata of what is written so far (:func:`bag.bag_metadata`)."""
+        first = self.first_log_time or 0
+        return bag.bag_metadata(
+            [bag.TopicRecord(t, type_hash(t.type), self.counts[t.name]) for t in self.topics],
+            self.path.name, first, self.last_log_time - first if self.messages else 0)
+
     def close(self) -> Dict[str, object]:
-        """Write the summary and the footer and close the file (idempotent).
+        """Write the rosbag2 metadata, the summary and the footer, close the file (idempotent).
+
+        Then ``metadata.yaml`` beside the file makes its folder a rosbag2 bag.
 
         :return: ``{'mcap': {'file', 'messages', 'topics', 'bytes'}}`` for the run summary.
         """
         if not self.closed:
             self.closed = True
+            metadata = self.bag_metadata()
             try:
+                self._writer.add_metadata(bag.METADATA_RECORD, {
+                    'serialized_metadata': bag.to_yaml(metadata), 'ROS_DISTRO': bag.ROS_DISTRO})
                 self._writer.finish()
             finally:
                 self._stream.close()
+            (self.path.parent / bag.METADATA_FILE).write_text(bag.metadata_yaml(metadata),
+                                                              encoding='utf-8')
         return {'mcap': {'file': self.path.name, 'messages': self.messages,
                          'topics': {k: v for k, v in self.counts.items() if v},
                          'bytes': self.path.stat().st_size if self.path.exists() else 0}}
