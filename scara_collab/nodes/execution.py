@@ -37,21 +37,23 @@ class Execution:
         """Nothing runs yet."""
         self.cell, self.sim, self.report, self.warn = cell, sim, report, warn
         self.running: Dict[str, Tuple[str, float]] = {}  # robot -> (move id, end)
+        self.reason = ''  # why the last refused trajectory was refused
 
     def run(self, robot: str, msg: JointTrajectory) -> Optional[Tuple[float, float]]:
-        """Execute ``msg`` on ``robot``; return its ``(start, end)``, or None if refused."""
+        """Execute ``msg`` on ``robot``; return its ``(start, end)``, or None if refused.
+
+        A refusal is reported, and its reason kept in :attr:`reason`.
+        """
         move = msg.header.frame_id
         try:
             stamp, t, q, qd, qdd = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
         except conv.MessageError as exc:
-            self.report(robot, 'refused', move, f'{exc}; {KEEPS}')
-            return None
+            return self._refuse(robot, move, f'{exc}; {KEEPS}')
         now = self.sim.time
         start = now if stamp == 0.0 else stamp
         if start + t[-1] < now:
-            self.report(robot, 'refused', move, f'it ended {now - start - t[-1]:.3f} s ago; '
-                        f'{KEEPS}')
-            return None
+            return self._refuse(robot, move, f'it ended {now - start - t[-1]:.3f} s ago; '
+                                f'{KEEPS}')
         if start < now - self.sim.dt:
             self.warn(f'{robot}: move {move or "(no id)"} start {start:.3f} s is '
                       f'{now - start:.3f} s late; starting now')
@@ -65,8 +67,7 @@ class Execution:
         try:
             self.sim.execute(robot, start + t, q, qd, qdd)
         except ValueError as exc:
-            self.report(robot, 'refused', move, f'{exc}; {KEEPS}')
-            return None
+            return self._refuse(robot, move, f'{exc}; {KEEPS}')
         old = self.running.get(robot)
         if old is not None and old[0] != move:
             self.report(robot, 'preempted', old[0], f'replaced by move {move or "(no id)"}')
@@ -74,6 +75,10 @@ class Execution:
         self.report(robot, 'accepted', move, start=start, end=start + t[-1],
                     stamp=stamp if stamp > 0 else None)
         return start, start + t[-1]
+
+    def _refuse(self, robot: str, move: str, reason: str) -> None:
+        self.reason = reason
+        self.report(robot, 'refused', move, reason)
 
     def poll(self) -> None:
         """Report every move whose end has passed as ``finished``."""

@@ -62,6 +62,7 @@ from scara_collab.nodes.params import declare_config
 from scara_collab.nodes.qos import EVENTS, LATCHED
 from scara_collab.nodes.runner import guarded, run_node
 from scara_collab.nodes.sim_control import SimControl
+from scara_collab.nodes.trajectory_action import FollowJointTrajectory, TrajectoryActions
 from scara_collab.sim.cell_sim import CellSim
 
 STATE_QOS = QoSProfile(depth=10)
@@ -150,6 +151,8 @@ class PyBulletBridge(Node):
         self._parked = False  # the stepping timer is off while the bridge waits for answers
         self.control = SimControl(self, self.sim, self.home, self._advance, self._on_pause,
                                   self._busy)
+        self.actions = (TrajectoryActions(self, self.cell, self.sim, self.execution)
+                        if FollowJointTrajectory is not None else None)
         if self.gate.enabled:  # re-arm now and then, so a silent participant times out
             self.create_timer(0.25, self._wake, clock=self._steady)
         self._publish_all()
@@ -280,6 +283,8 @@ class PyBulletBridge(Node):
         for ev in self.sim.pop_events():
             self.events_pub.publish(proto.ItemEvent(ev.kind, ev.item, ev.cls, ev.time, ev.robot,
                                                     ev.cause).to_msg())
+        if self.actions is not None:
+            self.actions.tick()
         self.execution.poll()
 
     def _publish_all(self) -> None:

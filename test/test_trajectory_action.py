@@ -1,0 +1,127 @@
+"""FollowJointTrajectory on the bridge, as ros2_control's joint trajectory controller serves it.
+
+Needs control_msgs (no PyPI wheel: ``./scripts/build_interfaces`` builds it, CI does): a goal
+moves an arm and succeeds with feedback; bad goals end with their error codes; cancel holds the
+arm; a new goal preempts the running one.
+"""
+import numpy as np
+import pytest
+from ros_harness import Graph
+
+from scara_collab.core.trajectory import joint_move
+from scara_collab.nodes import conversions as conv
+
+try:
+    from action_msgs.msg import GoalStatus
+    from control_msgs.action import FollowJointTrajectory
+    from control_msgs.msg import JointTolerance
+    from rclpy.action import ActionClient
+except ImportError:
+    FollowJointTrajectory = None
+
+pytestmark = pytest.mark.skipif(FollowJointTrajectory is None,
+                                reason='control_msgs not built (./scripts/build_interfaces)')
+
+
+@pytest.fixture
+def graph():
+    """Yield the bridge (unthrottled, no feed, no lockstep) and an action client per arm."""
+    g = Graph()
+    g.bridge = g.add_node_of('pybullet_bridge', real_time_factor=0.0, feed_interval=0.0,
+                             lockstep_window=0.0)
+    g.arm = g.bridge.cell.leader
+    g.client = ActionClient(g.probe, FollowJointTrajectory,
+                            f'/{g.arm.name}/follow_joint_trajectory')
+    assert g.spin_until(g.client.server_is_ready)
+    yield g
+    g.close()
+
+
+def goal_to(g, dq, names=None, path_tolerance=None):
+    """Return a goal: a joint move of the leader by ``dq`` from where it is."""
+    q0 = g.bridge.sim.arm_state(g.arm.name)[0]
+    traj = joint_move(g.arm, q0, q0 + np.asarray(dq))
+    goal = FollowJointTrajectory.Goal()
+    goal.trajectory = conv.trajectory_msg(names or g.arm.joint_names, traj.t, traj.q, traj.qd)
+    if path_tolerance is not None:
+        goal.path_tolerance = [JointTolerance(name=n, position=path_tolerance)
+                               for n in g.arm.joint_names]
+    return goal, q0 + np.asarray(dq), traj.duration
+
+
+def send(g, goal, feedback=None):
+    """Send ``goal``; return its accepted handle."""
+    sent = g.client.send_goal_async(goal, feedback_callback=feedback)
+    assert g.spin_until(sent.done)
+    handle = sent.result()
+    assert handle.accepted
+    return handle
+
+
+def result_of(g, handle, timeout=60.0):
+    """Return ``(status, result)`` of a goal once it has ended."""
+    future = handle.get_result_async()
+    assert g.spin_until(future.done, timeout=timeout)
+    return future.result().status, future.result().result
+
+
+def test_a_goal_moves_the_arm_and_succeeds_with_feedback(graph):
+    """The arm follows the goal through the bridge; feedback comes; the result is SUCCESSFUL."""
+    feedback = []
+    goal, target, duration = goal_to(graph, [0.4, -0.3, 0.1])
+    status, result = result_of(graph, send(graph, goal, feedback.append))
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.error_string
+    assert result.error_code == FollowJointTrajectory.Result.SUCCESSFUL
+    np.testing.assert_allclose(graph.bridge.sim.arm_state(graph.arm.name)[0], target, atol=0.01)
+    assert len(feedback) >= duration / 0.1 - 2
+    fb = feedback[len(feedback) // 2].feedback
+    assert list(fb.joint_names) == list(graph.arm.joint_names)
+    np.testing.assert_allclose(np.subtract(fb.desired.positions, fb.actual.positions),
+                               fb.error.positions, atol=1e-12)
+    assert max(abs(v) for v in fb.error.positions) < 0.01  # it tracks
+
+
+def test_bad_goals_end_with_their_error_codes(graph):
+    """Wrong joints: INVALID_JOINTS; beyond the joint limits: INVALID_GOAL, with the reason."""
+    R = FollowJointTrajectory.Result
+    goal, _, _ = goal_to(graph, [0.1, 0.0, 0.0], names=['a', 'b', 'c'])
+    status, result = result_of(graph, send(graph, goal))
+    assert status == GoalStatus.STATUS_ABORTED and result.error_code == R.INVALID_JOINTS
+    assert "not scara_left's" in result.error_string
+    goal, _, _ = goal_to(graph, [0.1, 0.0, 0.0])
+    goal.trajectory.points[-1].positions[0] = 3.0  # beyond +-150 deg
+    status, result = result_of(graph, send(graph, goal))
+    assert status == GoalStatus.STATUS_ABORTED and result.error_code == R.INVALID_GOAL
+    assert 'limit' in result.error_string
+
+
+def test_cancel_holds_the_arm_and_a_new_goal_preempts(graph):
+    """Canceled mid-move the arm brakes and holds short of the goal; a second goal preempts."""
+    g = graph
+    goal, target, _ = goal_to(g, [1.2, 0.0, 0.0])
+    handle = send(g, goal)
+    start = g.bridge.sim.time
+    assert g.spin_until(lambda: g.bridge.sim.time > start + 0.4)
+    cancel = handle.cancel_goal_async()
+    status, result = result_of(g, handle)
+    assert cancel.done() and status == GoalStatus.STATUS_CANCELED, result.error_string
+    t = g.bridge.sim.time
+    assert g.spin_until(lambda: g.bridge.sim.time > t + 1.0)
+    q, qd = g.bridge.sim.arm_state(g.arm.name)
+    assert np.abs(qd).max() < 1e-3 and abs(q[0] - target[0]) > 0.2  # held, short of the goal
+    first = send(g, goal_to(g, [0.8, 0.0, 0.0])[0])
+    assert g.spin_until(lambda: g.bridge.sim.time > t + 1.3)
+    second = send(g, goal_to(g, [-0.3, 0.0, 0.0])[0])
+    status, result = result_of(g, first)
+    assert status == GoalStatus.STATUS_ABORTED and 'preempted by goal' in result.error_string
+    status, result = result_of(g, second)
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.error_string
+
+
+def test_a_broken_path_tolerance_holds_the_arm(graph):
+    """A path tolerance tighter than the tracking error aborts the goal and holds the arm."""
+    goal, _, _ = goal_to(graph, [1.0, -0.8, 0.0], path_tolerance=1e-7)
+    status, result = result_of(graph, send(graph, goal))
+    assert status == GoalStatus.STATUS_ABORTED
+    assert result.error_code == FollowJointTrajectory.Result.PATH_TOLERANCE_VIOLATED
+    assert 'path tolerance 1e-07' in result.error_string
