@@ -38,6 +38,8 @@ setup(
         ('share/' + package_name, ['package.xml']),
         share('urdf'),
         share('config', '*.yaml'),
+        share('config', '*.rviz'),
+        share('launch', '*.launch.py'),
     ],
     install_requires=['setuptools'],
     zip_safe=True,

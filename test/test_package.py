@@ -45,6 +45,8 @@ def test_colcon_installs_share_files_and_marker(installed):
         assert (share / 'urdf' / name).is_file()
     for name in ('cell', 'simulation', 'controllers', 'automation'):
         assert (share / 'config' / f'{name}.yaml').is_file()
+    assert (share / 'launch' / 'cell.launch.py').is_file()  # ros2 launch scara_collab ...
+    assert (share / 'config' / 'cell.rviz').is_file()
     site = list(installed.glob('lib/python3*/site-packages/scara_collab/core/model.py'))
     assert site, 'the Python package is installed into the workspace'
 

@@ -1,0 +1,60 @@
+"""``ros2 launch scara_collab cell.launch.py``: the cell's graph for ROS installs.
+
+The same nodes, parameters files and job-mode parameters as ``scripts/launch_cell.py``, read
+from the one description of the graph (:mod:`scara_collab.graph`), every node on sim time
+(the bridge is the clock). It starts the nodes; the run's files, progress and report are the
+launcher script's (``scripts/launch_cell.py``), not this file's.
+
+Arguments: ``mode`` (``collaborative``, ``single``, ``mirrored`` or ``idle``), ``tf``
+(``true``: ``state_publisher`` for ``/robot_description``, ``/tf`` and ``/tf_static``),
+``viewer`` (``true``: the live 3D view), ``rviz`` (``true``: RViz with ``config/cell.rviz``;
+implies ``tf``), ``auto_start`` (``true``: the job starts once the graph is connected).
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+from scara_collab import graph
+
+PACKAGE = 'scara_collab'
+ARGUMENTS = {'mode': 'collaborative', 'tf': 'false', 'viewer': 'false', 'rviz': 'false',
+             'auto_start': 'true'}
+
+
+def _typed(value: str):
+    """Return a job-mode parameter (a ``-p`` string) as its typed value."""
+    return {'true': True, 'false': False}.get(str(value).lower(), value)
+
+
+def nodes(context):
+    """Return the graph's nodes for the arguments' values (resolved at launch time)."""
+    arg = {k: LaunchConfiguration(k).perform(context) for k in ARGUMENTS}
+    share = get_package_share_directory(PACKAGE)
+    rviz = arg['rviz'].lower() == 'true'
+    params = graph.job_params(arg['mode'])
+    if arg['mode'] != 'idle':
+        params['automation_manager']['auto_start'] = arg['auto_start']
+    out = []
+    for spec in graph.job_nodes(automation=arg['mode'] != 'idle',
+                                viewer=arg['viewer'].lower() == 'true',
+                                transforms=rviz or arg['tf'].lower() == 'true'):
+        files = [os.path.join(share, 'config', f'{c}.yaml') for c in spec.configs]
+        values = {k: _typed(v) for k, v in params.get(spec.name, {}).items()}
+        out.append(Node(package=PACKAGE, executable=spec.name, name=spec.name, output='screen',
+                        parameters=files + [dict(values, use_sim_time=True)]))
+    if rviz:
+        out.append(Node(package='rviz2', executable='rviz2', name='rviz2', output='screen',
+                        arguments=['-d', os.path.join(share, 'config', 'cell.rviz')],
+                        parameters=[{'use_sim_time': True}]))
+    return out
+
+
+def generate_launch_description():
+    """Declare the arguments; the nodes follow from them at launch time."""
+    return LaunchDescription(
+        [DeclareLaunchArgument(k, default_value=v) for k, v in ARGUMENTS.items()]
+        + [OpaqueFunction(function=nodes)])

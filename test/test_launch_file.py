@@ -1,0 +1,106 @@
+"""launch/cell.launch.py, loaded without ROS's launch (not on PyPI), checked against the graph.
+
+``launch``, ``launch_ros`` and ``ament_index_python`` are stood in for by recorders of what
+the file builds; where the real ``launch_ros`` exists, the file is also loaded by it.
+"""
+import importlib.util
+from pathlib import Path
+import sys
+import types
+
+import pytest
+import yaml
+
+from scara_collab import graph
+from scara_collab.core.config import validate
+
+ROOT = Path(__file__).resolve().parents[1]
+LAUNCH = ROOT / 'launch' / 'cell.launch.py'
+
+
+class _Recorded:
+    """An action or description: keeps its arguments."""
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+class _Config:
+    def __init__(self, name):
+        self.name = name
+
+    def perform(self, context):
+        return context[self.name]
+
+
+def stand_ins(monkeypatch):
+    """Put recorders in place of ``launch``, ``launch_ros`` and ``ament_index_python``."""
+    modules = {
+        'launch': {'LaunchDescription': _Recorded},
+        'launch.actions': {'DeclareLaunchArgument': _Recorded, 'OpaqueFunction': _Recorded},
+        'launch.substitutions': {'LaunchConfiguration': _Config},
+        'launch_ros': {}, 'launch_ros.actions': {'Node': _Recorded},
+        'ament_index_python': {},
+        'ament_index_python.packages': {'get_package_share_directory': lambda p: str(ROOT)},
+    }
+    for name, attrs in modules.items():
+        module = types.ModuleType(name)
+        module.__dict__.update(attrs)
+        monkeypatch.setitem(sys.modules, name, module)
+
+
+def load(monkeypatch):
+    """Return the launch file as a module, on the stand-ins."""
+    stand_ins(monkeypatch)
+    spec = importlib.util.spec_from_file_location('cell_launch', LAUNCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize('mode', graph.LAUNCH_MODES)
+def test_the_launch_file_starts_the_graphs_nodes_with_their_files(monkeypatch, mode):
+    """Each node of the mode's graph, by its executable, with its existing, valid params files.
+
+    Sim time everywhere, the job-mode parameters typed, RViz and the state publisher on request.
+    """
+    module = load(monkeypatch)
+    description = module.generate_launch_description()
+    declared = {a.args[0]: a.kwargs['default_value'] for a in description.args[0][:-1]}
+    assert declared == module.ARGUMENTS
+    opaque = description.args[0][-1]
+    context = dict(module.ARGUMENTS, mode=mode)
+    nodes = opaque.kwargs['function'](context)
+    expected = [n.name for n in graph.job_nodes(automation=mode != 'idle')]
+    assert [n.kwargs['name'] for n in nodes] == expected
+    scripts = {line.split(' = ')[0] for line in graph.console_scripts()}
+    for node in nodes:
+        kw = node.kwargs
+        assert kw['package'] == 'scara_collab' and kw['executable'] in scripts
+        *files, own = kw['parameters']
+        assert own['use_sim_time'] is True
+        assert [Path(f).stem for f in files] == list(graph.node(kw['name']).configs)
+        for f in files:
+            tree = yaml.safe_load(Path(f).read_text())['/**']['ros__parameters']
+            validate(Path(f).stem, tree)  # the installed file is a valid config
+        for key, value in own.items():
+            assert not isinstance(value, str) or value not in ('true', 'false'), (key, value)
+    params = {n.kwargs['name']: n.kwargs['parameters'][-1] for n in nodes}
+    if mode != 'idle':
+        assert params['automation_manager']['mode'] == mode
+        assert params['automation_manager']['auto_start'] is True
+    assert params['replication_manager']['enabled'] is (mode in ('mirrored', 'idle'))
+    with_rviz = opaque.kwargs['function'](dict(context, rviz='true'))
+    names = [n.kwargs['name'] for n in with_rviz]
+    assert names[-2:] == ['state_publisher', 'rviz2']
+    rviz = with_rviz[-1].kwargs['arguments'][1]
+    assert Path(rviz).is_file() and yaml.safe_load(Path(rviz).read_text())[
+        'Visualization Manager']['Global Options']['Fixed Frame'] == 'world'
+
+
+def test_an_unknown_mode_is_refused(monkeypatch):
+    """The mode argument goes through the graph's own check."""
+    module = load(monkeypatch)
+    opaque = module.generate_launch_description().args[0][-1]
+    with pytest.raises(ValueError, match='mode must be one of'):
+        opaque.kwargs['function'](dict(module.ARGUMENTS, mode='fast'))
