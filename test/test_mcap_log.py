@@ -27,6 +27,7 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
+from scara_collab.core.kinematics import fk
 from scara_collab.core.trajectory import joint_move
 from scara_collab.graph import message_class, topics
 from scara_collab.nodes import conversions as conv
@@ -35,6 +36,7 @@ from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 from scara_collab.nodes.recorder import RunRecorder
 from scara_collab.records.mcap_log import (
     iter_messages, msg_file, Reading, ros2msg_definition, SEPARATOR, type_hash)
+from scara_collab.records.transforms import TF_HASH, TOPICS as DERIVED
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = ('scara_left', 'scara_right')
@@ -61,7 +63,7 @@ def record_run(directory: Path, cell, seconds: float = 3.0) -> dict:
     try:
         bridge = _bridge(g, feed_interval=0.4)
         rec = g.add(RunRecorder(directory, 'collaborative', cell=cell, context=g.context))
-        log = McapLog(rec, directory / 'run.mcap', robots=ROBOTS)
+        log = McapLog(rec, directory / 'run.mcap', robots=ROBOTS, urdf=cell.urdf)
         rec.sinks.append(log)
         assert g.spin_until(lambda: rec.log.t_last is not None and rec.sim_time > 0.2, 30)
         rec.start_job()
@@ -234,11 +236,12 @@ def test_the_run_folder_is_a_rosbag2_bag_that_rosbags_reads(recorded):
         assert reader.ros_distro == 'jazzy' and not reader.compression_mode
         assert reader.message_count == recorded['summary']['mcap']['messages']
         conns = {c.topic: c for c in reader.connections}
-        assert set(conns) == {t.name for t in topics(ROBOTS)}
+        assert set(conns) == {t.name for t in topics(ROBOTS)} | {'/tf', '/tf_static'}
         assert {n: c.msgcount for n, c in conns.items() if c.msgcount} == counts
         for name, conn in conns.items():
             assert conn.msgtype == message_class_type(name)
-            assert conn.digest == type_hash(conn.msgtype) and conn.digest.startswith('RIHS01_')
+            assert conn.digest == (type_hash(conn.msgtype) or TF_HASH)
+            assert conn.digest.startswith('RIHS01_')
         (estop,) = conns['/emergency_stop'].ext.offered_qos_profiles
         assert estop.durability == QosDurability.TRANSIENT_LOCAL and estop.depth == 1
         (clock,) = conns['/clock'].ext.offered_qos_profiles
@@ -266,8 +269,52 @@ def test_the_run_folder_is_a_rosbag2_bag_that_rosbags_reads(recorded):
 
 
 def message_class_type(name: str) -> str:
-    """Return the type the graph gives the topic ``name``."""
-    return next(t.type for t in topics(ROBOTS) if t.name == name)
+    """Return the type the graph (or the recorder's derived topics) gives the topic ``name``."""
+    return next(t.type for t in list(topics(ROBOTS)) + list(DERIVED) if t.name == name)
+
+
+def test_the_recording_shows_the_arms_moving_from_its_own_transforms(recorded, cell):
+    """``/robot_description``, ``/tf_static`` and ``/tf`` are in every recording, made by it.
+
+    Read back with rosbags (no tf2_msgs needed to write them): the description is the cell's
+    URDF, the static tree holds the bases, the belt and the bins, and each ``/tf`` carries the
+    pose of every arm joint for one recorded joint state: composed from ``world`` it puts each
+    tool where FK of that state does, to 1e-9 m.
+    """
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with BagReader(recorded['mcap'].parent) as reader:
+        conns = {c.topic: c for c in reader.connections}
+
+        def read(topic):
+            return [store.deserialize_cdr(raw, conns[topic].msgtype)
+                    for _, _, raw in reader.messages(connections=[conns[topic]])]
+        (description,) = read('/robot_description')
+        assert description.data == cell.urdf
+        (static,) = read('/tf_static')
+        states, tfs = read('/joint_states'), read('/tf')
+    tree = {t.child_frame_id: t for t in static.transforms}
+    assert {f'{a.name}_base_link' for a in cell.arms} | {'conveyor'} <= set(tree)
+    assert len(tfs) == len(states) > 100
+    for state, tf in list(zip(states, tfs))[::25]:
+        assert tf.transforms[0].header.stamp.sec == state.header.stamp.sec
+        assert tf.transforms[0].header.stamp.nanosec == state.header.stamp.nanosec
+        frames = dict(tree, **{t.child_frame_id: t for t in tf.transforms})
+        positions = dict(zip(state.name, state.position))
+        for arm in cell.arms:
+            frame, pose = f'{arm.name}_quill', np.eye(4)
+            while frame != 'world':
+                t = frames[frame]
+                step = np.eye(4)
+                r, p = t.transform.rotation, t.transform.translation
+                x, y, z, w = r.x, r.y, r.z, r.w
+                step[:3, :3] = [
+                    [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                    [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                    [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+                step[:3, 3] = [p.x, p.y, p.z]
+                pose, frame = step @ pose, t.header.frame_id
+            q = np.array([positions[n] for n in arm.joint_names])
+            np.testing.assert_allclose(pose[:3, 3], fk(arm, q), atol=1e-9)
 
 
 def test_read_mcap_script_summarises_and_dumps(recorded):
@@ -314,3 +361,32 @@ def test_an_unclosed_recording_keeps_its_chunks_and_close_completes_it(tmp_path)
     full = list(iter_messages(path, reading=reading))
     assert reading.complete and len(full) == written
     assert full[:len(cut)] == cut
+
+
+def test_the_tf_schema_is_tf2_msgs_own_when_it_is_not_installed(monkeypatch):
+    """Without tf2_msgs the recorder writes TFMessage's schema itself: the installed one's text.
+
+    (Where tf2_msgs is built, its own concatenated definition is the reference; else the text
+    must at least parse and encode a transform.)
+    """
+    from scara_collab.records import mcap_log
+    from scara_collab.records.transforms import TF_TYPE
+    real = mcap_log.ros2msg_definition
+
+    def missing_tf2(type_name):
+        if type_name.startswith('tf2_msgs/'):
+            raise FileNotFoundError(type_name)
+        return real(type_name)
+    try:
+        installed = real(TF_TYPE)
+    except FileNotFoundError:
+        installed = None
+    monkeypatch.setattr(mcap_log, 'ros2msg_definition', missing_tf2)
+    text = mcap_log._definition(TF_TYPE)
+    if installed is not None:  # the same, but for the comments of the .msg file
+
+        def fields(t):
+            return [ln for ln in t.splitlines() if not ln.lstrip().startswith('#')]
+        assert fields(text) == fields(installed)
+    schema = Schema(id=1, name=TF_TYPE, encoding='ros2msg', data=text.encode())
+    assert DecoderFactory().decoder_for('cdr', schema) is not None

@@ -58,7 +58,7 @@ class McapLog(McapWriter):
         self._subs: List = [
             self._reader.create_subscription(classes[t.type], t.name, _never_called,
                                              qos.recording(t), raw=True)
-            for t in self.topics]
+            for t in self.wire_topics]
         self._timer = node.create_timer(float(period), self.drain,
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
 

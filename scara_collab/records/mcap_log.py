@@ -50,7 +50,7 @@ from mcap.reader import NonSeekingReader
 from mcap.writer import CompressionType, Writer
 
 from scara_collab.graph import Topic
-from scara_collab.records import bag
+from scara_collab.records import bag, transforms
 
 MCAP_FILE = 'run.mcap'
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'
@@ -176,6 +176,23 @@ def type_hash(type_name: str) -> str:
     return next((h['hash_string'] for h in hashes if h.get('type_name') == full), '')
 
 
+def _definition(type_name: str) -> str:
+    """Return :func:`ros2msg_definition`; TFMessage's is written here if not installed."""
+    if type_name != transforms.TF_TYPE:
+        return ros2msg_definition(type_name)
+    try:
+        return ros2msg_definition(type_name)
+    except FileNotFoundError:  # no PyPI wheel: the Jazzy definition and its dependencies
+        nested = 'geometry_msgs/msg/TransformStamped'
+        return (f'{transforms.TF_DEFINITION}\n{SEPARATOR}\nMSG: geometry_msgs/TransformStamped\n'
+                f'{ros2msg_definition(nested)}')
+
+
+def _hash(type_name: str) -> str:
+    """Return :func:`type_hash`, with TFMessage's known Jazzy hash if it is not installed."""
+    return type_hash(type_name) or (transforms.TF_HASH if type_name == transforms.TF_TYPE else '')
+
+
 # --- writing ---------------------------------------------------------------------------------
 def clock_nanoseconds(data: bytes) -> int:
     """Return the time in a serialized ``rosgraph_msgs/msg/Clock``, ns (0 if unreadable).
@@ -199,16 +216,25 @@ class McapWriter:
     :param chunk_size: bytes of messages per chunk (an unclean kill loses at most one).
     :param compression: ``'zstd'``, ``'lz4'`` or ``'none'``.
     :param flush_period: wall seconds between flushes of the file stream.
+    :param urdf: the cell's URDF: the file also gets ``/robot_description``, ``/tf_static``
+        and ``/tf`` made from it and the recorded ``/joint_states``
+        (:class:`scara_collab.records.transforms.Transforms`), not taken off the wire; they are
+        the last of :attr:`topics`, after the :attr:`wire_topics`.
     :raises FileNotFoundError: if a message definition is missing (no file is opened).
     """
 
     def __init__(self, path: Union[str, Path], topics: Iterable[Topic], sim_clock: bool = False,
                  chunk_size: int = 256 * 1024, compression: str = 'zstd',
-                 flush_period: float = 2.0):
+                 flush_period: float = 2.0, urdf: Optional[str] = None):
         """Open the file and register a schema per type and a channel per topic."""
         self.path = Path(path)
-        self.topics = list(topics)
-        definitions = {t.type: ros2msg_definition(t.type) for t in self.topics}  # fail early
+        derived = {t.name for t in transforms.TOPICS} if urdf else set()
+        self.wire_topics = [t for t in topics if t.name not in derived]
+        self.topics = self.wire_topics + (list(transforms.TOPICS) if urdf else [])
+        definitions = {t: _definition(t) for t in {t.type for t in self.topics}
+                       | ({transforms.STATE_TYPE} if urdf else set())}  # fail early
+        self._derive = transforms.Transforms(urdf, definitions) if urdf else None
+        self._first_written = False
         compressions = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4,
                         'none': CompressionType.NONE}
         if compression not in compressions:
@@ -232,8 +258,9 @@ class McapWriter:
         self._channels: List[Tuple[int, str, bool]] = [
             (self._writer.register_channel(t.name, MESSAGE_ENCODING, schemas[t.type], {
                 'offered_qos_profiles': bag.qos_yaml(bag.topic_qos(t)),
-                'topic_type_hash': type_hash(t.type)}), t.name, t.type == CLOCK_TYPE)
+                'topic_type_hash': _hash(t.type)}), t.name, t.type == CLOCK_TYPE)
             for t in self.topics]
+        self._index = {name: k for k, (_, name, _) in enumerate(self._channels)}
 
     @property
     def messages(self) -> int:
@@ -259,14 +286,28 @@ class McapWriter:
             else:
                 t = max(received or now, last)
             last = t
+            if self._derive is not None and not self._first_written:
+                self._first_written = True  # the description and the static tree, once
+                for name, derived in self._derive.first():
+                    self._add(name, t, derived)
             seq = counts[topic] = counts[topic] + 1
             add(channel_id=channel, log_time=t, publish_time=t, data=data, sequence=seq)
             if self.first_log_time is None:
                 self.first_log_time = t
+            if self._derive is not None and topic == '/joint_states':
+                tf = self._derive.from_state(data)
+                if tf:
+                    self._add('/tf', t, tf)
         self.last_log_time = last
         if time.monotonic() >= self._next_flush:
             self.flush()
         return len(batch)
+
+    def _add(self, topic: str, t: int, data: bytes) -> None:
+        """Write one derived message on ``topic`` at log time ``t``."""
+        seq = self.counts[topic] = self.counts[topic] + 1
+        self._writer.add_message(channel_id=self._channels[self._index[topic]][0], log_time=t,
+                                 publish_time=t, data=data, sequence=seq)
 
     def flush(self) -> None:
         """Push what the writer has handed to the file stream to the OS (not the open chunk)."""
@@ -278,7 +319,7 @@ class McapWriter:
         """Return the rosbag2 metadata of what is written so far (:func:`bag.bag_metadata`)."""
         first = self.first_log_time or 0
         return bag.bag_metadata(
-            [bag.TopicRecord(t, type_hash(t.type), self.counts[t.name]) for t in self.topics],
+            [bag.TopicRecord(t, _hash(t.type), self.counts[t.name]) for t in self.topics],
             self.path.name, first, self.last_log_time - first if self.messages else 0)
 
     def close(self) -> Dict[str, object]:

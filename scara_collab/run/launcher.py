@@ -250,7 +250,8 @@ class Launcher:
             from scara_collab.nodes.mcap_recorder import McapLog
             from scara_collab.records.mcap_log import MCAP_FILE
             mcap = McapLog(self.recorder, output / MCAP_FILE,
-                           robots=[a.name for a in self.recorder.cell.arms])
+                           robots=[a.name for a in self.recorder.cell.arms],
+                           urdf=self.recorder.cell.urdf)  # + /robot_description, /tf
             self.recorder.sinks.append(mcap)
             console.say(f'[launch] recording {len(mcap.topics)} topics to {mcap.path}')
         self.executor = SingleThreadedExecutor(context=self.context)
