@@ -118,14 +118,15 @@ def assert_children_gone(out: Path, names=NODES) -> dict:
 def test_idle_run_writes_report_and_files(launch, tmp_path):
     """An idle run exits 0 with its report and every file.
 
-    Summary, CSVs, plots, node logs, CPU costs, the MCAP recording and the GIF.
+    Summary, CSVs, plots, node logs, CPU costs, the MCAP recording and the GIF; with ``--tf``
+    the state publisher is started and ready once it publishes ``/robot_description``.
     """
     out = tmp_path / 'idle'
     la = launch('--mode', 'idle', '--duration', '3', '--rtf', '0', '--output', str(out),
-                '--record', '--animation')
+                '--record', '--animation', '--tf')
     assert la.wait() == 0, la.output
     text = la.output
-    for stage in NODES:
+    for stage in NODES + ('state_publisher',):
         assert re.search(rf'\[launch\] {stage} +ready in', text), stage
     assert 'scara_collab run: mode idle, finished (duration reached)' in text
     assert re.search(r'real-time factor \d+\.\dx', text)
@@ -149,7 +150,7 @@ def test_idle_run_writes_report_and_files(launch, tmp_path):
     # the cost of each process over the run, CPU s per sim s, in the summary and the report
     cost = summary['cpu_per_sim_s']
     assert set(NODES) | {'launcher', 'total'} <= set(cost) <= set(NODES) | {
-        'automation_manager', 'launcher', 'total'}
+        'automation_manager', 'state_publisher', 'launcher', 'total'}
     assert all(v >= 0 for v in cost.values()) and cost['total'] > 0
     assert abs(cost['total'] - sum(v for k, v in cost.items() if k != 'total')) < 1e-3
     assert re.search(r'CPU per sim s +\d+\.\d{3} s +\(pybullet bridge \d', text)

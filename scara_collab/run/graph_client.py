@@ -153,19 +153,14 @@ class GraphClient:
         return sum(1 for n, ns in self.node.get_node_names_and_namespaces()
                    if n == name and ns == '/')
 
-    def _subscribed(self, node_name: str, topic: str) -> bool:
+    def _has(self, node_name: str, topic: str, kind: str) -> bool:
+        """Return True if ``node_name`` has a ``kind`` (publisher, subscriber) on ``topic``."""
+        query = {'publisher': self.node.get_publisher_names_and_types_by_node,
+                 'subscriber': self.node.get_subscriber_names_and_types_by_node}[kind]
         try:
-            subs = self.node.get_subscriber_names_and_types_by_node(node_name, '/')
+            return any(name == topic for name, _ in query(node_name, '/'))
         except NodeNameNonExistentError:
             return False
-        return any(name == topic for name, _ in subs)
-
-    def _published(self, node_name: str, topic: str) -> bool:
-        try:
-            pubs = self.node.get_publisher_names_and_types_by_node(node_name, '/')
-        except NodeNameNonExistentError:
-            return False
-        return any(name == topic for name, _ in pubs)
 
     def ready_check(self, stage: Stage) -> Callable[[], bool]:
         """Return the readiness predicate of a stage (from :mod:`scara_collab.graph`)."""
@@ -173,12 +168,12 @@ class GraphClient:
         if ready.kind == 'clock':
             return lambda: self.node.get_clock().now().nanoseconds > 0
         if ready.kind == 'subscribed':
-            return lambda: self._subscribed(name, ready.name)
+            return lambda: self._has(name, ready.name, 'subscriber')
         if ready.kind == 'published':
-            return lambda: self._published(name, ready.name)
+            return lambda: self._has(name, ready.name, 'publisher')
         if ready.kind == 'service':
             return self.client(SERVICE_TYPES[ready.srv_type], ready.name).service_is_ready
         if ready.kind == 'page':  # on the graph, and its page answers
             url = f'http://127.0.0.1:{stage.params["port"]}/'
-            return lambda: self._subscribed(name, ready.name) and http_ok(url)
+            return lambda: self._has(name, ready.name, 'subscriber') and http_ok(url)
         raise ValueError(f'no readiness check of kind {ready.kind!r} ({name})')
