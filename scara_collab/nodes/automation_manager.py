@@ -85,7 +85,7 @@ class AutomationManager(Node):
                            for a in self.cell.arms}
         self.collab_pub = self.create_publisher(PointStamped, '/collab/target', 10)
         self.stats_pub = self.create_publisher(DiagnosticStatus, '~/stats', 10)
-        self.diagnostics = Diagnostics(self)  # the same status on /diagnostics
+        self.diagnostics = Diagnostics(self, self.stats_pub)  # and on /diagnostics
         self.grippers = {a.name: self.create_client(SetBool, f'/{a.name}/gripper')
                          for a in self.cell.arms}
         self.status_subs = {}
@@ -247,9 +247,7 @@ class AutomationManager(Node):
             last_give_up=job.last_give_up)
 
     def _publish_stats(self) -> None:
-        msg = self.stats().to_msg()
-        self.stats_pub.publish(msg)
-        self.diagnostics.publish(msg)
+        self.diagnostics.publish(self.stats().to_msg())
 
 
 def main(args=None) -> None:

@@ -103,7 +103,7 @@ class CollisionMonitor(Node):
         self.dist_pub = self.create_publisher(Float64, '~/min_distance', 10)
         self.estop_pub = self.create_publisher(Bool, '/emergency_stop', LATCHED)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
-        self.diagnostics = Diagnostics(self)  # the same status on /diagnostics
+        self.diagnostics = Diagnostics(self, self.status_pub)  # and on /diagnostics
         self.marker_pub = self.create_publisher(MarkerArray, '~/capsules', 10)
         self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
                                  LATEST)
@@ -274,9 +274,7 @@ class CollisionMonitor(Node):
                                    self.minimum_time, self.margin, self.stopped, self.reason)
 
     def _publish_status(self) -> None:
-        msg = self.status().to_msg()
-        self.status_pub.publish(msg)
-        self.diagnostics.publish(msg)
+        self.diagnostics.publish(self.status().to_msg())
 
     def _markers(self, qa, qb, d: float, header: Header) -> MarkerArray:
         colour = (ColorRGBA(r=0.9, g=0.1, b=0.1, a=0.6) if d < self.margin else

@@ -17,15 +17,19 @@ class Diagnostics:
     """The ``/diagnostics`` publisher of one node.
 
     :param node: the node whose statuses it publishes (stamped with its clock).
+    :param own: the node's own status publisher (``~/status``), which gets each status too.
     """
 
-    def __init__(self, node: Node):
+    def __init__(self, node: Node, own=None):
         """Create the publisher."""
-        self.node = node
+        self.node, self.own = node, own
         self.pub = node.create_publisher(DiagnosticArray, TOPIC, DEFAULT)
 
     def publish(self, *statuses: DiagnosticStatus) -> None:
-        """Publish ``statuses`` as one array stamped now."""
+        """Publish ``statuses`` on the node's own topic, one by one, and as one array, now."""
+        if self.own is not None:
+            for status in statuses:
+                self.own.publish(status)
         msg = DiagnosticArray()
         msg.header.stamp = self.node.get_clock().now().to_msg()
         msg.status = list(statuses)

@@ -74,7 +74,7 @@ class ReplicationManager(Node):
         self.lead_pub = self.create_publisher(PointStamped, f'/{lead.name}/target', 10)
         self.foll_pub = self.create_publisher(PointStamped, f'/{foll.name}/target', 10)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
-        self.diagnostics = Diagnostics(self)  # the same status on /diagnostics
+        self.diagnostics = Diagnostics(self, self.status_pub)  # and on /diagnostics
         self.error_pub = self.create_publisher(Float64, '~/mirror_error', 10)
         self.create_subscription(PointStamped, '/collab/target', guarded(self, self._on_target),
                                  10)
@@ -185,9 +185,7 @@ class ReplicationManager(Node):
                                   self.not_in_step, self.last_reason)
 
     def _publish_status(self) -> None:
-        msg = self.status().to_msg()
-        self.status_pub.publish(msg)
-        self.diagnostics.publish(msg)
+        self.diagnostics.publish(self.status().to_msg())
 
 
 def main(args=None) -> None:
