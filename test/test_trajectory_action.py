@@ -125,3 +125,25 @@ def test_a_broken_path_tolerance_holds_the_arm(graph):
     assert status == GoalStatus.STATUS_ABORTED
     assert result.error_code == FollowJointTrajectory.Result.PATH_TOLERANCE_VIOLATED
     assert 'path tolerance 1e-07' in result.error_string
+
+
+def test_a_destroyed_bridge_leaves_the_graph_with_its_action_servers():
+    """The bridge's action servers are destroyed with it: no ghost node stays on the graph.
+
+    (An action server left alive kept the destroyed bridge's node on the graph, and the next
+    launcher in the same process group refused to start: "pybullet_bridge is already running".)
+    """
+    import time
+    g = Graph()
+    g.add_node_of('pybullet_bridge', real_time_factor=0.0, feed_interval=0.0)
+    g.close()
+    look = Graph()
+    try:
+        names = set()
+        end = time.monotonic() + 3.0
+        while time.monotonic() < end:  # let discovery settle: the name must stay gone
+            look.executor.spin_once(timeout_sec=0.1)
+            names = {n for n, _ in look.probe.get_node_names_and_namespaces()}
+        assert 'pybullet_bridge' not in names, names
+    finally:
+        look.close()

@@ -328,6 +328,8 @@ class PyBulletBridge(Node):
         """Close the simulator with the node."""
         if self.gate.enabled:
             self.get_logger().info(self.gate.summary())
+        if self.actions is not None:
+            self.actions.destroy()  # an action server left alive keeps the node on the graph
         self.sim.close()
         return super().destroy_node()
 

@@ -103,6 +103,12 @@ class TrajectoryActions:
             goal_callback=lambda request: GoalResponse.ACCEPT,
             cancel_callback=lambda handle: CancelResponse.ACCEPT) for arm in cell.arms]
 
+    def destroy(self) -> None:
+        """Destroy the action servers: else they keep the node alive on the graph."""
+        for server in self.servers:
+            server.destroy()
+        self.servers = []
+
     async def _execute(self, robot: str, handle):
         result = FollowJointTrajectory.Result()
         goal = self._start(robot, handle)
