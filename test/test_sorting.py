@@ -118,3 +118,20 @@ def test_candidate_groups_say_which_items_come_with_the_arms_own():
     grouped = order_candidates(CELL, LEFT, [own, other], 0.0, z, True, True, groups=True)
     assert [(g, it.id) for g, it in grouped] == [(0, 1), (1, 2)]
     assert [it for _, it in grouped] == plain
+
+
+def test_an_item_falling_into_a_bin_is_not_on_the_belt(cell):
+    """At the belt's height but over a bin (falling into it) an item is not on the belt.
+
+    The job once saw a just-sorted item pass the belt's height in its bin, took it for an item
+    on the belt and chased it there (a give-up in the collaborative job's test, 1 run in 10).
+    """
+    from scara_collab.core.sorting import drop_point, on_belt
+    z = cell.belt.top_z + cell.item_size / 2
+    for robot, cls in cell.bins:
+        x, y, _ = drop_point(cell, robot, cls, 0.1)
+        assert not on_belt(cell, (x, y, z))
+    belt = cell.belt
+    assert on_belt(cell, (belt.x_start, belt.centre_y + belt.width / 2, z))
+    assert not on_belt(cell, (belt.x_end + 0.01, belt.centre_y, z))
+    assert not on_belt(cell, (2.0, belt.centre_y, z + 0.02))  # held above it

@@ -56,6 +56,23 @@ def at_belt_height(cell: CellModel, z: float) -> bool:
     return abs(z - (cell.belt.top_z + cell.item_size / 2.0)) < BELT_HEIGHT_TOLERANCE
 
 
+def on_belt(cell: CellModel, p) -> bool:
+    """Return True if an item centre at ``p`` (world) rests on the belt: its height, its area.
+
+    The height alone is not enough: an item dropped into a bin passes the belt's height while
+    it falls (a job that took it for an item on the belt chased it into the bin).
+
+    >>> from scara_collab.core.model import load_cell
+    >>> cell = load_cell()
+    >>> on_belt(cell, (1.0, 0.2, 0.25)), on_belt(cell, (3.4, 2.1, 0.25))
+    (True, False)
+    """
+    belt = cell.belt
+    x, y, z = (float(v) for v in p)
+    return (at_belt_height(cell, z) and abs(y - belt.centre_y) <= belt.width / 2.0
+            and belt.x_start <= x <= belt.x_end)
+
+
 def predict(cell: CellModel, item: SeenItem, t: float) -> np.ndarray:
     """Return the item centre at time ``t`` if it stays on the belt."""
     return item.position + np.array([cell.belt.speed * (t - item.stamp), 0.0, 0.0])

@@ -130,7 +130,7 @@ class AutomationManager(Node):
     def _on_items(self, msg: MarkerArray) -> None:
         self.job.on_items([sorting.SeenItem(i, cls, xyz, stamp)
                            for i, (cls, xyz, stamp) in conv.item_positions(msg).items()
-                           if sorting.at_belt_height(self.cell, xyz[2])])  # not held, falling
+                           if sorting.on_belt(self.cell, xyz)])  # not held, falling, binned
 
     def _on_event(self, msg: DiagnosticStatus) -> None:
         ev = proto.ItemEvent.from_msg(msg)

@@ -22,7 +22,7 @@ import pybullet
 from scara_collab.core.config import ConfigError
 from scara_collab.core.model import CellModel
 from scara_collab.core.palette import class_colour
-from scara_collab.core.sorting import at_belt_height
+from scara_collab.core.sorting import on_belt
 
 FEED_PATTERNS = ('random', 'mirror_pairs')
 EVENT_KINDS = ('spawned', 'grasped', 'released', 'sorted', 'wrong_bin', 'missed', 'dropped')
@@ -257,7 +257,6 @@ class Conveyor:
             self._next_feed += self.feed_period
             self._feed()
         belt = self.cell.belt
-        half_w = belt.width / 2.0
         carry = [belt.speed, 0.0, 0.0]
         zero = [0.0, 0.0, 0.0]
         rest_speed_sq = float(self.cfg['rest_speed']) ** 2
@@ -268,8 +267,7 @@ class Conveyor:
             if x > belt.x_end and rec.state == 'belt':  # carried off the end (maybe tipping)
                 self._remove(rec, 'missed')
                 continue
-            if (at_belt_height(self.cell, z) and abs(y - belt.centre_y) <= half_w
-                    and belt.x_start <= x <= belt.x_end):
+            if on_belt(self.cell, (x, y, z)):
                 rec.state = 'belt'
                 self._set_vel(rec.body, carry, zero)
                 continue
