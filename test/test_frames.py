@@ -2,6 +2,7 @@
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
+from tf_listener import matrix_of
 
 from scara_collab.core.frames import quaternion, rotation, Tree
 from scara_collab.core.kinematics import fk
@@ -12,13 +13,6 @@ from scara_collab.core.model import parse_urdf
 def tree(cell):
     """Return the cell's tree."""
     return Tree.of(cell.urdf)
-
-
-def matrix_of(x, y, z, w):
-    """Return the rotation matrix of a unit quaternion (the textbook formula, written here)."""
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
 def test_the_tool_frame_is_fk_and_every_link_is_the_urdfs_own(cell, tree):

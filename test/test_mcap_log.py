@@ -24,6 +24,7 @@ from rosbags.rosbag2 import Reader as BagReader
 from rosbags.typesys import get_typestore, Stores
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from tf_listener import by_child, pose_in
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -292,29 +293,18 @@ def test_the_recording_shows_the_arms_moving_from_its_own_transforms(recorded, c
         assert description.data == cell.urdf
         (static,) = read('/tf_static')
         states, tfs = read('/joint_states'), read('/tf')
-    tree = {t.child_frame_id: t for t in static.transforms}
+    tree = by_child(static.transforms)
     assert {f'{a.name}_base_link' for a in cell.arms} | {'conveyor'} <= set(tree)
     assert len(tfs) == len(states) > 100
     for state, tf in list(zip(states, tfs))[::25]:
         assert tf.transforms[0].header.stamp.sec == state.header.stamp.sec
         assert tf.transforms[0].header.stamp.nanosec == state.header.stamp.nanosec
-        frames = dict(tree, **{t.child_frame_id: t for t in tf.transforms})
+        frames = dict(tree, **by_child(tf.transforms))
         positions = dict(zip(state.name, state.position))
         for arm in cell.arms:
-            frame, pose = f'{arm.name}_quill', np.eye(4)
-            while frame != 'world':
-                t = frames[frame]
-                step = np.eye(4)
-                r, p = t.transform.rotation, t.transform.translation
-                x, y, z, w = r.x, r.y, r.z, r.w
-                step[:3, :3] = [
-                    [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                    [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                    [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
-                step[:3, 3] = [p.x, p.y, p.z]
-                pose, frame = step @ pose, t.header.frame_id
             q = np.array([positions[n] for n in arm.joint_names])
-            np.testing.assert_allclose(pose[:3, 3], fk(arm, q), atol=1e-9)
+            np.testing.assert_allclose(pose_in(frames, f'{arm.name}_quill')[:3, 3], fk(arm, q),
+                                       atol=1e-9)
 
 
 def test_read_mcap_script_summarises_and_dumps(recorded):

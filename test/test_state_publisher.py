@@ -8,6 +8,7 @@ import pytest
 from ros_harness import Graph
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
+from tf_listener import by_child, pose_in
 
 from scara_collab.core.kinematics import fk
 from scara_collab.core.model import parse_urdf
@@ -41,22 +42,6 @@ def test_the_description_reaches_a_late_subscriber_and_names_the_six_joints(grap
     assert got[-1].data == graph.bridge.cell.urdf  # the one model
 
 
-def transforms_by_child(messages):
-    """Return ``{child: (parent, pose (4, 4), stamp)}``, the newest of each."""
-    out = {}
-    for msg in messages:
-        for t in msg.transforms:
-            p, r = t.transform.translation, t.transform.rotation
-            x, y, z, w = r.x, r.y, r.z, r.w
-            pose = np.eye(4)
-            pose[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
-            pose[:3, 3] = [p.x, p.y, p.z]
-            out[t.child_frame_id] = (t.header.frame_id, pose, conv.to_sec(t.header.stamp))
-    return out
-
-
 @pytest.mark.skipif(TFMessage is None, reason='tf2_msgs not built (./scripts/build_interfaces)')
 def test_the_tf_chain_from_world_to_each_tool_is_fk_of_the_joint_states(graph):
     """Composed from ``/tf_static`` and ``/tf``, ``world`` -> ``<robot>_quill`` is FK to 1e-6 m."""
@@ -70,18 +55,15 @@ def test_the_tf_chain_from_world_to_each_tool_is_fk_of_the_joint_states(graph):
     assert graph.spin_until(lambda: moving and states and conv.to_sec(
         moving[-1].transforms[0].header.stamp) >= conv.to_sec(states[-1].header.stamp) - 1e-9,
         timeout=20)
-    tree = transforms_by_child(static)
+    tree = by_child(t for m in static for t in m.transforms)
     by_stamp = {conv.to_sec(m.header.stamp): m for m in states}
     pairs = [(tf, by_stamp[t]) for tf in moving
              for t in [conv.to_sec(tf.transforms[0].header.stamp)] if t in by_stamp and t > 1.0]
     assert pairs, 'a /tf of a joint state the probe also heard, while the arm moves'
     tf, state = pairs[-1]
-    tree.update(transforms_by_child([tf]))
+    tree.update(by_child(tf.transforms))
     for arm in cell.arms:
-        frame, pose = f'{arm.name}_quill', np.eye(4)
-        while frame != 'world':
-            parent, step, _ = tree[frame]
-            pose, frame = step @ pose, parent
         q, _ = conv.joint_state_arrays(state, arm.joint_names)
-        np.testing.assert_allclose(pose[:3, 3], fk(arm, q), atol=1e-6)
+        np.testing.assert_allclose(pose_in(tree, f'{arm.name}_quill')[:3, 3], fk(arm, q),
+                                   atol=1e-6)
     assert {t.header.frame_id for m in static for t in m.transforms} == {'world'}
