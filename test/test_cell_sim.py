@@ -261,6 +261,25 @@ def test_estop_brakes_both_arms_within_limits_and_refuses_trajectories(cell):
 
 
 # --- belt and items -----------------------------------------------------------------------
+def test_the_fixed_links_are_merged_and_the_belt_is_its_own_box(cell):
+    """Only the six moving links are in the multibody; the belt box is the model's belt."""
+    with _make(cell) as sim:
+        pb = sim.client
+        cell_bodies = [b for b in (pb.getBodyUniqueId(k) for k in range(pb.getNumBodies()))
+                       if pb.getNumJoints(b)]
+        assert len(cell_bodies) == 1
+        names = {pb.getJointInfo(cell_bodies[0], j)[1].decode()
+                 for j in range(pb.getNumJoints(cell_bodies[0]))}
+        assert names == set(sim.joint_names)
+        lo, hi = (np.array(v) for v in pb.getAABB(sim.conveyor.belt_body))
+        belt = cell.belt
+        margin = 0.03  # PyBullet pads an AABB by the collision margin
+        npt.assert_allclose([lo[0], hi[0]], [belt.x_start, belt.x_end], atol=margin)
+        npt.assert_allclose([lo[1], hi[1]], [belt.centre_y - belt.width / 2,
+                                             belt.centre_y + belt.width / 2], atol=margin)
+        npt.assert_allclose(hi[2], belt.top_z, atol=margin)
+
+
 def test_belt_carries_items_at_belt_speed(cell):
     """An item on the belt moves at the belt speed, in x only, and stays on the belt."""
     with _make(cell) as sim:

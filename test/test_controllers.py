@@ -5,7 +5,7 @@ import numpy.testing as npt
 from scara_collab.core.config import load_config
 from scara_collab.core.dynamics import forward_dynamics, mass_matrix
 from scara_collab.sim.controllers import (
-    ComputedTorqueController, joint_gains, PidController, smooth_friction)
+    applied_efforts, ComputedTorqueController, joint_gains, PidController, smooth_friction)
 
 
 def test_gains_come_from_controllers_yaml():
@@ -69,3 +69,14 @@ def test_smooth_friction_is_odd_and_tends_to_viscous_plus_coulomb():
     npt.assert_allclose(smooth_friction(v, c, qd, 0.01), v * qd + c * np.sign(qd), rtol=1e-9)
     npt.assert_allclose(smooth_friction(v, c, -qd, 0.01), -smooth_friction(v, c, qd, 0.01))
     assert not smooth_friction(v, c, np.zeros(3), 0.01).any()
+
+
+def test_the_physics_loop_applies_the_same_friction():
+    """``applied_efforts`` (plain floats, every physics step) is ``tau - smooth_friction``."""
+    rng = np.random.default_rng(3)
+    v, c = rng.uniform(0.0, 5.0, 6), rng.uniform(0.0, 2.0, 6)
+    for _ in range(20):
+        tau, qd = rng.normal(0.0, 50.0, 6), rng.normal(0.0, 0.05, 6)
+        npt.assert_allclose(applied_efforts(tau.tolist(), v.tolist(), c.tolist(), qd.tolist(),
+                                            0.01),
+                            tau - smooth_friction(v, c, qd, 0.01), rtol=1e-13, atol=1e-12)

@@ -201,6 +201,7 @@ class SortingJob(SharedBelt):
         """Advance every lane to ``now`` (sim s); return the commands to send, in order."""
         self._out = []
         self._now = now
+        self.forget_plans()
         if self.estop or len(self.q) < len(self.cell.arms):
             return self._out
         if self.running and not self._parked_unused:

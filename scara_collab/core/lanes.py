@@ -136,7 +136,8 @@ class LaneProtocol:
                  lanes: Sequence[Tuple[str, Tuple[str, ...]]], plan: PlanFn,
                  log: Callable[[str, str], None]):
         """Set up idle lanes; nothing is asked yet."""
-        self.cell, self.s, self.plan, self.log = cell, settings, plan, log
+        self.cell, self.s, self._plan, self.log = cell, settings, plan, log
+        self._plans: Dict[tuple, object] = {}  # this tick's plans (or refusals), by their inputs
         self.lanes = [Lane(r, rs) for r, rs in lanes]
         self.q: Dict[str, np.ndarray] = {}
         self.retries = 0
@@ -144,6 +145,32 @@ class LaneProtocol:
         self._token = 0
         self._out: List[object] = []
         self._now = 0.0
+
+    def plan(self, robot: str, q_start, target) -> Trajectory:
+        """Plan a move as the planners will (the ``plan`` given), once per tick per move.
+
+        A decision and the move it then asks for plan the same move in the same tick (the
+        check that a carried item clears the belt, then the move to the bin): the second
+        gets the first's trajectory. :meth:`forget_plans` empties the memo (every tick).
+
+        :raises ValueError: the move is refused (the same reason each time).
+        """
+        key = (robot, np.asarray(q_start, dtype=float).tobytes(),
+               np.asarray(target, dtype=float).tobytes())
+        found = self._plans.get(key)
+        if found is None:
+            try:
+                found = self._plan(robot, q_start, target)
+            except ValueError as exc:
+                found = str(exc)
+            self._plans[key] = found
+        if isinstance(found, str):
+            raise ValueError(found)
+        return found
+
+    def forget_plans(self) -> None:
+        """Empty the memo of :meth:`plan` (the arms have moved on)."""
+        self._plans.clear()
 
     # --- the decisions, taken by the subclass ----------------------------------------------
     def _arrived(self, lane: Lane, now: float) -> None:

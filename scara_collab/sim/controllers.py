@@ -24,7 +24,8 @@ what holds the quills up (``G``, negative: upward)::
     array([[  0. ,   0. , -23.3],
            [  0. ,   0. , -28.2]])
 """
-from typing import Dict, Sequence
+import math
+from typing import Dict, List, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -49,6 +50,21 @@ def smooth_friction(viscous: ArrayLike, coulomb: ArrayLike, qd: ArrayLike,
     """
     qd = np.asarray(qd, dtype=float)
     return viscous * qd + coulomb * np.tanh(qd / smoothing)
+
+
+def applied_efforts(tau: Sequence[float], viscous: Sequence[float], coulomb: Sequence[float],
+                    qd: Sequence[float], smoothing: float) -> List[float]:
+    """Return ``tau - smooth_friction(viscous, coulomb, qd, smoothing)`` on flat float lists.
+
+    The physics loop's form of :func:`smooth_friction` (one call per 1 kHz step, six joints):
+    plain floats and :func:`math.tanh`, a fifth of numpy's per-call cost on six values.
+
+    >>> applied_efforts([1.0, 0.0], [2.0, 0.0], [3.0, 0.0], [0.5, 0.0], 0.01)
+    [-3.0, 0.0]
+    """
+    tanh = math.tanh
+    return [t - (v * w + c * tanh(w / smoothing))
+            for t, v, c, w in zip(tau, viscous, coulomb, qd)]
 
 
 def joint_gains(group: Dict[str, Dict[str, float]], key: str) -> np.ndarray:

@@ -3,7 +3,7 @@
 :class:`Conveyor` lives in the PyBullet world of a :class:`~scara_collab.sim.cell_sim.CellSim`
 (same client, same clock) and knows nothing of the arms but their body (to name what knocked
 an item off the belt). The belt is a frictionless static box with the URDF conveyor's
-geometry (the URDF link keeps its visual and loses its collision): an item on it keeps its
+collision geometry (:class:`BeltBox`; the URDF link keeps only its visual): an item on it keeps its
 velocity exactly, and :meth:`Conveyor.update` re-imposes the belt velocity ``(speed, 0, 0)``
 on every item resting on the belt (after a push, a release onto the belt, a collision).
 
@@ -14,7 +14,7 @@ gripper adds ``grasped`` and ``released`` (:meth:`Conveyor.event`).
 """
 from dataclasses import dataclass
 import math
-from typing import Callable, Dict, List, NamedTuple, Optional
+from typing import Callable, Dict, List, NamedTuple, Optional, Tuple
 
 import numpy as np
 import pybullet
@@ -67,6 +67,18 @@ class SimEvent:
     cause: str = ''
 
 
+class BeltBox(NamedTuple):
+    """The belt's collision box: centre, orientation and half extents.
+
+    :ivar position: centre in world, m; :ivar orientation: quaternion ``(x, y, z, w)``;
+    :ivar half_extents: m.
+    """
+
+    position: Tuple[float, float, float]
+    orientation: Tuple[float, float, float, float]
+    half_extents: Tuple[float, float, float]
+
+
 class Bin(NamedTuple):
     """A bin's opening: who it belongs to, what it takes, and the box an item rests in."""
 
@@ -102,13 +114,13 @@ class Conveyor:
     :param sim_cfg: ``simulation.yaml`` (feed, jitter, inlet margin, rest speed).
     :param clock: returns the sim time, s.
     :param cell_body: the cell's URDF body (the arms), whose links are named by ``link_names``.
-    :param belt_link: the URDF's conveyor link, replaced by a frictionless box.
+    :param belt_box: the URDF conveyor's collision box, built here as a frictionless body.
     :param seed: the item RNG seed (classes, lateral offsets).
     :raises ConfigError: if ``lateral_jitter`` puts items off the belt.
     """
 
     def __init__(self, pb, cell: CellModel, sim_cfg: dict, clock: Callable[[], float],
-                 cell_body: int, belt_link: int, link_names: Dict[int, str], seed: int):
+                 cell_body: int, belt_box: BeltBox, link_names: Dict[int, str], seed: int):
         """Build the belt box and the item shape; no items, the feed as configured."""
         belt, size = cell.belt, cell.item_size
         self._half_free = belt.width / 2.0 - size / 2.0
@@ -119,7 +131,7 @@ class Conveyor:
         self._pb, self.cell, self.cfg, self._clock = pb, cell, sim_cfg, clock
         self._cell_body, self._link_names = cell_body, link_names
         self._rng = np.random.default_rng(int(seed))
-        self._build_belt(belt_link)
+        self._build_belt(belt_box)
         self._item_shape = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[size / 2] * 3)
         self._item_visual: Dict[str, int] = {}
         inner = cell.config['bins']['size']
@@ -134,16 +146,12 @@ class Conveyor:
         self._set_vel = pb.resetBaseVelocity
         self.set_feed(float(sim_cfg['feed_interval']), sim_cfg['feed_pattern'])
 
-    def _build_belt(self, link: int) -> None:
-        """Replace the URDF conveyor's collision by a static, frictionless rigid box."""
+    def _build_belt(self, belt: BeltBox) -> None:
+        """Build the belt as a static, frictionless rigid box."""
         pb = self._pb
-        shape = pb.getCollisionShapeData(self._cell_body, link)[0]
-        half = [float(v) / 2.0 for v in shape[3]]
-        state = pb.getLinkState(self._cell_body, link, computeForwardKinematics=True)
-        pos, orn = pb.multiplyTransforms(state[0], state[1], shape[5], shape[6])
-        pb.setCollisionFilterGroupMask(self._cell_body, link, 0, 0)
-        box = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half)
-        self.belt_body = pb.createMultiBody(0.0, box, -1, pos, orn, useMaximalCoordinates=True)
+        box = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=list(belt.half_extents))
+        self.belt_body = pb.createMultiBody(0.0, box, -1, list(belt.position),
+                                            list(belt.orientation), useMaximalCoordinates=True)
         pb.changeDynamics(self.belt_body, -1, lateralFriction=0.0, rollingFriction=0.0,
                           spinningFriction=0.0)
 
