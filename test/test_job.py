@@ -687,6 +687,6 @@ def test_a_move_is_planned_once_per_tick_and_a_refusal_remembered(cell):
     assert len(calls) == 2
     job.plan(robot, HOME + [0.1, 0.0, 0.0], target)  # another start: another plan
     assert len(calls) == 3
-    job.forget_plans()
+    job.plan.forget()
     assert job.plan(robot, HOME, target) is not first
     assert len(calls) == 4

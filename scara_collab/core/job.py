@@ -162,7 +162,6 @@ class SortingJob(SharedBelt):
         self.sorted_by: Dict[str, int] = {a.name: 0 for a in cell.arms}
         self.give_ups = 0
         self.last_give_up = ''
-        self._parked_unused = False
 
     # --- observations ---------------------------------------------------------------------
     def start(self, now: float) -> bool:
@@ -201,7 +200,7 @@ class SortingJob(SharedBelt):
         """Advance every lane to ``now`` (sim s); return the commands to send, in order."""
         self._out = []
         self._now = now
-        self.forget_plans()
+        self.plan.forget()
         if self.estop or len(self.q) < len(self.cell.arms):
             return self._out
         if self.running and not self._parked_unused:
@@ -301,17 +300,6 @@ class SortingJob(SharedBelt):
             return
         lane.next_look = now + LOOK_AGAIN  # each look plans: not at every tick
 
-    def _park_unused(self, now: float) -> None:
-        """Arms no lane uses wait above their first bin, off the belt (once)."""
-        self._parked_unused = True
-        used = {r for lane in self.lanes for r in lane.robots}
-        for arm in self.cell.arms:
-            if arm.name not in used:
-                park = sorting.drop_point(self.cell, arm.name, self.cell.item_classes[0],
-                                          self.s.drop_clearance)
-                req = self._request([arm.name], now + self.s.decision_lead)
-                self._out.append(MoveCommand(arm.name, park, req, False, 'park'))
-
     # --- after a grip -----------------------------------------------------------------------
     def _gripped(self, lane: Lane, now: float) -> None:
         main = lane.grips[lane.robot]
@@ -385,12 +373,6 @@ class SortingJob(SharedBelt):
         if phase == 'to_park':  # the park move itself failed: stay idle, do not loop
             return
         self._park(lane, now)
-
-    def _park(self, lane: Lane, now: float) -> None:
-        """Wait clear of the shared zone, above the first bin, so the other arm is free."""
-        park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
-                                  self.s.drop_clearance)
-        self._move_safely(lane, 'to_park', park, self._soon(lane, now), now)
 
     # --- figures --------------------------------------------------------------------------
     def minutes(self, now: float) -> float:

@@ -121,37 +121,24 @@ class Lane:
     next_look: float = 0.0  # idle with nothing to take: look again from then
 
 
-class LaneProtocol:
-    """Moves and grips of the lanes, asked and tracked to an outcome (see the module docstring).
+class PlanMemo:
+    """A plan function (:data:`PlanFn`) that plans each move once until :meth:`forget`.
 
-    :param cell: the cell model.
-    :param settings: the timeouts and retries (:class:`scara_collab.core.job.JobSettings`).
-    :param lanes: the lanes, ``(robot, robots it moves)`` each.
-    :param plan: ``plan(robot, q_start, target) -> Trajectory`` with the planners' settings
-        (raises ``ValueError`` if refused): a timed move's motion is known from it.
-    :param log: ``log(level, text)`` for events worth a log line (``'info'``, ``'warn'``).
+    A decision and the move it then asks for plan the same move in the same tick (the check
+    that a carried item clears the belt, then the move to the bin): the second gets the
+    first's trajectory. The job forgets at every tick (the arms have moved on).
+
+    :param plan: ``plan(robot, q_start, target) -> Trajectory`` (raises ``ValueError`` if
+        refused).
     """
 
-    def __init__(self, cell: CellModel, settings: 'JobSettings',
-                 lanes: Sequence[Tuple[str, Tuple[str, ...]]], plan: PlanFn,
-                 log: Callable[[str, str], None]):
-        """Set up idle lanes; nothing is asked yet."""
-        self.cell, self.s, self._plan, self.log = cell, settings, plan, log
-        self._plans: Dict[tuple, object] = {}  # this tick's plans (or refusals), by their inputs
-        self.lanes = [Lane(r, rs) for r, rs in lanes]
-        self.q: Dict[str, np.ndarray] = {}
-        self.retries = 0
-        self._last_request: Dict[str, int] = {a.name: 0 for a in cell.arms}
-        self._token = 0
-        self._out: List[object] = []
-        self._now = 0.0
+    def __init__(self, plan: PlanFn):
+        """Wrap ``plan``; nothing planned yet."""
+        self._plan = plan
+        self._plans: Dict[tuple, object] = {}  # trajectories (or refusals) by their inputs
 
-    def plan(self, robot: str, q_start, target) -> Trajectory:
-        """Plan a move as the planners will (the ``plan`` given), once per tick per move.
-
-        A decision and the move it then asks for plan the same move in the same tick (the
-        check that a carried item clears the belt, then the move to the bin): the second
-        gets the first's trajectory. :meth:`forget_plans` empties the memo (every tick).
+    def __call__(self, robot: str, q_start, target) -> Trajectory:
+        """Return the plan of the move, planned now or earlier since the last :meth:`forget`.
 
         :raises ValueError: the move is refused (the same reason each time).
         """
@@ -168,9 +155,35 @@ class LaneProtocol:
             raise ValueError(found)
         return found
 
-    def forget_plans(self) -> None:
-        """Empty the memo of :meth:`plan` (the arms have moved on)."""
+    def forget(self) -> None:
+        """Forget every plan."""
         self._plans.clear()
+
+
+class LaneProtocol:
+    """Moves and grips of the lanes, asked and tracked to an outcome (see the module docstring).
+
+    :param cell: the cell model.
+    :param settings: the timeouts and retries (:class:`scara_collab.core.job.JobSettings`).
+    :param lanes: the lanes, ``(robot, robots it moves)`` each.
+    :param plan: ``plan(robot, q_start, target) -> Trajectory`` with the planners' settings
+        (raises ``ValueError`` if refused): a timed move's motion is known from it.
+    :param log: ``log(level, text)`` for events worth a log line (``'info'``, ``'warn'``).
+    """
+
+    def __init__(self, cell: CellModel, settings: 'JobSettings',
+                 lanes: Sequence[Tuple[str, Tuple[str, ...]]], plan: PlanFn,
+                 log: Callable[[str, str], None]):
+        """Set up idle lanes; nothing is asked yet."""
+        self.cell, self.s, self.log = cell, settings, log
+        self.plan = PlanMemo(plan)
+        self.lanes = [Lane(r, rs) for r, rs in lanes]
+        self.q: Dict[str, np.ndarray] = {}
+        self.retries = 0
+        self._last_request: Dict[str, int] = {a.name: 0 for a in cell.arms}
+        self._token = 0
+        self._out: List[object] = []
+        self._now = 0.0
 
     # --- the decisions, taken by the subclass ----------------------------------------------
     def _arrived(self, lane: Lane, now: float) -> None:
@@ -184,6 +197,12 @@ class LaneProtocol:
     def _give_up(self, lane: Lane, now: float, why: str) -> None:
         """Decide what follows a move that failed or ran out of time."""
         raise NotImplementedError
+
+    def _book(self, robot: str, request: int, track: MoveTrack) -> None:
+        """Keep the motion a move just timed commits ``robot`` to (two lanes: the subclass)."""
+
+    def _book_asked(self, lane: Lane, traj: Optional[Trajectory]) -> None:
+        """Keep the motion a move just asked for commits its arm to (two lanes: the subclass)."""
 
     # --- observations -----------------------------------------------------------------------
     def on_arm_state(self, robot: str, q: np.ndarray) -> None:
@@ -220,21 +239,6 @@ class LaneProtocol:
         else:
             track.state, track.reason = new, reason or new
 
-    def on_trajectory(self, robot: str, request: int, t: np.ndarray, q: np.ndarray) -> None:
-        """Take the trajectory a planner published for ``robot``'s move ``request``.
-
-        With two lanes it is the motion the move commits the arm to (its booking, see
-        :meth:`_book`); a later start reported by the bridge shifts it.
-
-        :param t: ``(N,)`` absolute sim times, s; :param q: ``(N, 3)`` joint positions.
-        """
-        track = self._open_track(robot, request)
-        if len(self.lanes) < 2 or track is None:
-            return
-        track.timeline = planning.Timeline(np.asarray(t, dtype=float), np.asarray(q, dtype=float))
-        if track.start is not None:  # already timed: the start that counts
-            self._book(robot, request, track)
-
     def on_grip(self, token: int, ok: bool, message: str = '') -> None:
         """Take a gripper response for request ``token`` (late or unknown tokens: ignored)."""
         for lane in self.lanes:
@@ -258,42 +262,6 @@ class LaneProtocol:
                 return None if track.state in ('finished',) + FAILED_MOVE else track
         return None
 
-    def _book(self, robot: str, request: int, track: MoveTrack) -> None:
-        """Keep the motion a timed move commits ``robot`` to (two lanes: each one's look-ahead).
-
-        It is the trajectory the planner published (:meth:`on_trajectory`), shifted to the
-        start the planner's ``planned`` or the bridge's ``accepted`` reports. Only if that
-        message has not come (lost, or overtaken by the status) is the move planned here, as
-        the planner did, from where the arm is when the move is first timed (it has not
-        started yet).
-        """
-        if len(self.lanes) < 2 or track.start is None:
-            return
-        if track.timeline is not None:
-            track.timeline = track.timeline.shifted(track.start - track.timeline.start)
-            return
-        lane = next(la for la in self.lanes if la.request == request and robot in la.moves)
-        try:
-            traj = self.plan(robot, self.q[robot], self._target_of(lane, robot))
-        except (ValueError, KeyError):
-            return
-        track.timeline = planning.Timeline.of(traj, track.start)
-
-    def _committed(self, robot: str, now: float) -> planning.Timeline:
-        """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds).
-
-        Booked: a move the planner timed (``planned``, ``accepted``), or one just asked for,
-        as the job planned it when it asked (:meth:`_move`): in the ticks before the planner's
-        answer the other lane must not decide as if the arm stood still.
-        """
-        for lane in self.lanes:
-            track = lane.moves.get(robot) if lane.phase in MOVING else None
-            if (track is not None and track.timeline is not None
-                    and track.state in ('asked', 'planned', 'accepted')
-                    and track.timeline.end > now):
-                return track.timeline
-        return planning.Timeline.hold(now, self.q[robot])
-
     def phases(self) -> Dict[str, str]:
         """Each lane's phase, by its robot."""
         return {lane.robot: lane.phase for lane in self.lanes}
@@ -307,11 +275,9 @@ class LaneProtocol:
 
     def _move(self, lane: Lane, phase: str, target, start: float, now: float,
               traj: Optional[Trajectory] = None) -> None:
-        """Ask for ``lane``'s move to ``target`` from ``start``; with two lanes, book it.
+        """Ask for ``lane``'s move to ``target`` from ``start`` (``traj``: as the job planned it).
 
-        Booked as the job plans it (``traj`` if the caller has planned it already) until the
-        planner's own trajectory comes (:meth:`on_trajectory`); a move the job cannot plan is
-        booked once the planner has timed it (:meth:`_book`).
+        With two lanes the move is booked (:meth:`_book_asked`).
         """
         lane.phase, lane.target = phase, np.asarray(target, dtype=float)
         lane.request = self._request(lane.robots, max(start, now + 1e-3))
@@ -319,12 +285,7 @@ class LaneProtocol:
         lane.since = lane.sent = now
         lane.sends = 1
         self._send(lane)
-        if len(self.lanes) > 1 and lane.robot in self.q:
-            try:
-                traj = traj or self.plan(lane.robot, self.q[lane.robot], lane.target)
-            except ValueError:
-                return  # the planner will refuse it with the reason
-            lane.moves[lane.robot].timeline = planning.Timeline.of(traj, lane.request * 1e-9)
+        self._book_asked(lane, traj)
 
     def _soon(self, lane: Lane, now: float) -> float:
         """Return the start to ask for a move that should start as soon as possible.

@@ -5,15 +5,19 @@
 (:class:`scara_collab.core.job.SortingJob`) that deals with the other arm: a chase timed around
 the other arm's booked motion (:meth:`SharedBelt._unhindered`), an arm that waits for the other
 unblocked (parks, gives way, backs out or re-aims: :meth:`SharedBelt._unblock`), a mirrored
-pair kept apart by a detour (:meth:`SharedBelt._move_safely`). The geometry is
+pair kept apart by a detour (:meth:`SharedBelt._move_safely`). What each arm is committed to
+is booked here too: a move as the job planned it when it asked (:meth:`SharedBelt._book_asked`),
+then as the planner published it (:meth:`SharedBelt.on_trajectory`, :meth:`SharedBelt._book`),
+read back by :meth:`SharedBelt._committed`. The geometry is
 :mod:`scara_collab.core.pairing`'s; with one lane nothing here acts.
 """
 from typing import Dict, Optional
 
 import numpy as np
 
-from scara_collab.core import pairing, sorting
-from scara_collab.core.lanes import Lane, LaneProtocol, MOVING
+from scara_collab.core import pairing, planning, sorting
+from scara_collab.core.lanes import Lane, LaneProtocol, MoveCommand, MoveTrack, MOVING
+from scara_collab.core.trajectory import Trajectory
 
 #: s: an item with less than this left in an arm's reach is urgent: about two cycles, so of
 #: two urgent items the arm can still take the one after the other. An urgent item is chased
@@ -25,19 +29,104 @@ URGENT_SLACK = 8.0
 class SharedBelt(LaneProtocol):
     """The job's dealings with the other arm (see the module docstring).
 
-    The subclass provides ``items`` (the items resting on the belt, by id), the chase
-    (:meth:`_chase`) and the park (:meth:`_park`).
+    The subclass provides ``items`` (the items resting on the belt, by id) and the chase
+    (:meth:`_chase`).
     """
 
     items: Dict[int, sorting.SeenItem]
+
+    def __init__(self, *args, **kwargs):
+        """Set up the lanes (:class:`LaneProtocol`); no arm parked yet."""
+        super().__init__(*args, **kwargs)
+        self._parked_unused = False
 
     def _chase(self, lane: Lane, item: sorting.SeenItem, now: float) -> bool:
         """Ask for the move that meets ``item``; return False if the arm cannot."""
         raise NotImplementedError
 
+    # --- what each arm has booked ------------------------------------------------------------
+    def on_trajectory(self, robot: str, request: int, t: np.ndarray, q: np.ndarray) -> None:
+        """Take the trajectory a planner published for ``robot``'s move ``request``.
+
+        With two lanes it is the motion the move commits the arm to (its booking, see
+        :meth:`_book`); a later start reported by the bridge shifts it.
+
+        :param t: ``(N,)`` absolute sim times, s; :param q: ``(N, 3)`` joint positions.
+        """
+        track = self._open_track(robot, request)
+        if len(self.lanes) < 2 or track is None:
+            return
+        track.timeline = planning.Timeline(np.asarray(t, dtype=float), np.asarray(q, dtype=float))
+        if track.start is not None:  # already timed: the start that counts
+            self._book(robot, request, track)
+
+    def _book(self, robot: str, request: int, track: MoveTrack) -> None:
+        """Keep the motion a timed move commits ``robot`` to (two lanes: each one's look-ahead).
+
+        It is the trajectory the planner published (:meth:`on_trajectory`), shifted to the
+        start the planner's ``planned`` or the bridge's ``accepted`` reports. Only if that
+        message has not come (lost, or overtaken by the status) is the move planned here, as
+        the planner did, from where the arm is when the move is first timed (it has not
+        started yet).
+        """
+        if len(self.lanes) < 2 or track.start is None:
+            return
+        if track.timeline is not None:
+            track.timeline = track.timeline.shifted(track.start - track.timeline.start)
+            return
+        lane = next(la for la in self.lanes if la.request == request and robot in la.moves)
+        try:
+            traj = self.plan(robot, self.q[robot], self._target_of(lane, robot))
+        except (ValueError, KeyError):
+            return
+        track.timeline = planning.Timeline.of(traj, track.start)
+
+    def _committed(self, robot: str, now: float) -> planning.Timeline:
+        """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds).
+
+        Booked: a move the planner timed (``planned``, ``accepted``), or one just asked for,
+        as the job planned it when it asked (:meth:`_move`): in the ticks before the planner's
+        answer the other lane must not decide as if the arm stood still.
+        """
+        for lane in self.lanes:
+            track = lane.moves.get(robot) if lane.phase in MOVING else None
+            if (track is not None and track.timeline is not None
+                    and track.state in ('asked', 'planned', 'accepted')
+                    and track.timeline.end > now):
+                return track.timeline
+        return planning.Timeline.hold(now, self.q[robot])
+
+    def _book_asked(self, lane: Lane, traj: Optional[Trajectory]) -> None:
+        """Book a move just asked for as the job plans it (``traj`` if planned already).
+
+        It stands until the planner's own trajectory comes (:meth:`on_trajectory`); a move
+        the job cannot plan is booked once the planner has timed it (:meth:`_book`).
+        """
+        if len(self.lanes) < 2 or lane.robot not in self.q:
+            return
+        try:
+            traj = traj or self.plan(lane.robot, self.q[lane.robot], lane.target)
+        except ValueError:
+            return  # the planner will refuse it with the reason
+        lane.moves[lane.robot].timeline = planning.Timeline.of(traj, lane.request * 1e-9)
+
+    # --- out of the way ------------------------------------------------------------------------
     def _park(self, lane: Lane, now: float) -> None:
-        """Move the lane's arm clear of the shared zone."""
-        raise NotImplementedError
+        """Wait clear of the shared zone, above the first bin, so the other arm is free."""
+        park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
+                                  self.s.drop_clearance)
+        self._move_safely(lane, 'to_park', park, self._soon(lane, now), now)
+
+    def _park_unused(self, now: float) -> None:
+        """Arms no lane uses wait above their first bin, off the belt (once)."""
+        self._parked_unused = True
+        used = {r for lane in self.lanes for r in lane.robots}
+        for arm in self.cell.arms:
+            if arm.name not in used:
+                park = sorting.drop_point(self.cell, arm.name, self.cell.item_classes[0],
+                                          self.s.drop_clearance)
+                req = self._request([arm.name], now + self.s.decision_lead)
+                self._out.append(MoveCommand(arm.name, park, req, False, 'park'))
 
     def _blocked(self, lane: Lane, now: float) -> bool:
         """Return True if the lane's planner has waited for the other arm ``unblock_after``."""
