@@ -171,7 +171,7 @@ def test_tool_tip_is_the_core_fk(cell):
         for arm in cell.arms:
             for q in rng.uniform(arm.lower, arm.upper, size=(5, 3)):
                 sim.reset_arm(arm.name, q)
-                npt.assert_allclose(sim.tool_tip(arm.name), fk(arm, q), atol=1e-6)
+                npt.assert_allclose(sim.grippers.tool_tip(arm.name), fk(arm, q), atol=1e-6)
 
 
 def test_joint_state_order_and_efforts(cell):
@@ -215,7 +215,7 @@ def test_unknown_robot_is_refused(cell):
     with _make(cell) as sim:
         with pytest.raises(TrajectoryError, match="unknown robot 'scara_middle'"):
             sim.execute('scara_middle', [0.0], [[0.0, 0.0, 0.0]])
-        assert sim.grasp('scara_middle')[0] is False
+        assert sim.grippers.grasp('scara_middle')[0] is False
 
 
 def test_estop_brakes_both_arms_within_limits_and_refuses_trajectories(cell):
@@ -356,11 +356,11 @@ def test_grasp_refuses_without_an_item_and_release_without_a_hold(cell):
     """Grasping with no item under the tool and releasing with none held are refused."""
     with _make(cell) as sim:
         sim.spawn_item('red', x=2.5, y=0.0)
-        ok, why = sim.grasp(LEFT)
+        ok, why = sim.grippers.grasp(LEFT)
         assert not ok and 'nothing to grasp within 0.06 m' in why
-        ok, why = sim.release(LEFT)
+        ok, why = sim.grippers.release(LEFT)
         assert not ok and 'holds nothing' in why
-        assert sim.held_item(LEFT) is None
+        assert sim.grippers.held_item(LEFT) is None
 
 
 def _pick(sim, robot, cls, xy):
@@ -369,13 +369,26 @@ def _pick(sim, robot, cls, xy):
     _home(sim, robot, [xy[0] + 0.3, xy[1] - 0.3, 0.5])
     top = sim.cell.belt.top_z + sim.cell.item_size
     _move(sim, robot, [xy[0], xy[1], top])
-    ok, why = sim.grasp(robot)
+    ok, why = sim.grippers.grasp(robot)
     assert ok, why
-    assert sim.held_item(robot) == item
-    ok, why = sim.grasp(robot)
+    assert sim.grippers.held_item(robot) == item
+    ok, why = sim.grippers.grasp(robot)
     assert not ok and 'already holds' in why
     _move(sim, robot, [xy[0], xy[1], top + 0.25])
     return item
+
+
+def test_the_gripper_command_is_idempotent(still_cell):
+    """A repeated grasp or release (its answer was lost) succeeds and changes nothing."""
+    with _make(still_cell) as sim:
+        g = sim.grippers
+        assert g.command(LEFT, False) == (True, f'{LEFT} holds nothing (already released)')
+        item = _pick(sim, LEFT, 'red', (2.5, -0.2))
+        ok, why = g.command(LEFT, True)
+        assert ok and why == f'{LEFT} already holds item {item}' and g.held_item(LEFT) == item
+        assert g.command(LEFT, False)[0] and g.held_item(LEFT) is None
+        assert g.command('scara_middle', True) == (
+            False, "unknown robot 'scara_middle'; the cell has ['scara_left', 'scara_right']")
 
 
 def test_grasp_lift_release(still_cell):
@@ -387,14 +400,14 @@ def test_grasp_lift_release(still_cell):
         item = _pick(sim, LEFT, 'red', (2.5, -0.2))
         it = sim.items()[0]
         assert it.state == 'held'
-        tip = sim.tool_tip(LEFT)
+        tip = sim.grippers.tool_tip(LEFT)
         npt.assert_allclose(it.position + [0, 0, still_cell.item_size / 2], tip, atol=5e-3)
         assert it.position[2] > still_cell.belt.top_z + 0.25
         _move(sim, LEFT, tip + [0.3, 0.0, 0.0])  # it moves with the tool
         it = sim.items()[0]
         npt.assert_allclose(it.position[:2], tip[:2] + [0.3, 0.0], atol=5e-3)
-        ok, _ = sim.release(LEFT)
-        assert ok and sim.held_item(LEFT) is None
+        ok, _ = sim.grippers.release(LEFT)
+        assert ok and sim.grippers.held_item(LEFT) is None
         sim.step(600)  # it falls back onto the belt
         it = sim.items()[0]
         assert it.state == 'belt'
@@ -417,7 +430,7 @@ def test_dropping_an_item_gives_the_right_event(still_cell, where, kind):
             cls = 'red' if where == 'own' else 'blue'
             target = [*still_cell.bins[(LEFT, cls)][:2], 0.5]
         _move(sim, LEFT, target, kind='joint')
-        sim.release(LEFT)
+        sim.grippers.release(LEFT)
         sim.pop_events()
         events = []
         for _ in range(200):
@@ -437,7 +450,7 @@ def test_payload_is_felt_by_the_arm(cell):
         q0 = _home(sim, LEFT, [3.0, -0.6, 0.4])
         sim.step(100)
         before = sim.joint_state().effort[2]
-        sim.attach_payload(LEFT, 2.5)
+        sim.grippers.attach_payload(LEFT, 2.5)
         sim.step(1000)
         after = sim.joint_state().effort[2]
         assert after - before == pytest.approx(-2.5 * g, rel=0.01)

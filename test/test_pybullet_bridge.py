@@ -294,5 +294,8 @@ def test_a_bad_sim_step_count_is_refused_at_start():
             bad = {'real_time_factor': 0.0, 'feed_interval': 0.0, 'sim_step_count': 0}
             PyBulletBridge(context=g.context,
                            cli_args=params_args('simulation', 'controllers', overrides=bad))
+        # the refused node is gone (it kept a later bridge's test from seeing the graph empty)
+        g.spin_until(lambda: False, timeout=1.0)
+        assert 'pybullet_bridge' not in {n for n, _ in g.probe.get_node_names_and_namespaces()}
     finally:
         g.close()

@@ -114,7 +114,7 @@ def tracking(cell: CellModel, mode: str, payload: float, settle: float) -> Dict[
         q0 = ik(arm, start).q
         sim.reset_arm(arm.name, q0)
         if payload > 0:
-            sim.attach_payload(arm.name, payload, size=PAYLOAD_SIZE)
+            sim.grippers.attach_payload(arm.name, payload, size=PAYLOAD_SIZE)
         traj = line_move(arm, q0, goal)
         t0 = sim.time
         sim.execute(arm.name, t0 + traj.t, traj.q, traj.qd, traj.qdd)

@@ -30,12 +30,15 @@ class Execution:
     :param cell: the cell model; :param sim: the simulator that executes.
     :param report: publishes a status (:data:`Report`).
     :param warn: logs a warning.
+    :param blocked: returns why no move may start now (a lockstep guard is missing), ``''``
+        when moves may start; asked for every trajectory, from the topic or an action goal.
     """
 
     def __init__(self, cell: CellModel, sim: CellSim, report: Report,
-                 warn: Callable[[str], None]):
+                 warn: Callable[[str], None], blocked: Callable[[], str] = lambda: ''):
         """Nothing runs yet."""
         self.cell, self.sim, self.report, self.warn = cell, sim, report, warn
+        self.blocked = blocked
         self.running: Dict[str, Tuple[str, float]] = {}  # robot -> (move id, end)
         self.reason = ''  # why the last refused trajectory was refused
 
@@ -45,6 +48,9 @@ class Execution:
         A refusal is reported, and its reason kept in :attr:`reason`.
         """
         move = msg.header.frame_id
+        why = self.blocked()
+        if why:
+            return self._refuse(robot, move, why)
         try:
             stamp, t, q, qd, qdd = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
         except conv.MessageError as exc:

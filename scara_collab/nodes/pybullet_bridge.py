@@ -68,6 +68,50 @@ from scara_collab.sim.cell_sim import CellSim
 STATE_QOS = QoSProfile(depth=10)
 
 
+class Pacer:
+    """How many physics steps are due now, to run at a real-time factor.
+
+    :param rtf: sim seconds per wall second, ``0`` = as fast as the machine allows;
+    :param dt: s per physics step; :param chunk: steps per tick when unthrottled (and the
+        most a throttled tick catches up by, tenfold, before it starts counting afresh).
+    """
+
+    def __init__(self, rtf: float, dt: float, chunk: int):
+        """Count from the first :meth:`due`."""
+        self.rtf, self.dt, self.chunk = float(rtf), dt, chunk
+        self._anchor: Optional[tuple] = None  # (wall, sim) when counting started
+
+    @property
+    def period(self) -> float:
+        """Wall seconds between stepping ticks: back to back when unthrottled."""
+        return 0.0 if self.rtf == 0 else 0.002
+
+    def set_rate(self, rtf: float) -> bool:
+        """Change the real-time factor; return True if the tick :attr:`period` changes."""
+        before = self.period
+        self.rtf = float(rtf)
+        self.restart()
+        return self.period != before
+
+    def restart(self) -> None:
+        """Count afresh from now (after a pause or a change of rate)."""
+        self._anchor = None
+
+    def due(self, sim_time: float) -> int:
+        """Return the steps due at ``sim_time`` (sim s) to keep the rate."""
+        if self.rtf <= 0:
+            return self.chunk
+        wall = time.monotonic()
+        if self._anchor is None:
+            self._anchor = (wall, sim_time)
+        target = self._anchor[1] + (wall - self._anchor[0]) * self.rtf
+        due = int((target - sim_time) / self.dt)
+        if due > 10 * self.chunk:  # the machine cannot keep up: do not try to catch up
+            self._anchor = (wall, sim_time)
+            due = self.chunk
+        return max(due, 0)
+
+
 class PyBulletBridge(Node):
     """The simulator node. ``sim`` is the :class:`CellSim` it owns."""
 
@@ -79,6 +123,17 @@ class PyBulletBridge(Node):
             than the clock period.
         """
         super().__init__('pybullet_bridge', **kwargs)
+        self.sim: Optional[CellSim] = None
+        self.gate: Optional[LockstepGate] = None
+        self.actions: Optional[TrajectoryActions] = None
+        try:
+            self._setup()
+        except BaseException:
+            self.destroy_node()  # a refused start leaves no node on the graph, no PyBullet
+            raise
+
+    def _setup(self) -> None:
+        """Build what :meth:`__init__` says."""
         cfg = declare_config(self, ('simulation', 'controllers'),
                              dynamic=('real_time_factor', 'feed_interval'),
                              on_change=self._on_config)
@@ -105,7 +160,6 @@ class PyBulletBridge(Node):
                                  f'limits of {arm.name}')
             self.sim.reset_arm(arm.name, self.home[arm.name])
         self.dt = 1.0 / float(sim_cfg['physics_rate'])
-        self._rtf = float(sim_cfg['real_time_factor'])
         self._periods = {
             'state': 1.0 / float(sim_cfg['state_rate']),
             'clock': 1.0 / float(sim_cfg['clock_rate']),
@@ -113,11 +167,12 @@ class PyBulletBridge(Node):
             'diagnostics': 1.0,
         }
         self._next = {k: 0.0 for k in self._periods}
-        self._chunk = max(1, int(round(float(self.get_parameter('step_chunk').value) / self.dt)))
-        self._anchor: Optional[tuple] = None  # (wall, sim) at the last rate change
+        self.pacer = Pacer(float(sim_cfg['real_time_factor']), self.dt, max(1, int(round(
+            float(self.get_parameter('step_chunk').value) / self.dt))))
 
         self.faults = declare_faults(self)
-        self.execution = Execution(self.cell, self.sim, self._report, self.get_logger().warning)
+        self.execution = Execution(self.cell, self.sim, self._report, self.get_logger().warning,
+                                   blocked=self._unguarded)
         self.clock_pub = self.create_publisher(ClockMsg, '/clock', STATE_QOS)
         self.state_pub = self.create_publisher(JointState, 'joint_states', STATE_QOS)
         self.items_pub = self.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
@@ -130,7 +185,7 @@ class PyBulletBridge(Node):
                 DiagnosticStatus, f'{name}/execution_status', EVENTS))
             self.create_subscription(
                 JointTrajectory, f'{name}/joint_trajectory',
-                guarded(self, lambda msg, n=name: self._on_trajectory_watched(n, msg)), 10)
+                guarded(self, lambda msg, n=name: self.execution.run(n, msg)), 10)
             self.create_service(
                 SetBool, f'{name}/gripper',
                 guarded(self, lambda req, res, n=name: self._on_gripper(n, req, res), True))
@@ -146,8 +201,7 @@ class PyBulletBridge(Node):
             guards=[g for g in self.get_parameter('lockstep_guards').value or [] if g.strip()],
             on_guard=self._on_guard)
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self._timer = self.create_timer(0.0 if self._rtf == 0 else 0.002, self._tick,
-                                        clock=self._steady)
+        self._timer = self.create_timer(self.pacer.period, self._tick, clock=self._steady)
         self._parked = False  # the stepping timer is off while the bridge waits for answers
         self.control = SimControl(self, self.sim, self.home, self._advance, self._on_pause,
                                   self._busy)
@@ -159,37 +213,20 @@ class PyBulletBridge(Node):
         self.get_logger().info(
             f'cell ready: {len(self.sim.joint_state()[0])} joints, physics '
             f'{sim_cfg["physics_rate"]:.0f} Hz, control {ctl_cfg["control_mode"]}, '
-            f'real-time factor {self._rtf or "unthrottled"}, lockstep '
+            f'real-time factor {self.pacer.rtf or "unthrottled"}, lockstep '
             f'{f"window {window:.3f} s" if window > 0 else "off"}')
 
     # --- stepping -------------------------------------------------------------------------
     def _on_config(self, name: str, tree: dict) -> None:
         if name == 'simulation':
-            unthrottled = self._rtf == 0
-            self._rtf = float(tree['real_time_factor'])
-            self._anchor = None
-            if unthrottled != (self._rtf == 0):  # unthrottled: step back to back
+            if self.pacer.set_rate(float(tree['real_time_factor'])):  # unthrottled: back to back
                 self.destroy_timer(self._timer)
-                self._timer = self.create_timer(0.0 if self._rtf == 0 else 0.002, self._tick,
-                                                clock=self._steady)
+                self._timer = self.create_timer(self.pacer.period, self._tick, clock=self._steady)
                 self._parked = False
                 if self.control.paused:
                     self._timer.cancel()
             if float(tree['feed_interval']) != self.sim.conveyor.feed_interval:
                 self.sim.conveyor.set_feed(float(tree['feed_interval']))
-
-    def _steps_due(self) -> int:
-        if self._rtf <= 0:
-            return self._chunk
-        wall = time.monotonic()
-        if self._anchor is None:
-            self._anchor = (wall, self.sim.time)
-        target = self._anchor[1] + (wall - self._anchor[0]) * self._rtf
-        due = int((target - self.sim.time) / self.dt)
-        if due > 10 * self._chunk:  # the machine cannot keep up: do not try to catch up
-            self._anchor = (wall, self.sim.time)
-            due = self._chunk
-        return max(due, 0)
 
     def _wake(self) -> None:
         if self._parked and not self.control.paused:
@@ -210,18 +247,17 @@ class PyBulletBridge(Node):
             else:  # braked at the acceleration limits, as for an e-stop
                 self.execution.hold(arm.name, f'{name} {why}: holding')
 
-    def _on_trajectory_watched(self, robot: str, msg: JointTrajectory) -> None:
-        if self.gate.absent:
-            name, why = next(iter(self.gate.absent.items()))
-            self._report(robot, 'refused', msg.header.frame_id,
-                         f'{name} {why}: no move until it answers again')
-            return
-        self.execution.run(robot, msg)
+    def _unguarded(self) -> str:
+        """Return why no move may start (a guard is missing), or ''."""
+        if not self.gate.absent:
+            return ''
+        name, why = next(iter(self.gate.absent.items()))
+        return f'{name} {why}: no move until it answers again'
 
     def _tick(self) -> None:
         if self.control.paused:
             return
-        due = self._steps_due()
+        due = self.pacer.due(self.sim.time)
         limit = self.gate.limit(self.sim.time)
         if limit != float('inf'):
             allowed = int(math.floor((limit - self.sim.time) / self.dt + 1e-6))
@@ -246,7 +282,8 @@ class PyBulletBridge(Node):
         if paused:
             self._timer.cancel()
         else:
-            self._anchor, self._parked = None, False
+            self.pacer.restart()
+            self._parked = False
             self._timer.reset()
         self.diagnostics.publish(self.status().to_msg())  # no sim second passes while paused
 
@@ -260,8 +297,8 @@ class PyBulletBridge(Node):
     def _busy(self) -> str:
         """Return why the arms cannot be reset now (a move runs, an item is held), or ''."""
         why = [f'{r} is executing a move' for r in self.sim.robots if self.sim.active(r)]
-        why += [f'{r} holds item {self.sim.held_item(r)}' for r in self.sim.robots
-                if self.sim.held_item(r) is not None]
+        why += [f'{r} holds item {self.sim.grippers.held_item(r)}' for r in self.sim.robots
+                if self.sim.grippers.held_item(r) is not None]
         return '; '.join(why)
 
     def _publish_due(self) -> None:
@@ -301,16 +338,10 @@ class PyBulletBridge(Node):
         self.status_pub[robot].publish(st.to_msg())
 
     def _on_gripper(self, robot: str, req: SetBool.Request, res: SetBool.Response):
-        held = self.sim.held_item(robot)
-        if req.data and held is not None:  # idempotent: a repeated grasp is not an error
-            res.success, res.message = True, f'{robot} already holds item {held}'
-        elif not req.data and held is None:
-            res.success, res.message = True, f'{robot} holds nothing (already released)'
-        else:
-            ok, message = self.sim.grasp(robot) if req.data else self.sim.release(robot)
-            res.success, res.message = bool(ok), message
-            if not ok:
-                self.get_logger().warning(f'{robot} gripper: {message}')
+        ok, res.message = self.sim.grippers.command(robot, bool(req.data))
+        res.success = bool(ok)
+        if not ok:
+            self.get_logger().warning(f'{robot} gripper: {res.message}')
         return res
 
     def _on_estop(self, msg: Bool) -> None:
@@ -325,12 +356,13 @@ class PyBulletBridge(Node):
                 self._report(arm.name, 'cleared', '', 'emergency stop cleared')
 
     def destroy_node(self) -> bool:
-        """Close the simulator with the node."""
-        if self.gate.enabled:
+        """Close the simulator with the node (also after a refused start)."""
+        if self.gate is not None and self.gate.enabled:
             self.get_logger().info(self.gate.summary())
         if self.actions is not None:
             self.actions.destroy()  # an action server left alive keeps the node on the graph
-        self.sim.close()
+        if self.sim is not None:
+            self.sim.close()
         return super().destroy_node()
 
 

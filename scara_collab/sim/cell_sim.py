@@ -54,7 +54,7 @@ from scara_collab.core.model import CellModel, load_cell, parse_urdf
 from scara_collab.sim.controllers import applied_efforts
 from scara_collab.sim.conveyor import BeltBox, Conveyor, Item, SimEvent
 from scara_collab.sim.gripper import Grippers
-from scara_collab.sim.reference import HermiteReference, TrajectoryError, validate_trajectory
+from scara_collab.sim.reference import TrajectoryError, validate_trajectory
 from scara_collab.sim.servo import CONTROL_MODES, Servo
 
 __all__ = ['CellSim', 'CONTROL_MODES', 'JointStateSample']
@@ -246,7 +246,9 @@ class CellSim:
         # state
         self._steps = 0
         self.servo = Servo(self.arms, self.ctl_cfg, self.control_mode, -self._gravity[2],
-                           self._eps, self._servo_dt, self._read()[0])
+                           self._eps, self._servo_dt, self._read()[0],
+                           float(self.sim_cfg['velocity_tolerance']),
+                           float(self.sim_cfg['start_tolerance']))
         self.conveyor = Conveyor(pb, self.cell, self.sim_cfg, lambda: self.time, world.body,
                                  world.belt, world.link_names, self._seed)
         self.grippers = Grippers(pb, self.conveyor, world.body, world.quills, self.robots,
@@ -314,52 +316,17 @@ class CellSim:
         """Return the servo's reference ``(q, qd, qdd)`` of one arm (as of the last tick)."""
         return self.servo.reference(self._index(robot))
 
-    def tool_tip(self, robot: str) -> np.ndarray:
-        """World position of the tool tip (the ``<robot>_quill`` link frame origin), ``(3,)``."""
-        a = self._index(robot)
-        state = self._pb.getLinkState(self._body, self._quill[a], computeForwardKinematics=True)
-        return np.array(state[4])
-
     def execute(self, robot: str, t: ArrayLike, q: ArrayLike, qd: Optional[ArrayLike] = None,
                 qdd: Optional[ArrayLike] = None) -> None:
-        """Run a joint trajectory on one arm, replacing the running one.
-
-        Before ``t[0]`` the arm holds the position it has now; between points the reference
-        is the cubic Hermite spline of positions and velocities (velocities by central finite
-        differences, zero at both ends, if not given; accelerations its derivative unless
-        given); after ``t[-1]`` it holds the last point.
+        """Run a joint trajectory on one arm, replacing the running one (:meth:`Servo.execute`).
 
         :param robot: arm name, e.g. ``scara_left``.
-        :param t: ``(N,)`` absolute sim times, s, strictly increasing.
-        :param q: ``(N, 3)`` joint positions; :param qd, qdd: ``(N, 3)`` or ``None``.
-        While the emergency stop is set, only a move that takes this arm away from the other
-        one, standing still, is run (:func:`scara_collab.core.safety.separating`): the way
-        to part arms that stopped too close.
-
-        :raises TrajectoryError: (a ``ValueError``) with the reason: unknown robot, emergency
-            stop active and the move not separating, bad shape, non-finite value,
-            non-increasing times, a position outside the joint limits, a velocity above the
-            limits (also between points), or a start more than ``start_tolerance`` away from
-            the measured position. The arm keeps doing what it did.
+        :param t: ``(N,)`` absolute sim times, s; :param q: ``(N, 3)`` joint positions;
+        :param qd, qdd: ``(N, 3)`` or ``None``.
+        :raises TrajectoryError: (a ``ValueError``) with the reason (:meth:`Servo.execute`);
+            the arm keeps doing what it did.
         """
-        a = self._index(robot)
-        arm = self.arms[a]
-        t, q, qd, qdd = validate_trajectory(
-            t, q, qd, arm.lower, arm.upper, arm.max_velocity,
-            float(self.sim_cfg['velocity_tolerance']), qdd=qdd)
-        if self.servo.estop:
-            self.servo.check_recovery(a, q, *self._read(), self.time)
-        ref = HermiteReference(t, q, qd, qdd)
-        q_now = self._read()[0][a]
-        start_q = ref.sample(max(self.time, ref.start))[0]
-        jump = np.abs(start_q - q_now)
-        tol = float(self.sim_cfg['start_tolerance'])
-        if np.any(jump > tol):
-            j = int(np.argmax(jump))
-            raise TrajectoryError(
-                f'the trajectory starts {jump[j]:.4f} away from the measured position of joint '
-                f'{j + 1} ({q_now[j]:.4f}); at most {tol} is allowed')
-        self.servo.follow(a, ref, q_now)
+        self.servo.execute(self._index(robot), t, q, qd, qdd, *self._read(), self.time)
 
     def hold(self, robot: str) -> None:
         """Drop the running trajectory and hold the arm where it is now."""
@@ -435,32 +402,6 @@ class CellSim:
     def pop_events(self) -> List[SimEvent]:
         """Events since the last call, oldest first (:meth:`Conveyor.pop_events`)."""
         return self.conveyor.pop_events()
-
-    # --- grippers (:class:`~scara_collab.sim.gripper.Grippers`) ---------------------------
-    def held_item(self, robot: str) -> Optional[int]:
-        """Id of the item in the gripper of ``robot``, or ``None``."""
-        return self.grippers.held[self._index(robot)]
-
-    def grasp(self, robot: str) -> Tuple[bool, str]:
-        """Close the gripper of ``robot`` on the nearest item (:meth:`Grippers.grasp`)."""
-        try:
-            a = self._index(robot)
-        except TrajectoryError as exc:
-            return False, str(exc)
-        return self.grippers.grasp(a, self.tool_tip(robot))
-
-    def release(self, robot: str) -> Tuple[bool, str]:
-        """Open the gripper of ``robot``: the held item falls free (:meth:`Grippers.release`)."""
-        try:
-            a = self._index(robot)
-        except TrajectoryError as exc:
-            return False, str(exc)
-        return self.grippers.release(a)
-
-    def attach_payload(self, robot: str, mass: float, size: Optional[float] = None) -> int:
-        """Hang a test body of ``mass`` kg on the tool (:meth:`Grippers.attach_payload`)."""
-        a = self._index(robot)
-        return self.grippers.attach_payload(a, self.tool_tip(robot), mass, size)
 
     # --- lifetime -------------------------------------------------------------------------
     def close(self) -> None:

@@ -27,7 +27,7 @@ from scara_collab.core.sorting import on_belt
 FEED_PATTERNS = ('random', 'mirror_pairs')
 EVENT_KINDS = ('spawned', 'grasped', 'released', 'sorted', 'wrong_bin', 'missed', 'dropped')
 PAYLOAD_CLASS = 'payload'
-"""Class of the test bodies hung on a tool (:meth:`CellSim.attach_payload`), not sortable."""
+"""Class of the test bodies hung on a tool (``Grippers.attach_payload``), not sortable."""
 
 _LOST_Z = -1.0  # m, an item below this fell through something: dropped
 

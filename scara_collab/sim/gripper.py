@@ -17,7 +17,7 @@ _CONSTRAINT_FORCE = 1e5  # N, the gripper's fixed constraint never slips
 
 
 class Grippers:
-    """One gripper per arm (arms by index, as in the simulator).
+    """One gripper per arm, by the arm's name.
 
     :param pb: the simulator's PyBullet client.
     :param conveyor: the items.
@@ -36,6 +36,44 @@ class Grippers:
         self.held: List[Optional[int]] = [None] * len(self.robots)  # item id per arm
         self.payload = np.zeros(len(self.robots))  # kg held per arm (the servo's payload)
 
+    def _index(self, robot: str) -> int:
+        try:
+            return self.robots.index(robot)
+        except ValueError:
+            raise ValueError(f'unknown robot {robot!r}; the cell has {list(self.robots)}') \
+                from None
+
+    def tool_tip(self, robot: str) -> np.ndarray:
+        """World position of the tool tip (the ``<robot>_quill`` link frame origin), ``(3,)``.
+
+        :raises ValueError: for a robot the cell does not have.
+        """
+        state = self._pb.getLinkState(self._body, self._quill[self._index(robot)],
+                                      computeForwardKinematics=True)
+        return np.array(state[4])
+
+    def held_item(self, robot: str) -> Optional[int]:
+        """Id of the item in the gripper of ``robot``, or ``None``."""
+        return self.held[self._index(robot)]
+
+    def command(self, robot: str, grasp: bool) -> Tuple[bool, str]:
+        """Grasp (``grasp`` true) or release, idempotently: what the gripper service does.
+
+        A grasp while holding an item and a release while empty succeed and change nothing,
+        so a repeated request (its answer was lost) is never an error.
+
+        :return: ``(ok, message)`` as :meth:`grasp` / :meth:`release`.
+        """
+        try:
+            held = self.held_item(robot)
+        except ValueError as exc:
+            return False, str(exc)
+        if grasp and held is not None:
+            return True, f'{robot} already holds item {held}'
+        if not grasp and held is None:
+            return True, f'{robot} holds nothing (already released)'
+        return self.grasp(robot) if grasp else self.release(robot)
+
     def _attach(self, a: int, rec: ItemRecord) -> None:
         pb = self._pb
         link = pb.getLinkState(self._body, self._quill[a], computeForwardKinematics=True)
@@ -52,13 +90,17 @@ class Grippers:
         self.held[a] = rec.id
         self.payload[a] = rec.mass
 
-    def grasp(self, a: int, tip) -> Tuple[bool, str]:
-        """Attach the item whose top centre is nearest the tool tip ``tip`` (world) of arm ``a``.
+    def grasp(self, robot: str) -> Tuple[bool, str]:
+        """Attach the item whose top centre is nearest ``robot``'s tool tip.
 
-        :return: ``(True, message)``, or ``(False, reason)`` if the gripper already holds an
-            item or nothing is within the tolerance.
+        :return: ``(True, message)``, or ``(False, reason)`` for an unknown robot, a gripper
+            that already holds an item, or nothing within the tolerance.
         """
-        robot = self.robots[a]
+        try:
+            a = self._index(robot)
+        except ValueError as exc:
+            return False, str(exc)
+        tip = self.tool_tip(robot)
         if self.held[a] is not None:
             return False, f'{robot} already holds item {self.held[a]}'
         half = self.conveyor.cell.item_size / 2.0
@@ -78,12 +120,16 @@ class Grippers:
         self.conveyor.event('grasped', best, robot)
         return True, f'{robot} grasped item {best.id} ({best.cls}) at {best_d * 1000:.1f} mm'
 
-    def release(self, a: int) -> Tuple[bool, str]:
-        """Open the gripper of arm ``a``: the held item falls free.
+    def release(self, robot: str) -> Tuple[bool, str]:
+        """Open the gripper of ``robot``: the held item falls free.
 
-        :return: ``(True, message)``, or ``(False, reason)`` if the gripper holds nothing.
+        :return: ``(True, message)``, or ``(False, reason)`` for an unknown robot or a gripper
+            that holds nothing.
         """
-        robot = self.robots[a]
+        try:
+            a = self._index(robot)
+        except ValueError as exc:
+            return False, str(exc)
         item_id = self.held[a]
         if item_id is None:
             return False, f'{robot} holds nothing to release'
@@ -96,23 +142,26 @@ class Grippers:
         self.conveyor.event('released', rec, robot)
         return True, f'{robot} released item {rec.id} ({rec.cls})'
 
-    def attach_payload(self, a: int, tip, mass: float, size: Optional[float] = None) -> int:
-        """Hang a test body of ``mass`` kg (a cube, class ``'payload'``) on arm ``a``'s tool.
+    def attach_payload(self, robot: str, mass: float, size: Optional[float] = None) -> int:
+        """Hang a test body of ``mass`` kg (a cube, class ``'payload'``) on ``robot``'s tool.
 
-        Its top centre is placed at the tool tip ``tip`` (world) and it is held like a grasped
+        Its top centre is placed at the tool tip and it is held like a grasped
         item, so the physics feels it and the computed-torque feed-forward knows it. For
         benchmarks.
 
         :param size: cube edge, m; default the item size.
         :return: the body's item id (``release`` drops it).
-        :raises ValueError: for a mass or size <= 0, or a gripper that already holds something.
+        :raises ValueError: for an unknown robot, a mass or size <= 0, or a gripper that
+            already holds something.
         """
+        a = self._index(robot)
         size = self.conveyor.cell.item_size if size is None else float(size)
         if not (math.isfinite(mass) and mass > 0 and math.isfinite(size) and size > 0):
             raise ValueError(f'payload mass and size must be > 0, got {mass!r} kg, {size!r} m')
         if self.held[a] is not None:
             raise ValueError(f'{self.robots[a]} already holds item {self.held[a]}')
-        rec = self.conveyor.create_item(PAYLOAD_CLASS, np.asarray(tip) - [0.0, 0.0, size / 2.0],
+        rec = self.conveyor.create_item(PAYLOAD_CLASS,
+                                        self.tool_tip(robot) - [0.0, 0.0, size / 2.0],
                                         float(mass), 'held', size)
         self._attach(a, rec)
         return rec.id

@@ -14,11 +14,12 @@ a new trajectory is run only if it parts the arms (:meth:`Servo.check_recovery`)
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from scara_collab.core import safety
 from scara_collab.core.model import ArmModel
 from scara_collab.sim.controllers import ComputedTorqueController, joint_gains, PidController
-from scara_collab.sim.reference import HermiteReference, TrajectoryError
+from scara_collab.sim.reference import HermiteReference, TrajectoryError, validate_trajectory
 
 CONTROL_MODES = ('pid', 'computed_torque')
 
@@ -33,16 +34,20 @@ class Servo:
     :param friction_smoothing: the Coulomb friction's tanh scale (computed torque's model).
     :param dt: s between servo ticks (the PID's integration step).
     :param q: ``(arms, 3)`` the joints now: each arm holds them.
+    :param velocity_tolerance: relative slack on the velocity limits of a trajectory.
+    :param start_tolerance: rad | m, how far a trajectory may start from the measured joints.
     :raises ValueError: for an unknown ``control_mode``.
     """
 
     def __init__(self, arms: Sequence[ArmModel], ctl_cfg: dict, control_mode: str,
-                 gravity: float, friction_smoothing: float, dt: float, q: np.ndarray):
+                 gravity: float, friction_smoothing: float, dt: float, q: np.ndarray,
+                 velocity_tolerance: float = 0.01, start_tolerance: float = 0.05):
         """Make both control laws; every arm holds ``q``."""
         if control_mode not in CONTROL_MODES:
             raise ValueError(f'control_mode must be one of {CONTROL_MODES}, '
                              f'got {control_mode!r}')
         self.arms, self.control_mode, self.dt = tuple(arms), control_mode, float(dt)
+        self.velocity_tolerance, self.start_tolerance = velocity_tolerance, start_tolerance
         self.estop = False
         self.effort = np.stack([a.max_effort for a in arms])
         pid = ctl_cfg['pid']
@@ -74,6 +79,41 @@ class Servo:
         else:
             tau = self._ct(q, qd, self.ref_q, self.ref_qd, self.ref_qdd, payload)
         self.tau = np.minimum(np.maximum(tau, -self.effort), self.effort)
+
+    def execute(self, a: int, t: ArrayLike, q: ArrayLike, qd: Optional[ArrayLike],
+                qdd: Optional[ArrayLike], q_now: np.ndarray, qd_now: np.ndarray,
+                now: float) -> None:
+        """Run a joint trajectory on arm ``a``, replacing the running one.
+
+        Before ``t[0]`` the arm holds the position it has now; between points the reference
+        is the cubic Hermite spline of positions and velocities (velocities by central finite
+        differences, zero at both ends, if not given; accelerations its derivative unless
+        given); after ``t[-1]`` it holds the last point. While the emergency stop is set, only
+        a move that takes this arm away from the other one, standing still, is run
+        (:meth:`check_recovery`): the way to part arms that stopped too close.
+
+        :param t: ``(N,)`` absolute sim times, s, strictly increasing.
+        :param q: ``(N, 3)`` joint positions; :param qd, qdd: ``(N, 3)`` or ``None``.
+        :param q_now, qd_now: ``(arms, 3)`` the measured joints now; :param now: sim time, s.
+        :raises TrajectoryError: (a ``ValueError``) with the reason: emergency stop active and
+            the move not separating, bad shape, non-finite value, non-increasing times, a
+            position outside the joint limits, a velocity above the limits (also between
+            points), or a start more than ``start_tolerance`` away from the measured position.
+            The arm keeps doing what it did.
+        """
+        arm = self.arms[a]
+        t, q, qd, qdd = validate_trajectory(t, q, qd, arm.lower, arm.upper, arm.max_velocity,
+                                            self.velocity_tolerance, qdd=qdd)
+        if self.estop:
+            self.check_recovery(a, q, q_now, qd_now, now)
+        ref = HermiteReference(t, q, qd, qdd)
+        jump = np.abs(ref.sample(max(now, ref.start))[0] - q_now[a])
+        if np.any(jump > self.start_tolerance):
+            j = int(np.argmax(jump))
+            raise TrajectoryError(
+                f'the trajectory starts {jump[j]:.4f} away from the measured position of joint '
+                f'{j + 1} ({q_now[a][j]:.4f}); at most {self.start_tolerance} is allowed')
+        self.follow(a, ref, q_now[a])
 
     def hold(self, a: int, q: np.ndarray) -> None:
         """Drop arm ``a``'s trajectory: it holds ``q`` ``(3,)`` at rest."""

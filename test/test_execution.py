@@ -1,0 +1,59 @@
+"""The bridge's execution core and its pacing, without a graph: refusals, the guard, the rate."""
+import numpy as np
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from scara_collab.core.config import load_config
+from scara_collab.nodes.execution import Execution
+from scara_collab.nodes.pybullet_bridge import Pacer
+from scara_collab.sim import CellSim
+
+
+def _small_move(sim, robot, move='m1'):
+    """Return a 0.5 s trajectory message that turns ``robot``'s first joint by 0.1 rad."""
+    q0 = sim.arm_state(robot)[0]
+    msg = JointTrajectory(joint_names=list(sim.cell.arm(robot).joint_names))
+    msg.header.frame_id = move
+    for k, t in enumerate((0.0, 0.5)):
+        point = JointTrajectoryPoint(positions=(q0 + [0.1 * k, 0.0, 0.0]).tolist())
+        point.time_from_start.sec, point.time_from_start.nanosec = 0, int(t * 1e9)
+        msg.points.append(point)
+    return msg
+
+
+def test_no_move_starts_while_blocked_and_every_path_is_asked(cell):
+    """While ``blocked`` gives a reason (a lockstep guard is missing) every move is refused.
+
+    The topic and the action server both run moves through :meth:`Execution.run`, so neither
+    can start an arm while the collision monitor is not watching.
+    """
+    reports, why = [], ['/collision_monitor stopped answering: no move until it answers again']
+    cfg = dict(load_config('simulation'), feed_interval=0.0)
+    with CellSim(cell, cfg) as sim:
+        robot = cell.leader.name
+        ex = Execution(cell, sim, lambda *a, **k: reports.append((a, k)), lambda text: None,
+                       blocked=lambda: why[0])
+        assert ex.run(robot, _small_move(sim, robot)) is None
+        assert reports[-1][0][:3] == (robot, 'refused', 'm1') and reports[-1][0][3] == why[0]
+        assert not sim.active(robot) and ex.reason == why[0]
+        why[0] = ''
+        span = ex.run(robot, _small_move(sim, robot, 'm2'))
+        assert span is not None and sim.active(robot)
+        assert reports[-1][0][:3] == (robot, 'accepted', 'm2')
+
+
+def test_the_pacer_keeps_the_rate_and_says_when_its_tick_changes(monkeypatch):
+    """Unthrottled: a chunk per tick. Throttled: the steps the wall clock has made due."""
+    wall = [100.0]
+    monkeypatch.setattr('scara_collab.nodes.pybullet_bridge.time.monotonic', lambda: wall[0])
+    p = Pacer(0.0, 0.001, 10)
+    assert p.period == 0.0 and p.due(5.0) == 10
+    assert p.set_rate(2.0) and p.period == 0.002
+    assert p.due(5.0) == 0  # counting starts now
+    wall[0] += 0.004
+    assert p.due(5.0) == 8  # 4 ms of wall time at 2x: 8 ms of sim time
+    assert not p.set_rate(1.0)  # throttled to throttled: the same tick
+    wall[0] += 1.0  # a new rate counts afresh from its first tick
+    assert p.due(5.0) == 0
+    wall[0] += 1.0  # the machine fell 1000 steps behind: one chunk, and count from here
+    assert p.due(5.0) == 10 and p.due(5.01) == 0
+    assert np.isclose(p.rtf, 1.0)
