@@ -690,3 +690,15 @@ def test_a_move_is_planned_once_per_tick_and_a_refusal_remembered(cell):
     job.plan.forget()
     assert job.plan(robot, HOME, target) is not first
     assert len(calls) == 4
+
+
+def test_a_missed_item_says_what_the_job_last_did_with_it(cell):
+    """The job logs why an item got away: its last note (ranked, chased, given up) or none."""
+    job = make_job(cell)
+    pick = first_pick(cell, job)
+    job.on_item_event('missed', 1, '')
+    assert ('warn', f'item 1 missed; last: {pick.robot} chased it at t=0.00 s') in job.logs
+    job.on_item_event('missed', 7, '')
+    assert ('warn', 'item 7 missed; last: never a candidate of either arm') in job.logs
+    job.on_item_event('sorted', 7, pick.robot)  # notes are dropped with the item
+    assert sum('missed' in text for _, text in job.logs) == 2

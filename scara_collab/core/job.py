@@ -51,9 +51,9 @@ from scara_collab.core.lanes import (FAILED_MOVE, GripCommand, GripTrack, Lane, 
 from scara_collab.core.model import CellModel
 from scara_collab.core.sharing import SharedBelt
 
-__all__ = ['CANDIDATES', 'FAILED_MOVE', 'GripCommand', 'GripTrack', 'items_per_minute',
-           'JobSettings', 'Lane', 'LOOK_AGAIN', 'MODES', 'MOVE_STATES', 'MoveCommand',
-           'MoveTrack', 'MOVING', 'PHASES', 'SAVABLE', 'SortingJob']
+__all__ = ['CANDIDATES', 'FAILED_MOVE', 'GripCommand', 'GripTrack', 'ItemNotes',
+           'items_per_minute', 'JobSettings', 'Lane', 'LOOK_AGAIN', 'MODES', 'MOVE_STATES',
+           'MoveCommand', 'MoveTrack', 'MOVING', 'PHASES', 'SAVABLE', 'SortingJob']
 
 MODES = ('single', 'collaborative', 'mirrored')
 #: s an idle arm that found nothing to take waits before it looks again (the items move 2 cm)
@@ -134,6 +134,31 @@ class JobSettings:
             pair_margin=cell.safety_margin + float(planning_buffer))
 
 
+class ItemNotes:
+    """The job's last word on each item on the belt, so that a missed item says why.
+
+    Kept per item until it leaves the belt: ranked among an arm's candidates, not met (no
+    intercept, or the way not clear), claimed, given up.
+    """
+
+    def __init__(self):
+        """No item noted yet."""
+        self._notes: Dict[int, str] = {}
+
+    def note(self, item: int, now: float, text: str) -> None:
+        """Note ``text`` about ``item`` at sim time ``now``."""
+        self._notes[item] = f'{text} at t={now:.2f} s'
+
+    def ranked(self, robot: str, order: Sequence, now: float) -> None:
+        """Note each item's place among ``robot``'s candidates (``(group, item)`` pairs)."""
+        for k, (_, item) in enumerate(order):
+            self.note(item.id, now, f'{robot} ranked it #{k + 1} of {len(order)}')
+
+    def close(self, item: int) -> str:
+        """Forget ``item`` (it left the belt); return the last note, or say there was none."""
+        return self._notes.pop(item, 'never a candidate of either arm')
+
+
 class SortingJob(SharedBelt):
     """The sorting job's decisions (see the module docstring).
 
@@ -162,6 +187,7 @@ class SortingJob(SharedBelt):
         self.sorted_by: Dict[str, int] = {a.name: 0 for a in cell.arms}
         self.give_ups = 0
         self.last_give_up = ''
+        self.notes = ItemNotes()
 
     # --- observations ---------------------------------------------------------------------
     def start(self, now: float) -> bool:
@@ -193,6 +219,9 @@ class SortingJob(SharedBelt):
             self.sorted_by[robot] += 1
         if kind in ('sorted', 'wrong_bin', 'missed', 'dropped'):
             self.claimed.pop(item, None)
+            last = self.notes.close(item)
+            if kind == 'missed':
+                self.log('warn', f'item {item} missed; last: {last}')
         self._confirm_grip(kind, robot)
 
     # --- the clock ------------------------------------------------------------------------
@@ -220,7 +249,7 @@ class SortingJob(SharedBelt):
     # --- after a move -----------------------------------------------------------------------
     def _arrived(self, lane: Lane, now: float) -> None:
         if lane.phase == 'to_park':
-            self._idle(lane)
+            lane.idle()
         elif lane.phase == 'to_bin':
             self._grip(lane, False, now)
         elif lane.phase == 'lift':
@@ -289,9 +318,12 @@ class SortingJob(SharedBelt):
                                           now + self.s.decision_lead, self.s.pick_z,
                                           self.s.drop_clearance, sharing.URGENT_SLACK, SAVABLE,
                                           CANDIDATES)
+        self.notes.ranked(lane.robot, order[:CANDIDATES], now)
         for item in [it for _, it in order[:2]]:
             if not self._chase(lane, item, now):
+                self.notes.note(item.id, now, f'{lane.robot} could not meet it (or not yet)')
                 continue
+            self.notes.note(item.id, now, f'{lane.robot} chased it')
             self.claimed[item.id] = lane.robot
             if self.s.mode == 'mirrored':
                 partner = sorting.mirror_partner(self.cell, item, list(self.items.values()))
@@ -311,13 +343,13 @@ class SortingJob(SharedBelt):
                 self.claimed.pop(lane.item.id, None)
             if not main.ok:
                 self.log('warn', f'{lane.robot}: release failed ({main.message})')
-            self._idle(lane)
+            lane.idle()
         elif not main.ok:
             item = lane.item
             lane.failures[item.id] = lane.failures.get(item.id, 0) + 1
             self.claimed.pop(item.id, None)
             self.log('info', f'{lane.robot}: grasp of item {item.id} failed ({main.message})')
-            self._idle(lane)
+            lane.idle()
         elif self.s.carry_z > self.s.pick_z + 1e-6 and self._would_sweep(lane, now):
             up = np.array([lane.target[0], lane.target[1], self.s.carry_z])
             lane.bin_tries, lane.holding = 0, True
@@ -346,15 +378,12 @@ class SortingJob(SharedBelt):
             mirrored=len(lane.robots) > 1)
 
     # --- endings --------------------------------------------------------------------------
-    def _idle(self, lane: Lane) -> None:
-        lane.phase, lane.item, lane.moves, lane.grips = 'idle', None, {}, {}
-        lane.holding, lane.route = False, []
-        lane.reaims = 0
-
     def _give_up(self, lane: Lane, now: float, why: str) -> None:
         self.log('warn', f'{lane.robot}: {why}')
         self.give_ups += 1
         self.last_give_up = f't={now:.2f} s {lane.robot} {lane.phase}: {why}'
+        if lane.item is not None:
+            self.notes.note(lane.item.id, now, f'{lane.robot} gave it up ({why})')
         phase = lane.phase
         lane.route = []
         if lane.holding and phase in MOVING:  # never put an item down off the bin
@@ -369,7 +398,7 @@ class SortingJob(SharedBelt):
         if lane.item is not None:
             self.claimed.pop(lane.item.id, None)
             lane.failures[lane.item.id] = lane.failures.get(lane.item.id, 0) + 1
-        self._idle(lane)
+        lane.idle()
         if phase == 'to_park':  # the park move itself failed: stay idle, do not loop
             return
         self._park(lane, now)

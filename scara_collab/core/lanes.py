@@ -120,6 +120,11 @@ class Lane:
     failures: Dict[int, int] = field(default_factory=dict)
     next_look: float = 0.0  # idle with nothing to take: look again from then
 
+    def idle(self) -> None:
+        """Forget the current item, move and grips: the lane is free for the next item."""
+        self.phase, self.item, self.moves, self.grips = 'idle', None, {}, {}
+        self.holding, self.route, self.reaims = False, [], 0
+
 
 class PlanMemo:
     """A plan function (:data:`PlanFn`) that plans each move once until :meth:`forget`.
