@@ -54,7 +54,7 @@ from scara_collab.core.model import CellModel, load_cell, parse_urdf
 from scara_collab.sim.controllers import applied_efforts
 from scara_collab.sim.conveyor import BeltBox, Conveyor, Item, SimEvent
 from scara_collab.sim.gripper import Grippers
-from scara_collab.sim.reference import TrajectoryError, validate_trajectory
+from scara_collab.sim.reference import robot_index, TrajectoryError, validate_trajectory
 from scara_collab.sim.servo import CONTROL_MODES, Servo
 
 __all__ = ['CellSim', 'CONTROL_MODES', 'JointStateSample']
@@ -294,11 +294,7 @@ class CellSim:
 
     # --- arms -----------------------------------------------------------------------------
     def _index(self, robot: str) -> int:
-        try:
-            return self.robots.index(robot)
-        except ValueError:
-            raise TrajectoryError(f'unknown robot {robot!r}; the cell has {list(self.robots)}')\
-                from None
+        return robot_index(self.robots, robot)
 
     def joint_state(self) -> JointStateSample:
         """Positions, velocities and applied motor efforts of all six joints (see the type)."""

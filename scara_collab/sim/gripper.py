@@ -12,6 +12,7 @@ import numpy as np
 import pybullet
 
 from scara_collab.sim.conveyor import Conveyor, ItemRecord, PAYLOAD_CLASS
+from scara_collab.sim.reference import robot_index
 
 _CONSTRAINT_FORCE = 1e5  # N, the gripper's fixed constraint never slips
 
@@ -37,11 +38,7 @@ class Grippers:
         self.payload = np.zeros(len(self.robots))  # kg held per arm (the servo's payload)
 
     def _index(self, robot: str) -> int:
-        try:
-            return self.robots.index(robot)
-        except ValueError:
-            raise ValueError(f'unknown robot {robot!r}; the cell has {list(self.robots)}') \
-                from None
+        return robot_index(self.robots, robot)  # a TrajectoryError is a ValueError
 
     def tool_tip(self, robot: str) -> np.ndarray:
         """World position of the tool tip (the ``<robot>_quill`` link frame origin), ``(3,)``.

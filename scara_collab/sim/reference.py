@@ -33,7 +33,7 @@ peak acceleration; otherwise the cubic is. The acceleration it returns is its ex
 No PyBullet here: plain numpy, tested alone.
 """
 from bisect import bisect_right
-from typing import Optional, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -41,6 +41,17 @@ from numpy.typing import ArrayLike
 
 class TrajectoryError(ValueError):
     """A trajectory (or a command) was refused; the message says why."""
+
+
+def robot_index(robots: Sequence[str], robot: str) -> int:
+    """Return the index of ``robot`` among the simulator's ``robots``.
+
+    :raises TrajectoryError: for a robot the cell does not have.
+    """
+    try:
+        return list(robots).index(robot)
+    except ValueError:
+        raise TrajectoryError(f'unknown robot {robot!r}; the cell has {list(robots)}') from None
 
 
 def _array(x: ArrayLike, name: str, shape: Tuple[int, ...]) -> np.ndarray:
