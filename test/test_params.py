@@ -55,3 +55,30 @@ def test_only_dynamic_keys_change_at_run_time_and_only_to_valid_values(context):
     fixed = node.set_parameters([Parameter('physics_rate', value=500.0)])[0]
     assert not fixed.successful  # read-only: not a dynamic key
     node.destroy_node()
+
+
+@pytest.mark.parametrize('node, configs, bad, reason', [
+    ('pybullet_bridge', ('simulation', 'controllers'), {'markers_rate': 0.0},
+     'markers_rate must be a number > 0'),
+    ('pybullet_bridge', ('simulation', 'controllers'), {'step_chunk': -0.01},
+     'step_chunk must be a number > 0'),
+    ('pybullet_bridge', ('simulation', 'controllers'), {'lockstep_timeout': 0.0},
+     'lockstep_timeout must be a number > 0'),
+    ('automation_manager', ('automation', 'controllers'), {'tick': 0.0},
+     'tick must be a number > 0'),
+    ('automation_manager', ('automation', 'controllers'), {'auto_start': 'yes please'},
+     'auto_start must be true or false'),
+    ('replication_manager', (), {'collab_lead': -0.5}, 'collab_lead must be a number > 0'),
+])
+def test_a_nodes_own_bad_parameter_stops_it_with_the_reason(context, node, configs, bad, reason):
+    """Node parameters outside the config files are checked at the door like the files' keys.
+
+    (A zero ``markers_rate`` divided by zero in the bridge; a zero ``tick`` made the job's
+    timer spin.)
+    """
+    from scara_collab import graph
+    from scara_collab.core.paths import config_dir
+    spec = graph.node(node)
+    with pytest.raises(ConfigError, match=f'{node}: {reason}'):
+        spec.build(context=context,
+                   cli_args=ros_args(configs, bad, config_dir=config_dir()))

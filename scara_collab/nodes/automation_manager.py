@@ -35,6 +35,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from scara_collab.core import sorting
+from scara_collab.core.config import Rule
 from scara_collab.core.job import GripCommand, JobSettings, MoveCommand, SortingJob
 from scara_collab.core.kinematics import IKError
 from scara_collab.core.model import load_cell
@@ -43,7 +44,7 @@ from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.faults import call_with_faults, declare_faults
-from scara_collab.nodes.params import declare_config
+from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import LATCHED
 from scara_collab.nodes.runner import guarded, run_node
 
@@ -60,10 +61,10 @@ class AutomationManager(Node):
         super().__init__('automation_manager', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         cfg = declare_config(self, ('automation', 'controllers'))
-        self.declare_parameter('profile', '')
-        self.declare_parameter('auto_start', False)
-        self.declare_parameter('tick', 0.02)
-        self.cell = load_cell(self.get_parameter('profile').value or None)
+        params = declare_checked(self, {'profile': '', 'auto_start': False, 'tick': 0.02},
+                                 (Rule('profile', 'text'), Rule('auto_start', 'bool'),
+                                  Rule('tick', 'positive')))
+        self.cell = load_cell(params['profile'] or None)
         self.settings = JobSettings.from_config(self.cell, cfg['automation'],
                                                 planning_buffer=cfg['controllers']
                                                 ['planning_buffer'])
@@ -107,10 +108,10 @@ class AutomationManager(Node):
         self.create_subscription(Bool, '/emergency_stop', guarded(self, self._on_estop), LATCHED)
         self.create_service(Trigger, '~/start', guarded(self, self._on_start, service=True))
         self.create_service(Trigger, '~/stop', guarded(self, self._on_stop, service=True))
-        self.create_timer(float(self.get_parameter('tick').value), guarded(self, self._tick))
+        self.create_timer(float(params['tick']), guarded(self, self._tick))
         self.create_timer(1.0, guarded(self, self._publish_stats))
         # auto_start: the job starts on the first tick that finds the graph connected
-        self.start_pending = bool(self.get_parameter('auto_start').value)
+        self.start_pending = params['auto_start']
         self.lockstep = lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'sorting job ready: mode {self.mode}, lanes '
                                f'{[lane.robot for lane in self.job.lanes]}')

@@ -49,6 +49,7 @@ from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import within_limits
 from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.model import load_cell
@@ -58,7 +59,7 @@ from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.execution import Execution
 from scara_collab.nodes.faults import declare_faults, FaultyPublisher
 from scara_collab.nodes.lockstep import LockstepGate, parse_timeouts
-from scara_collab.nodes.params import declare_config
+from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import EVENTS, LATCHED
 from scara_collab.nodes.runner import guarded, run_node
 from scara_collab.nodes.sim_control import SimControl
@@ -66,6 +67,18 @@ from scara_collab.nodes.trajectory_action import FollowJointTrajectory, Trajecto
 from scara_collab.sim.cell_sim import CellSim
 
 STATE_QOS = QoSProfile(depth=10)
+#: the bridge's own parameters (the config files' keys come from ``declare_config``)
+PARAMETERS = {
+    'profile': '',
+    'markers_rate': 10.0,                 # Hz of sim time, /conveyor/items
+    'step_chunk': 0.01,                   # sim s stepped per bridge tick
+    'home': [0.0, 1.5708, 0.0],           # leader joints; the follower mirrored
+    'lockstep_window': 0.02,              # sim s, 0 = no lockstep
+    'lockstep_timeout': 5.0,              # wall s before a silent participant is dropped
+}
+RULES = (Rule('profile', 'text'), Rule('markers_rate', 'positive'),
+         Rule('step_chunk', 'positive'), Rule('home', 'vec3'),
+         Rule('lockstep_window', 'nonneg'), Rule('lockstep_timeout', 'positive'))
 
 
 class Pacer:
@@ -137,22 +150,16 @@ class PyBulletBridge(Node):
         cfg = declare_config(self, ('simulation', 'controllers'),
                              dynamic=('real_time_factor', 'feed_interval'),
                              on_change=self._on_config)
-        self.declare_parameter('profile', '')
-        self.declare_parameter('markers_rate', 10.0)
-        self.declare_parameter('step_chunk', 0.01)
-        self.declare_parameter('home', [0.0, 1.5708, 0.0])  # leader joints; follower mirrored
-        self.declare_parameter('lockstep_window', 0.02)
-        self.declare_parameter('lockstep_timeout', 5.0)
+        params = declare_checked(self, PARAMETERS, RULES)
         for key, default, what in (
                 ('lockstep_timeouts', [''], "per-node lockstep_timeout: ['/<node>:<s>', ...]"),
                 ('lockstep_guards', ['/collision_monitor'], 'nodes the arms never move without')):
             self.declare_parameter(key, default, ParameterDescriptor(
                 type=ParameterType.PARAMETER_STRING_ARRAY, description=what))
         sim_cfg, ctl_cfg = cfg['simulation'], cfg['controllers']
-        profile = self.get_parameter('profile').value or None
-        self.cell = load_cell(profile)
+        self.cell = load_cell(params['profile'] or None)
         self.sim = CellSim(self.cell, sim_cfg, ctl_cfg, gui=bool(sim_cfg['gui']))
-        home = np.asarray(self.get_parameter('home').value, dtype=float)
+        home = np.asarray(params['home'], dtype=float)
         self.home = dict(zip((a.name for a in self.cell.arms), (home, mirror_joints(home))))
         for arm in self.cell.arms:
             if not within_limits(arm, self.home[arm.name]):
@@ -163,12 +170,12 @@ class PyBulletBridge(Node):
         self._periods = {
             'state': 1.0 / float(sim_cfg['state_rate']),
             'clock': 1.0 / float(sim_cfg['clock_rate']),
-            'markers': 1.0 / float(self.get_parameter('markers_rate').value),
+            'markers': 1.0 / float(params['markers_rate']),
             'diagnostics': 1.0,
         }
         self._next = {k: 0.0 for k in self._periods}
-        self.pacer = Pacer(float(sim_cfg['real_time_factor']), self.dt, max(1, int(round(
-            float(self.get_parameter('step_chunk').value) / self.dt))))
+        self.pacer = Pacer(float(sim_cfg['real_time_factor']), self.dt,
+                           max(1, int(round(float(params['step_chunk']) / self.dt))))
 
         self.faults = declare_faults(self)
         self.execution = Execution(self.cell, self.sim, self._report, self.get_logger().warning,
@@ -190,12 +197,12 @@ class PyBulletBridge(Node):
                 SetBool, f'{name}/gripper',
                 guarded(self, lambda req, res, n=name: self._on_gripper(n, req, res), True))
         self.create_subscription(Bool, 'emergency_stop', guarded(self, self._on_estop), LATCHED)
-        window = float(self.get_parameter('lockstep_window').value)
+        window = float(params['lockstep_window'])
         if 0 < window < self._periods['clock'] - 1e-9:
             raise ValueError(f'lockstep_window {window} s is shorter than the clock period '
                              f'{self._periods["clock"]} s: the clock could never advance')
         self.gate = LockstepGate(
-            self, window, float(self.get_parameter('lockstep_timeout').value),
+            self, window, float(params['lockstep_timeout']),
             on_answer=self._wake,
             timeouts=parse_timeouts(self.get_parameter('lockstep_timeouts').value or []),
             guards=[g for g in self.get_parameter('lockstep_guards').value or [] if g.strip()],

@@ -27,12 +27,14 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool
 
+from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import base_to_world, fk
 from scara_collab.core.mirror import mirror_error, mirror_point
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
+from scara_collab.nodes.params import declare_checked
 from scara_collab.nodes.qos import EVENTS, LATEST
 from scara_collab.nodes.runner import guarded, run_node
 
@@ -47,18 +49,17 @@ class ReplicationManager(Node):
         """Declare and check the parameters, load the cell and create the topics and service.
 
         :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``).
-        :raises ValueError: a ``collab_lead`` that is not > 0.
+        :raises ConfigError: (a ``ValueError``) a ``collab_lead`` that is not > 0, an
+            ``enabled`` that is not a bool.
         """
         super().__init__('replication_manager', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
-        self.declare_parameter('profile', '')
-        self.declare_parameter('collab_lead', 0.5)
-        self.declare_parameter('enabled', True)
-        self.cell = load_cell(self.get_parameter('profile').value or None)
-        self.lead = float(self.get_parameter('collab_lead').value)
-        if not self.lead > 0:
-            raise ValueError(f'collab_lead must be > 0 s, got {self.lead}')
-        self.enabled = bool(self.get_parameter('enabled').value)
+        params = declare_checked(self, {'profile': '', 'collab_lead': 0.5, 'enabled': True},
+                                 (Rule('profile', 'text'), Rule('collab_lead', 'positive'),
+                                  Rule('enabled', 'bool')))
+        self.cell = load_cell(params['profile'] or None)
+        self.lead = float(params['collab_lead'])
+        self.enabled = params['enabled']
         lead, foll = self.cell.leader, self.cell.follower
         # request -> {robot: (start, end)} as the bridge accepted them
         self.accepted: Dict[int, Dict[str, Tuple[float, float]]] = {}
