@@ -85,8 +85,8 @@ class SharedBelt(LaneProtocol):
         """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds).
 
         Booked: a move the planner timed (``planned``, ``accepted``), or one just asked for,
-        as the job planned it when it asked (:meth:`_move`): in the ticks before the planner's
-        answer the other lane must not decide as if the arm stood still.
+        as the job planned it when it asked (:meth:`_book_asked`): in the ticks before the
+        planner's answer the other lane must not decide as if the arm stood still.
         """
         for lane in self.lanes:
             track = lane.moves.get(robot) if lane.phase in MOVING else None

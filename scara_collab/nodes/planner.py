@@ -138,7 +138,7 @@ class Planner(Node):
     def _status(self, state: str, request: int, reason: str = '', plan: Optional[Plan] = None,
                 kind: str = '') -> None:
         st = proto.PlannerStatus(
-            self.arm.name, state, proto.move_id(self.arm.name, request), request, reason,
+            self.arm.name, state, proto.move_id(self.arm.name, request), request, reason=reason,
             start=None if plan is None else plan.start, end=None if plan is None else plan.end,
             delay=0.0 if plan is None else plan.delay, kind=kind)
         if state == 'refused':

@@ -25,7 +25,7 @@ now") gets the planner's receipt time instead. The planner puts the id in the
 ``header.frame_id`` of the ``JointTrajectory`` it publishes, the bridge reports on that id, so
 a status always says which move it is about, from the request to the end of the motion.
 """
-from dataclasses import dataclass, field, fields, MISSING
+from dataclasses import dataclass, field, fields, KW_ONLY, MISSING
 import functools
 import json
 import math
@@ -175,12 +175,29 @@ class _Status:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
+@dataclass(frozen=True)
+class _MoveStatus(_Status):
+    """What every status about one arm's move says: whose, what state, which move, why, when.
+
+    ``reason``, ``start`` and ``end`` (sim s) are keyword-only: each status adds its own
+    fields after the move's name.
+    """
+
+    robot: str
+    state: str
+    move: str
+    _: KW_ONLY
+    reason: str = ''
+    start: Optional[float] = None
+    end: Optional[float] = None
+
+
 # --- planner ---------------------------------------------------------------------------------
 PLANNER_STATES = ('planned', 'queued', 'waiting', 'refused', 'superseded')
 
 
 @dataclass(frozen=True)
-class PlannerStatus(_Status):
+class PlannerStatus(_MoveStatus):
     """What a planner did with one request (``/<robot>/planner_status``).
 
     ``planned``: the move is committed and published, starting at ``start`` (``delay``
@@ -190,13 +207,7 @@ class PlannerStatus(_Status):
     newer request replaced it before it was planned.
     """
 
-    robot: str
-    state: str
-    move: str
     request: int
-    reason: str = ''
-    start: Optional[float] = None
-    end: Optional[float] = None
     delay: float = 0.0
     kind: str = ''            # 'line' or 'joint' for planned moves
 
@@ -230,7 +241,7 @@ EXECUTION_STATES = ('accepted', 'refused', 'finished', 'preempted', 'held', 'cle
 
 
 @dataclass(frozen=True)
-class ExecutionStatus(_Status):
+class ExecutionStatus(_MoveStatus):
     """What the bridge does with one trajectory (``/<robot>/execution_status``).
 
     ``accepted``: it runs from ``start`` to ``end`` (sim s; ``stamp`` is the start it asked
@@ -241,13 +252,7 @@ class ExecutionStatus(_Status):
     ``cleared``: the emergency stop was released, or the guard answers again.
     """
 
-    robot: str
-    state: str
-    move: str
     time: float
-    reason: str = ''
-    start: Optional[float] = None
-    end: Optional[float] = None
     stamp: Optional[float] = None
 
     KIND: ClassVar[str] = 'execution'

@@ -339,7 +339,8 @@ class PyBulletBridge(Node):
     # --- callbacks ------------------------------------------------------------------------
     def _report(self, robot: str, state: str, move: str, reason: str = '',
                 **times) -> None:
-        st = proto.ExecutionStatus(robot, state, move, round(self.sim.time, 6), reason, **times)
+        st = proto.ExecutionStatus(robot, state, move, round(self.sim.time, 6), reason=reason,
+                                   **times)
         if st.level() != 'OK':
             self.get_logger().warning(f'{robot}: {st.text()}')
         self.status_pub[robot].publish(st.to_msg())
