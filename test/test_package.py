@@ -91,3 +91,21 @@ def test_package_xml_declares_what_the_code_imports():
             assert f'python3-{name}' in declared
     if 'xacro' in imported:
         assert 'xacro' in declared
+
+
+def test_rclpy_stays_in_the_node_and_process_layers():
+    """Only ``nodes/`` and ``run/`` import rclpy; the core imports nothing above it.
+
+    The layers of the README's *Architecture*: core (numpy), sim (PyBullet), records and bench
+    (files, figures) run no ROS node of their own; a benchmark that needs one gets it from
+    ``nodes/`` (the benchmarks do build messages to drive a graph).
+    """
+    ros = re.compile(r'^\s*(?:from|import)\s+rclpy\b', re.M)
+    package = ROOT / 'scara_collab'
+    offenders = [str(py.relative_to(ROOT)) for py in package.rglob('*.py')
+                 if py.parent.name not in ('nodes', 'run') and ros.search(py.read_text())]
+    assert not offenders, f'rclpy imported outside nodes/ and run/: {offenders}'
+    upward = re.compile(r'^\s*(?:from|import)\s+scara_collab\.(?!core\b)', re.M)
+    core = [str(py.relative_to(ROOT)) for py in (package / 'core').rglob('*.py')
+            if upward.search(py.read_text())]
+    assert not core, f'core imports from a layer above it: {core}'

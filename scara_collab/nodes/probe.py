@@ -1,0 +1,74 @@
+"""A node in a benchmark's own process that talks to a launched graph (the fault matrix's).
+
+:mod:`scara_collab.bench.faults` injects its faults through it: publishes bad input, listens
+to ``/joint_states`` for the stamps it forges.
+"""
+import time
+from typing import Optional
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from sensor_msgs.msg import JointState
+
+
+class Probe:
+    """A node in this process that talks to the launched graph (publish, listen).
+
+    A context manager: ``with Probe() as probe:`` closes it however the block ends.
+    """
+
+    def __init__(self):
+        """Join the graph with a node of its own context that keeps the newest /joint_states."""
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx)
+        self.node = rclpy.create_node('fault_probe', context=self.ctx)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+        self.state: Optional[JointState] = None
+        # depth 1: the newest state, never a backlog (a slow probe would lag the graph)
+        self.node.create_subscription(JointState, '/joint_states', self._on_state, 1)
+
+    def _on_state(self, msg) -> None:
+        self.state = msg
+
+    def spin(self, seconds: float) -> None:
+        """Spin the probe node for ``seconds`` of wall time."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.01)
+
+    def wait_state(self, timeout: float = 15.0):
+        """Return the newest /joint_states once one has come (discovery takes a while)."""
+        end = time.monotonic() + timeout
+        while self.state is None and time.monotonic() < end:
+            self.spin(0.05)
+        if self.state is None:
+            raise RuntimeError('no /joint_states heard from the launched graph')
+        return self.state
+
+    def publisher(self, msg_type, topic: str):
+        """Return a publisher on ``topic``, once a subscriber has matched (at most 10 s).
+
+        :param msg_type: the message class.
+        :param topic: the fully qualified topic name.
+        """
+        pub = self.node.create_publisher(msg_type, topic, 10)
+        end = time.monotonic() + 10.0
+        while pub.get_subscription_count() == 0 and time.monotonic() < end:
+            self.spin(0.05)
+        return pub
+
+    def close(self) -> None:
+        """Shut down the probe's executor, node and context."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
+
+    def __enter__(self) -> 'Probe':
+        """Return the probe; it is closed when the ``with`` block ends."""
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        """Close the probe (:meth:`close`); an exception goes on."""
+        self.close()
+        return False
