@@ -49,6 +49,9 @@ def render(r: dict, wall: float) -> str:
               f'{r["lockstep_drops"]}, real-time factor '
               f'{r["real_time_factor"] or 0:.2f}× (targets: growth < 5 % per hour, 0 missed, '
               '0 lockstep drops).']
+    if r.get('missed_items'):
+        lines += ['', "Missed, with the job's last word on each: "
+                  + '; '.join(r['missed_items']) + '.']
     return '\n'.join(lines)
 
 

@@ -9,6 +9,7 @@ and the growth per sim hour between them. Lockstep drops are counted from the br
 import json
 import os
 from pathlib import Path
+import re
 import subprocess
 import sys
 import time
@@ -19,6 +20,18 @@ from scara_collab.bench.util import Log
 
 #: the bridge's words when it stops waiting for a silent node (scara_collab.nodes.lockstep)
 DROP_WORDS = 'not waiting for it any more'
+#: the job's line for a missed item (scara_collab.core.job.SortingJob.on_item_event)
+MISSED = re.compile(r'item (\d+) missed; last: (.*)$', re.M)
+
+
+def missed_notes(log_text: str) -> List[str]:
+    """Return ``'item N: <the job's last word on it>'`` for each missed item in a job log.
+
+    >>> missed_notes('[WARN] [1.0] [automation_manager]: item 588 missed; last: scara_left '
+    ...              'ranked it #3 of 5 at t=1096.40 s')
+    ['item 588: scara_left ranked it #3 of 5 at t=1096.40 s']
+    """
+    return [f'item {m.group(1)}: {m.group(2).strip()}' for m in MISSED.finditer(log_text)]
 
 
 def rss_kib(pid: int) -> Optional[int]:
@@ -67,7 +80,8 @@ def soak(out: Path, duration: float = 3600.0, warm: float = 300.0, every: float 
     :param warm: sim s before the growth is measured from.
     :param every: wall s between samples.
     :return: :func:`scara_collab.bench.protocol.row` of the summary plus ``processes``
-        (name -> :func:`growth`), ``lockstep_drops`` and ``samples`` per process.
+        (name -> :func:`growth`), ``lockstep_drops``, ``missed_items`` (the job's last word on
+        each, :func:`missed_notes`) and ``samples`` per process.
     """
     out = Path(out)
     cmd = [sys.executable, '-c',
@@ -110,7 +124,10 @@ def soak(out: Path, duration: float = 3600.0, warm: float = 300.0, every: float 
     bridge_log = out / 'logs' / 'pybullet_bridge.log'
     drops = bridge_log.read_text(errors='replace').count(DROP_WORDS) \
         if bridge_log.is_file() else None
+    job_log = out / 'logs' / 'automation_manager.log'
+    missed = missed_notes(job_log.read_text(errors='replace')) if job_log.is_file() else []
     result = row(summary)
     result.update(processes={n: growth(s, warm) for n, s in samples.items()},
-                  lockstep_drops=drops, samples=samples, warm=warm, duration=duration)
+                  lockstep_drops=drops, missed_items=missed, samples=samples, warm=warm,
+                  duration=duration)
     return result
