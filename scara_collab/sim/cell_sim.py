@@ -217,8 +217,9 @@ class CellSim:
         self.joint_names = tuple(n for a in self.arms for n in a.joint_names)
         self._gravity = [float(v) for v in cfg['gravity']]
         self._eps = float(cfg['friction_smoothing'])
-        self._viscous = np.stack([a.viscous for a in self.arms])
-        self._coulomb = np.stack([a.coulomb for a in self.arms])
+        # the plant's friction per joint, both arms, as the physics loop uses it (plain floats)
+        self._viscous = [float(v) for a in self.arms for v in a.viscous]
+        self._coulomb = [float(c) for a in self.arms for c in a.coulomb]
         self._pb: Optional[BulletClient] = None
         try:
             self._build(gui)
@@ -270,7 +271,7 @@ class CellSim:
         body, idx = self._body, self._jidx
         get_states, set_motors, step_sim = self._get_states, self._set_motors, self._step_sim
         torque, servo, eps = pybullet.TORQUE_CONTROL, self.servo, self._eps
-        viscous, coulomb = self._viscous.ravel().tolist(), self._coulomb.ravel().tolist()
+        viscous, coulomb = self._viscous, self._coulomb
         shape = servo.tau.shape
         for _ in range(int(n)):
             states = get_states(body, idx)
