@@ -102,11 +102,11 @@ class Servo:
             The arm keeps doing what it did.
         """
         arm = self.arms[a]
-        t, q, qd, qdd = validate_trajectory(t, q, qd, arm.lower, arm.upper, arm.max_velocity,
-                                            self.velocity_tolerance, qdd=qdd)
+        valid = validate_trajectory(t, q, qd, arm.lower, arm.upper, arm.max_velocity,
+                                    self.velocity_tolerance, qdd=qdd)
         if self.estop:
-            self.check_recovery(a, q, q_now, qd_now, now)
-        ref = HermiteReference(t, q, qd, qdd)
+            self.check_recovery(a, valid.q, q_now, qd_now, now)
+        ref = HermiteReference(*valid)
         jump = np.abs(ref.sample(max(now, ref.start))[0] - q_now[a])
         if np.any(jump > self.start_tolerance):
             j = int(np.argmax(jump))
