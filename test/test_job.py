@@ -213,6 +213,9 @@ def test_mirrored_moves_are_one_request_for_both_arms(cell):
     pick = moves(job.tick(0.0))[0]
     assert pick.mirrored and pick.robot == lead
     assert job.claimed == {1: lead, 2: foll}
+    # one hop more to both planners (the replication manager): asked a pair lead further ahead
+    assert pick.start >= job.s.decision_lead + job.s.pair_lead - 1e-9
+    assert first_pick(cell, make_job(cell)).start < job.s.decision_lead + job.s.pair_lead
     t = pick.start + 1.0
     arrive(cell, job, pick, t)  # only the leader arrived: the lane waits for the follower
     job.tick(t)

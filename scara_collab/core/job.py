@@ -273,10 +273,11 @@ class SortingJob(SharedBelt):
                 self._give_up(lane, now, f'item {seen.id} got away ({np.hypot(*off):.3f} m)')
 
     def _chase(self, lane: Lane, item: sorting.SeenItem, now: float) -> bool:
-        start = now + self.s.decision_lead
+        mirrored = len(lane.robots) > 1
+        # a mirrored pair's move takes one hop more (the replication manager) to both planners
+        start = now + self.s.decision_lead + (self.s.pair_lead if mirrored else 0.0)
         arm = self.cell.arm(lane.robot)
         q0 = self.q[lane.robot]
-        mirrored = len(lane.robots) > 1
         aim = pairing.pair_aim(self.cell, item, self.s.pair_offset) if mirrored else item
         hit = sorting.intercept(self.cell, arm, q0, aim, start, self.s.pick_z,
                                 lambda q, p: self.plan(lane.robot, q, p))
