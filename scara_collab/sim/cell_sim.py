@@ -365,8 +365,9 @@ class CellSim:
         """
         a = self._index(robot)
         arm = self.arms[a]
-        _, q, qd, _, _ = validate_trajectory([self.time], [q], None if qd is None else [qd],
-                                             arm.lower, arm.upper, arm.max_velocity)
+        point = validate_trajectory([self.time], [q], None if qd is None else [qd], arm.lower,
+                                    arm.upper, arm.max_velocity)
+        q, qd = point.q, point.qd
         if self.grippers.held[a] is not None:
             raise TrajectoryError(f'{robot} holds item {self.grippers.held[a]}: release it first')
         for j, idx in enumerate(self._jidx[3 * a:3 * a + 3]):
