@@ -15,9 +15,9 @@ names), the in-process graph of the benchmarks (:func:`scara_collab.bench.job.ru
 the tests' graphs (``test/ros_harness.py``). In launch order::
 
     pybullet_bridge      clock, /joint_states, trajectories, belt, gripper   ready: /clock runs
-    left_planner         /scara_left/target -> trajectory                    ready: subscribed
-    right_planner        /scara_right/target -> trajectory                   ready: subscribed
-    replication_manager  /collab/target -> both arms, mirrored               ready: service
+    left_planner         /scara_left/target(_trajectory) -> trajectory       ready: subscribed
+    right_planner        /scara_right/target(_trajectory) -> trajectory      ready: subscribed
+    replication_manager  /collab/target(_trajectory) -> both arms, mirrored  ready: service
     collision_monitor    arm-to-arm distance, e-stop                         ready: service
     automation_manager   the sorting job                                     ready: service
     cell_viewer          live 3D view (optional)                             ready: page answers
@@ -157,6 +157,7 @@ class Topic:
 
 _STATUS = 'diagnostic_msgs/msg/DiagnosticStatus'
 _POINT = 'geometry_msgs/msg/PointStamped'
+_TRAJECTORY = 'trajectory_msgs/msg/JointTrajectory'
 #: the cell-wide topics the nodes publish (not /sim/lockstep: scara_collab.nodes.lockstep)
 TOPICS: Tuple[Topic, ...] = (
     Topic('/clock', 'rosgraph_msgs/msg/Clock'),                    # pybullet_bridge
@@ -164,6 +165,7 @@ TOPICS: Tuple[Topic, ...] = (
     Topic('/conveyor/items', 'visualization_msgs/msg/MarkerArray'),
     Topic('/conveyor/events', _STATUS, 'events'),
     Topic('/collab/target', _POINT),                               # automation_manager
+    Topic('/collab/target_trajectory', _TRAJECTORY),               # ... its plan of a move
     Topic('/collision_monitor/min_distance', 'std_msgs/msg/Float64'),
     Topic('/collision_monitor/status', _STATUS),
     Topic('/collision_monitor/capsules', 'visualization_msgs/msg/MarkerArray'),
@@ -178,7 +180,8 @@ TOPICS: Tuple[Topic, ...] = (
 #: the topics of each robot, ``{robot}`` standing for its namespace
 ROBOT_TOPICS: Tuple[Topic, ...] = (
     Topic('/{robot}/target', _POINT),                              # the job or the mirror
-    Topic('/{robot}/joint_trajectory', 'trajectory_msgs/msg/JointTrajectory'),  # its planner
+    Topic('/{robot}/target_trajectory', _TRAJECTORY),              # the job's plan of a move
+    Topic('/{robot}/joint_trajectory', _TRAJECTORY),               # its planner
     Topic('/{robot}/planned_path', 'nav_msgs/msg/Path'),
     Topic('/{robot}/planner_status', _STATUS, 'events'),
     Topic('/{robot}/execution_status', _STATUS, 'events'),         # pybullet_bridge

@@ -104,10 +104,13 @@ def test_the_job_starts_only_once_every_endpoint_it_uses_is_matched():
         res = node._on_start(Trigger.Request(), Trigger.Response())
         assert not res.success and not node.job.running
         assert '/scara_left/target (no subscriber)' in res.message
+        assert '/scara_left/target_trajectory (no subscriber)' in res.message
         assert '/scara_right/planner_status (no publisher)' in res.message
         assert '/scara_left/gripper (no server)' in res.message
         sub = node.create_subscription(PointStamped, '/scara_left/target', lambda m: None, 1)
-        assert '/scara_left/target' not in ' '.join(node.missing_links())
+        missing = ' '.join(node.missing_links())
+        assert '/scara_left/target (' not in missing
+        assert '/scara_left/target_trajectory (no subscriber)' in missing
         node.destroy_subscription(sub)
         node._tick()  # no auto_start: nothing happens, nothing raised
         assert not node.job.running

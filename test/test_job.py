@@ -705,3 +705,34 @@ def test_a_missed_item_says_what_the_job_last_did_with_it(cell):
     assert ('warn', 'item 7 missed; last: never a candidate of either arm') in job.logs
     job.on_item_event('sorted', 7, pick.robot)  # notes are dropped with the item
     assert sum('missed' in text for _, text in job.logs) == 2
+
+
+def test_one_arms_moves_carry_the_jobs_plan_so_the_planner_need_not_plan_again(cell):
+    """Every one-arm move goes with the job's plan of it: from the arm's state to the target.
+
+    The chase's plan is the intercept's own trajectory (planned once, to choose the item); a
+    re-sent request carries the same plan; a mirrored pair's carries the leader's (the
+    replication manager mirrors it for the follower).
+    """
+    job = make_job(cell, 'single')
+    pick = first_pick(cell, job)
+    assert pick.plan is not None and pick.plan.t[0] == 0.0
+    np.testing.assert_allclose(pick.plan.q[0], HOME, atol=1e-9)
+    np.testing.assert_allclose(pick.plan.p[-1], pick.target, atol=1e-9)
+    assert pick.plan.qd.shape == pick.plan.qdd.shape == pick.plan.q.shape
+    again = moves(job.tick(job.s.answer_timeout + 0.01))
+    assert [m.request for m in again] == [pick.request] and again[0].plan is pick.plan
+    # grasped at the item: the move on (lift or to the bin) is planned from where the arm is
+    job, pick, t = at_the_item(cell, mode='single')
+    grip = grips(job.tick(t))[0]
+    job.on_grip(grip.token, True)
+    on = moves(job.tick(t + 0.01))[0]
+    assert on.purpose in ('lift', 'to_bin') and on.plan is not None
+    np.testing.assert_allclose(on.plan.q[0], job.q[pick.robot], atol=1e-9)
+    np.testing.assert_allclose(on.plan.p[-1], on.target, atol=1e-9)
+    mirrored = make_job(cell, 'mirrored')
+    mirrored.on_items([item_on_belt(cell, 1, y=-0.2), item_on_belt(cell, 2, y=0.2)])
+    pick = moves(mirrored.tick(0.0))[0]
+    assert pick.mirrored and pick.robot == cell.leader.name
+    np.testing.assert_allclose(pick.plan.q[0], HOME, atol=1e-9)
+    np.testing.assert_allclose(pick.plan.p[-1], pick.target, atol=1e-9)

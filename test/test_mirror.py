@@ -73,3 +73,11 @@ def test_mirror_error_is_zero_for_mirrored_joints_and_the_offset_otherwise():
     assert err.shape == (500,)
     assert_allclose(err, np.linalg.norm(offset, axis=1), rtol=1e-12)
     assert mirror_error(LEFT, RIGHT, p_left[0], p_right[0] + [0.0, 0.0, 0.1]).shape == ()
+
+
+def test_joint_mirroring_is_exact_only_for_arms_of_the_same_geometry():
+    """The cell's arms mirror joint by joint; an arm with a longer link 2 does not."""
+    from dataclasses import replace
+    from scara_collab.core.mirror import joints_mirror
+    assert joints_mirror(LEFT, RIGHT) and joints_mirror(RIGHT, LEFT)
+    assert not joints_mirror(LEFT, replace(RIGHT, l2=RIGHT.l2 + 0.1))

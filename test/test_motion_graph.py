@@ -261,3 +261,135 @@ def test_a_nan_state_then_a_target_leaves_the_planner_planning(cell):
     assert st.state in ('planned', 'refused'), st
     assert 'nan' not in st.reason.lower()
     assert np.all(np.isfinite(fk(left, cell.left.q)))
+
+
+def offer(g, robot, traj, request_s):
+    """Publish ``traj`` as ``robot``'s move for request ``request_s`` (s) on its offer topic."""
+    arm = g.bridge.cell.arm(robot)
+    pub = g.probe.create_publisher(JointTrajectory, f'/{robot}/target_trajectory', 10)
+    assert g.spin_until(lambda: pub.get_subscription_count() > 0)
+    msg = conv.trajectory_msg(arm.joint_names, traj.t, traj.q, traj.qd, traj.qdd)
+    msg.header.stamp = conv.time_from_ns(int(round(request_s * 1e9)))
+    pub.publish(msg)
+    return pub, msg
+
+
+def statuses(g, robot):
+    """Return ``robot``'s planner statuses so far, typed."""
+    return [proto.PlannerStatus.from_msg(m) for m in g.status[robot]]
+
+
+def test_an_offered_plan_is_scheduled_as_it_is_not_planned_again(cell):
+    """The job's plan of a move, offered on /<robot>/target_trajectory, is what runs.
+
+    The planner publishes the offered points unchanged under the request's id, the arm
+    arrives, and the same offer sent again is answered from the history, not re-planned.
+    """
+    from scara_collab.core.planning import plan_path
+    left = cell.bridge.cell.leader
+    target = np.array([3.3, -0.6, 0.45])
+    traj = plan_path(left, cell.left.q, target, mode='line_or_joint')
+    request = cell.left._now() + 0.3
+    pub, msg = offer(cell, 'scara_left', traj, request)
+    assert cell.spin_until(lambda: cell.trajs['scara_left'])
+    sent = cell.trajs['scara_left'][-1]
+    _, t, q, qd, qdd = conv.trajectory_arrays(sent, left.joint_names)
+    np.testing.assert_array_equal(q, traj.q)
+    np.testing.assert_array_equal(qdd, traj.qdd)
+    st = statuses(cell, 'scara_left')[-1]
+    assert st.state == 'planned' and st.request == proto.stamp_ns(msg.header.stamp)
+    assert sent.header.frame_id == st.move and abs(st.start - request) < 1e-6
+    run_until(cell, st.end + 0.3)
+    np.testing.assert_allclose(fk(left, cell.left.q), target, atol=1e-3)
+    n_trajs, n_status = len(cell.trajs['scara_left']), len(cell.status['scara_left'])
+    pub.publish(msg)  # re-sent (a lost answer): the same answer, nothing planned or moved
+    assert cell.spin_until(lambda: len(cell.status['scara_left']) > n_status)
+    assert statuses(cell, 'scara_left')[-1] == st
+    run_until(cell, cell.bridge.sim.time + 0.3)
+    assert len(cell.trajs['scara_left']) == n_trajs
+
+
+def test_an_offer_from_elsewhere_is_planned_again_to_its_end(cell):
+    """A plan that does not start where the arm is: the planner plans to its last point."""
+    from scara_collab.core.planning import plan_path
+    left = cell.bridge.cell.leader
+    target = np.array([3.3, -0.6, 0.45])
+    elsewhere = cell.left.q + [0.05, -0.05, 0.0]
+    traj = plan_path(left, elsewhere, target, mode='line_or_joint')
+    offer(cell, 'scara_left', traj, cell.left._now() + 0.3)
+    assert cell.spin_until(lambda: cell.trajs['scara_left'])
+    _, _, q, _, _ = conv.trajectory_arrays(cell.trajs['scara_left'][-1], left.joint_names)
+    np.testing.assert_allclose(q[0], cell.left.q, atol=2e-3)  # from the arm, not the offer
+    np.testing.assert_allclose(fk(left, q[-1]), target, atol=1e-9)
+    assert statuses(cell, 'scara_left')[-1].state == 'planned'
+
+
+def _no_accelerations(msg):
+    for p in msg.points:
+        p.accelerations = []
+
+
+def _past_the_limit(msg):
+    msg.points[-1].positions = [3.5, *msg.points[-1].positions[1:]]
+
+
+def _unknown_joint(msg):
+    msg.joint_names = ['elbow', *msg.joint_names[1:]]
+
+
+def _nan_velocity(msg):
+    msg.points[1].velocities = [0.0, float('nan'), 0.0]
+
+
+@pytest.mark.parametrize('spoil, reason', [
+    (_no_accelerations, 'velocities and accelerations'),
+    (_past_the_limit, 'joint limits'),
+    (_unknown_joint, 'joint names'),
+    (_nan_velocity, 'non-finite'),
+])
+def test_a_malformed_offer_is_refused_and_nothing_moves(cell, spoil, reason):
+    """An offered plan that is not one is refused with the reason; the arm stays."""
+    from scara_collab.core.planning import plan_path
+    left = cell.bridge.cell.leader
+    q0 = cell.left.q.copy()
+    traj = plan_path(left, q0, [3.3, -0.6, 0.45], mode='line_or_joint')
+    msg = conv.trajectory_msg(left.joint_names, traj.t, traj.q, traj.qd, traj.qdd)
+    msg.header.stamp = conv.time_from_ns(int(round((cell.left._now() + 0.3) * 1e9)))
+    spoil(msg)
+    pub = cell.probe.create_publisher(JointTrajectory, '/scara_left/target_trajectory', 10)
+    assert cell.spin_until(lambda: pub.get_subscription_count() > 0)
+    pub.publish(msg)
+    assert cell.spin_until(lambda: cell.status['scara_left'])
+    st = statuses(cell, 'scara_left')[-1]
+    assert st.state == 'refused' and 'offered trajectory' in st.reason and reason in st.reason
+    run_until(cell, cell.bridge.sim.time + 0.5)
+    np.testing.assert_allclose(cell.left.q, q0, atol=1e-4)
+    assert not cell.trajs['scara_left']
+
+
+def test_a_mirrored_offer_reaches_both_planners_mirrored_joint_by_joint(cell):
+    """The leader's plan on /collab/target_trajectory: each planner takes its share as is.
+
+    The leader's planner publishes the offered points, the follower's their mirror image
+    (both angles negated), with the same start; neither re-plans, and the pair moves mirrored.
+    """
+    from scara_collab.core.mirror import mirror_joints
+    from scara_collab.core.planning import plan_path
+    left, right = cell.bridge.cell.arms
+    target = np.array([2.7, -0.7, 0.4])
+    traj = plan_path(left, cell.left.q, target, mode='line_or_joint')
+    pub = cell.probe.create_publisher(JointTrajectory, '/collab/target_trajectory', 10)
+    assert cell.spin_until(lambda: pub.get_subscription_count() > 0)
+    msg = conv.trajectory_msg(left.joint_names, traj.t, traj.q, traj.qd, traj.qdd)
+    msg.header.stamp = conv.time_from_ns(int(round((cell.left._now() + 0.3) * 1e9)))
+    pub.publish(msg)
+    assert cell.spin_until(lambda: all(cell.trajs[n] for n in cell.trajs))
+    ql = conv.trajectory_arrays(cell.trajs['scara_left'][-1], left.joint_names)[2]
+    qr = conv.trajectory_arrays(cell.trajs['scara_right'][-1], right.joint_names)[2]
+    np.testing.assert_array_equal(ql, traj.q)
+    np.testing.assert_array_equal(qr, mirror_joints(traj.q))
+    stamps = {proto.stamp_ns(cell.trajs[n][-1].header.stamp) for n in cell.trajs}
+    assert stamps == {proto.stamp_ns(msg.header.stamp)}
+    run_until(cell, max(last_end(cell, n) for n in cell.status) + 0.3)
+    np.testing.assert_allclose(fk(right, cell.right.q), mirror_point(left, right, target),
+                               atol=1e-3)

@@ -78,3 +78,29 @@ def test_a_commanded_trajectory_starts_at_its_stamp_or_now_from_where_the_arm_is
     assert_allclose(tl.t, [2.5, 3.0])
     tl = Timeline.commanded(0.0, np.array([0.0, 1.0]), q, now=2.0, q_now=here)
     assert_allclose(tl.t, [2.0, 3.0])  # it starts at its first point
+
+
+def test_an_offered_move_is_checked_and_taken_only_from_where_the_arm_is(cell):
+    """The job's plan offered to a planner: refused if it is not a plan, used from the arm only.
+
+    :func:`offered_move` refuses a plan without velocities or accelerations, one that does not
+    start at t = 0 and one outside the joint limits; :func:`starts_at` says whether it starts
+    within the tolerance of the measured joints (else the planner plans to its end).
+    """
+    from scara_collab.core.planning import offered_move, starts_at
+    arm = cell.leader
+    q0 = np.array([0.2, 1.4, 0.1])
+    traj = plan_path(arm, q0, [3.3, -0.6, 0.45], mode='line_or_joint')
+    taken = offered_move(arm, traj.t, traj.q, traj.qd, traj.qdd)
+    assert_allclose(taken.p, traj.p, atol=1e-12)
+    assert starts_at(taken, q0, 0.002)
+    assert starts_at(taken, q0 + [0.0019, -0.0019, 0.0019], 0.002)
+    assert not starts_at(taken, q0 + [0.0, 0.0021, 0.0], 0.002)
+    with pytest.raises(ValueError, match='velocities and accelerations'):
+        offered_move(arm, traj.t, traj.q, traj.qd, None)
+    with pytest.raises(ValueError, match='starts at t = 0'):
+        offered_move(arm, traj.t + 0.1, traj.q, traj.qd, traj.qdd)
+    outside = traj.q.copy()
+    outside[-1, 2] = arm.upper[2] + 0.01
+    with pytest.raises(ValueError, match='joint limits'):
+        offered_move(arm, traj.t, outside, traj.qd, traj.qdd)

@@ -134,6 +134,7 @@ SCHEMAS = {
         Rule('trajectory.sample_period', 'positive', lambda v: v <= 0.1, 'must be <= 0.1 s'),
         Rule('trajectory.dls_threshold', 'positive'),
         Rule('trajectory.dls_max_damping', 'nonneg'),
+        Rule('trajectory.offer_tolerance', 'positive'),
     ],
     'automation': [
         Rule('mode', 'str', lambda v: v in ('single', 'collaborative', 'mirrored'),

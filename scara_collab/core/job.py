@@ -35,10 +35,11 @@ Every observation names what it is about (a move by its request, a grip by its t
 late, duplicated or unknown one is ignored, and every waiting phase has a deadline, so a lost
 one costs a retry, never the run. The servers are idempotent (a planner re-publishes the status
 of a request it already has; a grasp while holding and a release while empty succeed), so a
-re-sent request is always safe. That protocol is :class:`scara_collab.core.lanes.LaneProtocol`;
-:class:`SortingJob` adds the decisions: which item an arm takes and when (ranked by
-:func:`scara_collab.core.sorting.rank_by_cycle`), what follows each arrival and grip, how the
-two arms share the belt (:mod:`scara_collab.core.pairing`).
+re-sent request is always safe. Each move goes out with the job's plan of it (the one it
+was chosen by), which the planner schedules without planning it again. That protocol is
+:class:`scara_collab.core.lanes.LaneProtocol`; :class:`SortingJob` adds the decisions: which
+item an arm takes and when (ranked by :func:`scara_collab.core.sorting.rank_by_cycle`), what
+follows each arrival and grip, how the two arms share the belt (:mod:`scara_collab.core.pairing`).
 """
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Optional, Sequence
@@ -362,9 +363,10 @@ class SortingJob(SharedBelt):
     def _would_sweep(self, lane: Lane, now: float) -> bool:
         """Return True if the item just grasped would touch an item on the belt on its way.
 
-        Then it is lifted clear first: the move to the bin, as the planner will plan it, is
-        checked against every other item's predicted position with ``carry_clearance`` to
-        spare (:func:`scara_collab.core.sorting.carry_sweeps`; in mirrored mode the follower's
+        Then it is lifted clear first: the move to the bin, planned as the job will offer it
+        to the planner (the plan memo keeps it for that request), is checked against every
+        other item's predicted position with ``carry_clearance`` to spare
+        (:func:`scara_collab.core.sorting.carry_sweeps`; in mirrored mode the follower's
         mirror image too). Checking costs about a millisecond; lifting costs a move.
         """
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, self.s.drop_clearance)

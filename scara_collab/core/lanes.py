@@ -48,7 +48,11 @@ class MoveCommand:
 
     ``mirrored``: send it to the replication manager (``/collab/target``), which moves the
     follower to the mirror image with the same request. ``request`` (ns) is the target's
-    stamp and the move's identity; a re-sent request has the same one.
+    stamp and the move's identity; a re-sent request has the same one. ``plan``: the job's
+    own plan of ``robot``'s move (from the arm's state when asked, ending at ``target``),
+    offered to the planner (a mirrored pair's: through the replication manager, which mirrors
+    it for the follower) so it is not planned twice; None if the job cannot plan it (the
+    planner then plans the target, or refuses it with the reason).
     """
 
     robot: str
@@ -56,6 +60,7 @@ class MoveCommand:
     request: int
     mirrored: bool
     purpose: str
+    plan: Optional[Trajectory] = None
 
     @property
     def start(self) -> float:
@@ -108,6 +113,7 @@ class Lane:
     target: Optional[np.ndarray] = None
     request: int = 0
     purpose: str = ''
+    plan: Optional[Trajectory] = None  # the job's plan of the current move (lane.robot's)
     since: float = 0.0
     sent: float = 0.0
     sends: int = 0
@@ -206,7 +212,7 @@ class LaneProtocol:
     def _book(self, robot: str, request: int, track: MoveTrack) -> None:
         """Keep the motion a move just timed commits ``robot`` to (two lanes: the subclass)."""
 
-    def _book_asked(self, lane: Lane, traj: Optional[Trajectory]) -> None:
+    def _book_asked(self, lane: Lane) -> None:
         """Keep the motion a move just asked for commits its arm to (two lanes: the subclass)."""
 
     # --- observations -----------------------------------------------------------------------
@@ -282,15 +288,23 @@ class LaneProtocol:
               traj: Optional[Trajectory] = None) -> None:
         """Ask for ``lane``'s move to ``target`` from ``start`` (``traj``: as the job planned it).
 
-        With two lanes the move is booked (:meth:`_book_asked`).
+        The move goes with the job's plan of it (``traj``, else planned here from the arm's
+        state; a mirrored pair's: the lane's arm), which the planner takes instead of planning
+        it again; with two lanes the move is booked (:meth:`_book_asked`).
         """
         lane.phase, lane.target = phase, np.asarray(target, dtype=float)
         lane.request = self._request(lane.robots, max(start, now + 1e-3))
         lane.moves = {r: MoveTrack() for r in lane.robots}
         lane.since = lane.sent = now
         lane.sends = 1
+        lane.plan = None
+        if lane.robot in self.q:
+            try:
+                lane.plan = traj or self.plan(lane.robot, self.q[lane.robot], lane.target)
+            except ValueError:
+                pass  # the planner will refuse it with the reason
         self._send(lane)
-        self._book_asked(lane, traj)
+        self._book_asked(lane)
 
     def _soon(self, lane: Lane, now: float) -> float:
         """Return the start to ask for a move that should start as soon as possible.
@@ -302,7 +316,7 @@ class LaneProtocol:
 
     def _send(self, lane: Lane) -> None:
         self._out.append(MoveCommand(lane.robot, lane.target, lane.request,
-                                     len(lane.robots) > 1, lane.phase))
+                                     len(lane.robots) > 1, lane.phase, lane.plan))
 
     def _target_of(self, lane: Lane, robot: str) -> np.ndarray:
         if robot == lane.robot:

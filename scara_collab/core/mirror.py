@@ -20,7 +20,7 @@ from typing import Union
 
 import numpy as np
 
-from scara_collab.core.kinematics import base_to_world, world_to_base
+from scara_collab.core.kinematics import base_to_world, fk, world_to_base
 from scara_collab.core.model import ArmModel
 
 ArrayLike = Union[np.ndarray, list, tuple]
@@ -64,3 +64,21 @@ def mirror_joints(q: ArrayLike) -> np.ndarray:
     """
     q = np.asarray(q, dtype=float)
     return q * np.array([-1.0, -1.0, 1.0])
+
+
+def joints_mirror(src: ArmModel, dst: ArmModel, samples: int = 16, tol: float = 1e-9) -> bool:
+    """Return True if :func:`mirror_joints` mirrors ``src``'s tool onto ``dst``'s exactly.
+
+    It does for two arms of the same geometry (the cell's, from one xacro macro): then a
+    leader's trajectory mirrors to the follower's joint by joint. Checked over ``samples``
+    poses spread over the joint ranges; if the arms differ, mirror their tool points instead.
+
+    >>> from scara_collab.core.model import load_cell
+    >>> cell = load_cell()
+    >>> joints_mirror(cell.leader, cell.follower)
+    True
+    """
+    u = (np.arange(samples)[:, None] * np.array([0.381966, 0.618034, 0.723607])) % 1.0
+    q = src.lower + u * (src.upper - src.lower)
+    err = fk(dst, mirror_joints(q)) - mirror_point(src, dst, fk(src, q))
+    return bool(np.all(np.abs(err) <= tol))

@@ -13,7 +13,7 @@ from typing import Optional, Union
 import numpy as np
 
 from scara_collab.core import collision
-from scara_collab.core.kinematics import ik, IKError, JOINT_LIMIT
+from scara_collab.core.kinematics import fk, ik, IKError, JOINT_LIMIT
 from scara_collab.core.model import ArmModel
 from scara_collab.core.trajectory import interp_rows, joint_move, line_move, Trajectory
 
@@ -140,6 +140,40 @@ def plan_path(arm: ArmModel, q_start, target, frame: str = 'world', mode: str = 
         goal = ik(arm, target, q_current=q_start, frame=frame).unwrap()
         return joint_move(arm, q_start, goal, dt=dt)
     raise ValueError(f'unknown mode {mode!r}; expected one of {MODES}')
+
+
+def offered_move(arm: ArmModel, t, q, qd, qdd) -> Trajectory:
+    """Return a move offered as a plan (the sorting job's), checked to be a plan of ``arm``.
+
+    The job plans each move with the planners' settings to choose and book it, and offers
+    that plan so the planner need not plan the same move again; the planner takes it if it
+    :func:`starts_at` the arm's measured joints, else plans to its last point.
+
+    :param t: ``(N,)`` times from the start, s (``t[0] = 0``); :param q: ``(N, 3)``;
+    :param qd, qdd: ``(N, 3)`` velocities and accelerations, or None.
+    :raises ValueError: not a plan: no velocities or accelerations, the first point not at
+        ``t = 0``, or positions outside the joint limits (the reason).
+    """
+    if qd is None or qdd is None:
+        raise ValueError('an offered move needs velocities and accelerations at every point')
+    t, q = np.asarray(t, dtype=float), np.asarray(q, dtype=float)
+    if t[0] != 0.0:
+        raise ValueError(f'an offered move starts at t = 0, not {t[0]:g} s')
+    if np.any(q < arm.lower - 1e-9) or np.any(q > arm.upper + 1e-9):
+        raise ValueError('an offered move leaves the joint limits')
+    return Trajectory(t=t, q=q, qd=np.asarray(qd, dtype=float), qdd=np.asarray(qdd, dtype=float),
+                      p=fk(arm, q))
+
+
+def starts_at(traj: Trajectory, q_now, tolerance: float) -> bool:
+    """Return True if ``traj`` starts within ``tolerance`` (rad | m, each joint) of ``q_now``.
+
+    >>> move = Trajectory(np.zeros(1), np.zeros((1, 3)), np.zeros((1, 3)), np.zeros((1, 3)),
+    ...                   np.zeros((1, 3)))
+    >>> starts_at(move, [0.001, 0.0, 0.0], 0.002), starts_at(move, [0.0, 0.01, 0.0], 0.002)
+    (True, False)
+    """
+    return bool(np.all(np.abs(traj.q[0] - np.asarray(q_now, dtype=float)) <= tolerance))
 
 
 def other_view(other: Timeline, my_start: float, leader: bool) -> Timeline:

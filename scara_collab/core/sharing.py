@@ -17,7 +17,6 @@ import numpy as np
 
 from scara_collab.core import pairing, planning, sorting
 from scara_collab.core.lanes import Lane, LaneProtocol, MoveCommand, MoveTrack, MOVING
-from scara_collab.core.trajectory import Trajectory
 
 #: s: an item with less than this left in an arm's reach is urgent: about two cycles, so of
 #: two urgent items the arm can still take the one after the other. An urgent item is chased
@@ -96,19 +95,15 @@ class SharedBelt(LaneProtocol):
                 return track.timeline
         return planning.Timeline.hold(now, self.q[robot])
 
-    def _book_asked(self, lane: Lane, traj: Optional[Trajectory]) -> None:
-        """Book a move just asked for as the job plans it (``traj`` if planned already).
+    def _book_asked(self, lane: Lane) -> None:
+        """Book a move just asked for as the job planned it (:meth:`LaneProtocol._move`).
 
         It stands until the planner's own trajectory comes (:meth:`on_trajectory`); a move
         the job cannot plan is booked once the planner has timed it (:meth:`_book`).
         """
-        if len(self.lanes) < 2 or lane.robot not in self.q:
-            return
-        try:
-            traj = traj or self.plan(lane.robot, self.q[lane.robot], lane.target)
-        except ValueError:
-            return  # the planner will refuse it with the reason
-        lane.moves[lane.robot].timeline = planning.Timeline.of(traj, lane.request * 1e-9)
+        if len(self.lanes) > 1 and lane.plan is not None:
+            lane.moves[lane.robot].timeline = planning.Timeline.of(lane.plan,
+                                                                   lane.request * 1e-9)
 
     # --- out of the way ------------------------------------------------------------------------
     def _park(self, lane: Lane, now: float) -> None:

@@ -10,9 +10,13 @@ retries, :mod:`scara_collab.nodes.protocol` for the statuses):
   ``/<robot>/planner_status`` and ``/<robot>/execution_status`` (about its moves, by request
   id), ``/<robot>/joint_trajectory`` (the planners' moves: the other arm's booked motion),
   ``/conveyor/events`` (counts; confirms grasps and releases), ``/emergency_stop``;
-* out: ``/<robot>/target`` or, in mirrored mode, ``/collab/target`` (PointStamped; the stamp
-  is the requested start and the move's id), ``/<robot>/gripper`` calls (std_srvs/SetBool;
-  each answer goes back to the job with its request's token, a lost one is asked again).
+* out: a move as the job planned it on ``/<robot>/target_trajectory`` (JointTrajectory: the
+  planner takes it instead of planning the move again), or as a point on ``/<robot>/target``
+  (PointStamped) when the job has no plan of it; in mirrored mode on
+  ``/collab/target_trajectory`` or ``/collab/target``; either way the stamp is the requested
+  start and the move's id (:mod:`scara_collab.nodes.protocol`); ``/<robot>/gripper`` calls
+  (std_srvs/SetBool; each answer goes back to the job with its request's token, a lost one is
+  asked again).
 
 Services ``~/start`` and ``~/stop`` (std_srvs/Trigger, idempotent: starting a running job
 succeeds; a start before every endpoint the job uses is matched is refused, naming what is
@@ -84,7 +88,12 @@ class AutomationManager(Node):
         self.faults = declare_faults(self)
         self.target_pub = {a.name: self.create_publisher(PointStamped, f'/{a.name}/target', 10)
                            for a in self.cell.arms}
+        self.plan_pub = {a.name: self.create_publisher(JointTrajectory,
+                                                       f'/{a.name}/target_trajectory', 10)
+                         for a in self.cell.arms}
         self.collab_pub = self.create_publisher(PointStamped, '/collab/target', 10)
+        self.collab_plan_pub = self.create_publisher(JointTrajectory,
+                                                     '/collab/target_trajectory', 10)
         self.stats_pub = self.create_publisher(DiagnosticStatus, '~/stats', 10)
         self.diagnostics = Diagnostics(self, self.stats_pub)  # and on /diagnostics
         self.grippers = {a.name: self.create_client(SetBool, f'/{a.name}/gripper')
@@ -180,9 +189,10 @@ class AutomationManager(Node):
         """
         missing = []
         for lane in self.job.lanes:
-            pub = (self.collab_pub if len(lane.robots) > 1 else self.target_pub[lane.robot])
-            if pub.get_subscription_count() == 0:
-                missing.append(f'{pub.topic_name} (no subscriber)')
+            pubs = ((self.collab_pub, self.collab_plan_pub) if len(lane.robots) > 1 else
+                    (self.target_pub[lane.robot], self.plan_pub[lane.robot]))
+            missing += [f'{pub.topic_name} (no subscriber)' for pub in pubs
+                        if pub.get_subscription_count() == 0]
             for robot in lane.robots:
                 missing += [f'{sub.topic_name} (no publisher)'
                             for sub in self.status_subs[robot] if sub.get_publisher_count() == 0]
@@ -226,14 +236,25 @@ class AutomationManager(Node):
             self.get_logger().info(f'sorting job running ({self.mode})')
         for cmd in self.job.tick(self._now()):
             if isinstance(cmd, MoveCommand):
-                msg = conv.make_point_stamped(cmd.target, 'world', cmd.start)
-                msg.header.stamp = conv.time_from_ns(cmd.request)  # exact: it is the move's id
-                (self.collab_pub if cmd.mirrored else self.target_pub[cmd.robot]).publish(msg)
+                self._send_move(cmd)
             elif isinstance(cmd, GripCommand):
                 call_with_faults(self, self.faults, self.grippers[cmd.robot],
                                  SetBool.Request(data=cmd.grasp),
                                  lambda res, t=cmd.token: self.job.on_grip(
                                      t, res.success, res.message))
+
+    def _send_move(self, cmd: MoveCommand) -> None:
+        """Publish a move: the job's plan of it, else its target point."""
+        if cmd.plan is not None:
+            t = cmd.plan
+            msg = conv.trajectory_msg(self.cell.arm(cmd.robot).joint_names, t.t, t.q, t.qd,
+                                      t.qdd)
+            pub = self.collab_plan_pub if cmd.mirrored else self.plan_pub[cmd.robot]
+        else:
+            msg = conv.make_point_stamped(cmd.target, 'world')
+            pub = self.collab_pub if cmd.mirrored else self.target_pub[cmd.robot]
+        msg.header.stamp = conv.time_from_ns(cmd.request)  # exact: it is the move's id
+        pub.publish(msg)
 
     # --- stats ------------------------------------------------------------------------------
     def stats(self) -> proto.JobStats:

@@ -14,6 +14,14 @@ priority rule of :mod:`scara_collab.core.planning`, and publishes ``/<robot>/joi
 stamped with its start, ``/<robot>/planned_path`` and ``/<robot>/planner_status`` (OK, WARN
 when delayed, ERROR with the reason when refused; the arm then stays where it is).
 
+A move may come as a plan instead, on ``/<robot>/target_trajectory`` (JointTrajectory: the
+sorting job offers the trajectory it planned with the planners' settings to choose the move;
+:func:`scara_collab.core.planning.offered_move`). The planner checks it and takes it as its
+plan when it starts where the arm is (within ``trajectory.offer_tolerance``) and the mode is
+``line_or_joint`` (the job's); otherwise it plans the move to the plan's last point. Either
+way it schedules it against the other arm as above: the priority rule is applied here, once.
+A plan that is not one (missing velocities, outside the joint limits, malformed) is refused.
+
 Every status names its move (:mod:`scara_collab.nodes.protocol`): the id is
 ``<robot>/<request>``, the request being the target's stamp in ns (the receipt time for a
 target stamped zero), and it goes to the bridge in the trajectory's ``header.frame_id``. The
@@ -29,7 +37,7 @@ the planner reports WARN "waiting", retries whenever the other arm commits a new
 refuses after ``max_wait`` seconds.
 """
 from collections import OrderedDict
-from typing import Optional, Sequence, Tuple
+from typing import Callable, Optional, Sequence, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
@@ -40,10 +48,11 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from scara_collab.core.config import load_config, Rule
-from scara_collab.core.kinematics import IKError
+from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.model import load_cell
-from scara_collab.core.planning import committed, MODES, Plan, plan_path, schedule, Timeline
-from scara_collab.core.trajectory import path_metrics
+from scara_collab.core.planning import (committed, MODES, offered_move, Plan, plan_path,
+                                        schedule, starts_at, Timeline)
+from scara_collab.core.trajectory import path_metrics, Trajectory
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.faults import declare_faults, FaultyPublisher
@@ -64,6 +73,50 @@ def _rules(robots: Sequence[str]) -> Tuple[Rule, ...]:
             Rule('profile', 'text'),
             Rule('mode', 'str', lambda v: v in MODES, f'must be one of {MODES}'),
             *(Rule(key, 'positive') for key in TIMES))
+
+
+class Answers:
+    """The planner's last status of each request, so a re-sent one is answered, not re-planned.
+
+    Keeps the last ``HISTORY`` requests; a target stamped zero gets its receipt time as its
+    request id (:meth:`request_of`), unique even for two in the same nanosecond.
+
+    :param publish: sends a :class:`~scara_collab.nodes.protocol.PlannerStatus`.
+    """
+
+    def __init__(self, publish: Callable[[proto.PlannerStatus], None]):
+        """Remember nothing yet."""
+        self._publish = publish
+        self._last: 'OrderedDict[int, proto.PlannerStatus]' = OrderedDict()
+        self._last_auto = 0
+
+    def request_of(self, stamp_ns: int, now_ns: int) -> int:
+        """Return the request id of a target: its stamp, or (stamped zero) the receipt time."""
+        if stamp_ns:
+            return stamp_ns
+        self._last_auto = max(now_ns, self._last_auto + 1)
+        return self._last_auto
+
+    def send(self, st: proto.PlannerStatus) -> None:
+        """Publish ``st`` and keep it as its request's last answer."""
+        if st.request:
+            self._last[st.request] = st
+            self._last.move_to_end(st.request)
+            while len(self._last) > HISTORY:
+                self._last.popitem(last=False)
+        self._publish(st)
+
+    def again(self, request: int) -> bool:
+        """Publish the last status of ``request`` again; return False if it is new."""
+        st = self._last.get(request)
+        if st is not None:
+            self._publish(st)
+        return st is not None
+
+    def kind(self, request: int) -> str:
+        """Return the kind of move (``line``, ``joint move``) last reported for ``request``."""
+        st = self._last.get(request)
+        return '' if st is None else st.kind
 
 
 class Planner(Node):
@@ -97,25 +150,27 @@ class Planner(Node):
         self.q_other: Optional[np.ndarray] = None
         self.mine: Optional[Plan] = None            # my committed move
         self.mine_id = ''                           # ... its move id
-        self.pending_target = None                  # (xyz, frame, asked, request) of my move
+        # a move asked for: (xyz, frame, stamp or asked, offered plan or None, request)
+        self.pending_target = None                  # my committed move's
         self.theirs: Optional[Timeline] = None      # the other arm's committed move
         self.theirs_before: Optional[Timeline] = None  # ... and the one it replaced
-        self.queued = None                          # (xyz, frame, stamp, request) after mine
-        self.waiting = None                         # (xyz, frame, asked, request): blocked
-        self.history: 'OrderedDict[int, proto.PlannerStatus]' = OrderedDict()
-        self._last_auto = 0
+        self.queued = None                          # one to plan after mine
+        self.waiting = None                         # one blocked by the other arm
 
         r, o = self.arm.name, self.other.name
         faults = declare_faults(self)
         self.traj_pub = self.create_publisher(JointTrajectory, f'/{r}/joint_trajectory', 10)
         self.path_pub = self.create_publisher(Path, f'/{r}/planned_path', 10)
-        self.status_pub = FaultyPublisher(self, faults, self.create_publisher(
+        status_pub = FaultyPublisher(self, faults, self.create_publisher(
             DiagnosticStatus, f'/{r}/planner_status', EVENTS))
+        self.answers = Answers(lambda st: status_pub.publish(st.to_msg()))
         # only the latest state matters: a backlog of old ones would make plans start stale
         self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
                                  LATEST)
         self.create_subscription(PointStamped, f'/{r}/target', guarded(self, self._on_target),
                                  10)
+        self.create_subscription(JointTrajectory, f'/{r}/target_trajectory',
+                                 guarded(self, self._on_offer), 10)
         self.create_subscription(JointTrajectory, f'/{o}/joint_trajectory',
                                  guarded(self, self._on_other), 10)
         self.create_subscription(DiagnosticStatus, f'/{o}/execution_status',
@@ -143,12 +198,7 @@ class Planner(Node):
             delay=0.0 if plan is None else plan.delay, kind=kind)
         if state == 'refused':
             self.get_logger().warning(st.text())
-        if request:
-            self.history[request] = st
-            self.history.move_to_end(request)
-            while len(self.history) > HISTORY:
-                self.history.popitem(last=False)
-        self.status_pub.publish(st.to_msg())
+        self.answers.send(st)
 
     def _publish(self, plan: Plan, request: int, note: str = '') -> None:
         t = plan.traj
@@ -159,12 +209,8 @@ class Planner(Node):
         kind = 'line' if path_metrics(t).max_deviation < 1e-4 else 'joint move'
         self._status('planned', request, note, plan, kind)
 
-    def _request_of(self, stamp_ns: int) -> int:
-        """Return the request id of a target: its stamp, or (stamped zero) the receipt time."""
-        if stamp_ns:
-            return stamp_ns
-        self._last_auto = max(self.get_clock().now().nanoseconds, self._last_auto + 1)
-        return self._last_auto
+    def _request_of(self, stamp) -> int:
+        return self.answers.request_of(proto.stamp_ns(stamp), self.get_clock().now().nanoseconds)
 
     # --- callbacks --------------------------------------------------------------------------
     def _on_state(self, msg: JointState) -> None:
@@ -178,17 +224,8 @@ class Planner(Node):
             self.get_logger().warning(f'ignoring joint_states: {exc}', throttle_duration_sec=5.0)
             return
         if self.queued is not None and (self.mine is None or self.q_stamp >= self.mine.end):
-            xyz, frame, stamp, request = self.queued
-            self.queued = None
-            self._plan(xyz, frame, stamp, request)
-
-    def _known(self, request: int) -> bool:
-        """Re-publish the status of a request already handled (a re-sent target)."""
-        st = self.history.get(request)
-        if st is None:
-            return False
-        self.status_pub.publish(st.to_msg())
-        return True
+            queued, self.queued = self.queued, None
+            self._plan(*queued)
 
     def _supersede(self, held: Optional[Tuple], why: str) -> None:
         if held is not None:
@@ -196,9 +233,26 @@ class Planner(Node):
 
     def _on_target(self, msg: PointStamped) -> None:
         frame_id, xyz, stamp = conv.point_stamped(msg)
-        request = self._request_of(proto.stamp_ns(msg.header.stamp))
-        if self._known(request):
+        request = self._request_of(msg.header.stamp)
+        if not self.answers.again(request):
+            self._take(request, xyz, frame_id, stamp)
+
+    def _on_offer(self, msg: JointTrajectory) -> None:
+        """Take a move offered as a plan (see the module docstring)."""
+        request = self._request_of(msg.header.stamp)
+        if self.answers.again(request):
             return
+        try:
+            stamp, *arrays = conv.trajectory_arrays(msg, self.arm.joint_names)
+            offer = offered_move(self.arm, *arrays)
+        except ValueError as exc:  # conv.MessageError too
+            self._status('refused', request, f'offered trajectory: {exc}')
+            return
+        self._take(request, fk(self.arm, offer.q[-1]), 'world', stamp, offer)
+
+    def _take(self, request: int, xyz: np.ndarray, frame_id: str, stamp: float,
+              offer: Optional[Trajectory] = None) -> None:
+        """Plan, queue or refuse the move ``request`` to ``xyz`` (``offer``: a plan of it)."""
         if self.q is None or self.q_other is None:
             self._status('refused', request, 'no joint state yet (is the bridge up?)')
             return
@@ -216,37 +270,41 @@ class Planner(Node):
         self.waiting = self.queued = None
         if self.mine is not None and self.mine.end > self._now():
             # the bridge replaces a running trajectory: hold this one until mine has ended
-            self.queued = (xyz, frame, stamp, request)
+            self.queued = (xyz, frame, stamp, offer, request)
             self._status('queued', request, f'behind the running move (ends '
                          f't={self.mine.end:.3f} s)')
             return
-        self._plan(xyz, frame, stamp, request)
+        self._plan(xyz, frame, stamp, offer, request)
 
-    def _plan(self, xyz: np.ndarray, frame: str, stamp: float, request: int,
-              asked: Optional[float] = None) -> None:
+    def _plan(self, xyz: np.ndarray, frame: str, stamp: float, offer: Optional[Trajectory],
+              request: int, asked: Optional[float] = None) -> None:
         now = self._now()
         start = max(stamp, now + self.lead) if stamp > 0 else now + self.lead
         asked = start if asked is None else asked  # when the move was first wanted
-        try:
-            traj = plan_path(self.arm, self.q, xyz, frame, self.mode,
-                             dt=self.traj_cfg['sample_period'],
-                             dls_threshold=self.traj_cfg['dls_threshold'],
-                             dls_max_damping=self.traj_cfg['dls_max_damping'])
-        except (IKError, ValueError) as exc:
-            self._status('refused', request, str(exc))
-            return
+        if (offer is not None and self.mode == 'line_or_joint'
+                and starts_at(offer, self.q, self.traj_cfg['offer_tolerance'])):
+            traj = offer  # the job's plan of this move: not planned again
+        else:
+            try:
+                traj = plan_path(self.arm, self.q, xyz, frame, self.mode,
+                                 dt=self.traj_cfg['sample_period'],
+                                 dls_threshold=self.traj_cfg['dls_threshold'],
+                                 dls_max_damping=self.traj_cfg['dls_max_damping'])
+            except (IKError, ValueError) as exc:
+                self._status('refused', request, str(exc))
+                return
         now = self._now()
         start = max(start, now + self.lead)  # planning took (sim) time too
         other = committed(self.theirs, now, self.q_other)  # from now on: the past is past
         plan = schedule(self.arm, traj, start, self.other, other, self.margin, self.leader,
                         self.max_delay)
         if plan is None:
-            self._wait(xyz, frame, asked, request)
+            self._wait((xyz, frame, asked, offer, request))
             return
         if plan.start - asked > 1e-9:  # count the time spent waiting, not just the last delay
             plan = Plan(plan.traj, plan.start, plan.start - asked)
         self.waiting = None
-        self.pending_target = (xyz, frame, asked, request)
+        self.pending_target = (xyz, frame, asked, offer, request)
         self._publish(plan, request)
 
     def _on_other_execution(self, msg: DiagnosticStatus) -> None:
@@ -270,13 +328,13 @@ class Planner(Node):
             self.mine = Plan(self.mine.traj, st.start, self.mine.delay + st.late)
             _, request = proto.parse_move_id(st.move)
             self._status('planned', request, f'started {st.late:.3f} s late by the bridge',
-                         self.mine, self.history[request].kind if request in self.history
-                         else '')
+                         self.mine, self.answers.kind(request))
         elif st.state in ('refused', 'preempted', 'held'):
             self.mine = None  # nothing of mine runs: the next target is planned at once
 
-    def _wait(self, xyz: np.ndarray, frame: str, asked: float, request: int) -> None:
-        """Wait for the other arm: it blocks the move even after its committed motion."""
+    def _wait(self, move: Tuple) -> None:
+        """Wait for the other arm: it blocks ``move`` even after its committed motion."""
+        asked, request = move[2], move[-1]
         now = self._now()
         if now - asked > self.max_wait:
             self.waiting = None
@@ -284,7 +342,7 @@ class Planner(Node):
                          f'{now - asked:.1f} s')
             return
         first = self.waiting is None or self.waiting[-1] != request
-        self.waiting = (xyz, frame, asked, request)
+        self.waiting = move
         if first:
             self._status('waiting', request, f'{self.other.name} blocks it: no start within '
                          f'{self.max_delay:.0f} s keeps {self.margin:.2f} m')
@@ -298,8 +356,8 @@ class Planner(Node):
         self.theirs_before, self.theirs = self.theirs, Timeline.commanded(stamp, t, q, now,
                                                                           self.q_other)
         if self.waiting is not None:  # the other arm moves: maybe it clears the way
-            xyz, frame, asked, request = self.waiting
-            self._plan(xyz, frame, 0.0, request, asked)
+            xyz, frame, asked, offer, request = self.waiting
+            self._plan(xyz, frame, 0.0, offer, request, asked)
             return
         if self.leader or self.mine is None or self.mine.start <= now:
             return
@@ -307,12 +365,12 @@ class Planner(Node):
         replan = schedule(self.arm, self.mine.traj, self.mine.start, self.other,
                           self.theirs.since(now), self.margin, leader=False,
                           max_delay=self.max_delay)
-        xyz, frame, asked, request = self.pending_target
+        asked, request = self.pending_target[2], self.pending_target[-1]
         if replan is None:
             self.mine = None
             self.traj_pub.publish(conv.trajectory_msg(
                 self.arm.joint_names, np.array([0.0]), self.q.reshape(1, 3)))
-            self._wait(xyz, frame, asked, request)
+            self._wait(self.pending_target)
         elif replan.delay > 0:
             self._publish(Plan(replan.traj, replan.start, replan.start - asked), request,
                           f're-timed for a new {self.other.name} move')

@@ -24,6 +24,13 @@ automation manager, sends each request with its own stamp). A target stamped zer
 now") gets the planner's receipt time instead. The planner puts the id in the
 ``header.frame_id`` of the ``JointTrajectory`` it publishes, the bridge reports on that id, so
 a status always says which move it is about, from the request to the end of the motion.
+
+**A move's request.** A point (``/<robot>/target``, ``geometry_msgs/PointStamped``, frame
+``world`` or ``<robot>_base``; ``/collab/target`` for a mirrored pair), or a plan of the move
+(``/<robot>/target_trajectory``, ``trajectory_msgs/JointTrajectory``: positions, velocities
+and accelerations of the arm's joints from ``time_from_start`` 0; the target is its last
+point). The sorting job sends its own plan, so the planner schedules it without planning it
+again (:mod:`scara_collab.nodes.planner`). Either way ``header.stamp`` is the request.
 """
 from dataclasses import dataclass, field, fields, KW_ONLY, MISSING
 import functools

@@ -6,6 +6,12 @@ to ``/<follower>/target`` with the *same* stamp: the stamp is the requested star
 move's identity (:mod:`scara_collab.nodes.protocol`), so both planners plan the same request
 and both arms start at the same sim instant (unless the follower's planner must delay it for
 safety, which its status says). A target stamped zero gets ``now + collab_lead``.
+On ``/collab/target_trajectory`` (the leader's move as the sorting job planned it,
+JointTrajectory; :mod:`scara_collab.nodes.protocol`) it does the same with the plan: the
+leader's goes on unchanged to ``/<leader>/target_trajectory``, the follower's is its mirror
+image joint by joint (``(theta1, theta2, d3) -> (-theta1, -theta2, d3)``, exact for two arms
+of the same geometry; otherwise the follower gets the mirrored end point), so neither planner
+plans the pair's move again.
 ``~/enable`` (SetBool, idempotent) turns mirroring on and off; off, only the leader moves and
 the node does not listen to ``/joint_states`` (the launcher starts it off, ``enabled:=false``,
 in every mode but mirrored and idle: a collaborative job has no mirror error to measure).
@@ -26,10 +32,11 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import SetBool
+from trajectory_msgs.msg import JointTrajectory
 
 from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import base_to_world, fk
-from scara_collab.core.mirror import mirror_error, mirror_point
+from scara_collab.core.mirror import joints_mirror, mirror_error, mirror_joints, mirror_point
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
@@ -74,11 +81,17 @@ class ReplicationManager(Node):
         self.last_reason = ''
         self.lead_pub = self.create_publisher(PointStamped, f'/{lead.name}/target', 10)
         self.foll_pub = self.create_publisher(PointStamped, f'/{foll.name}/target', 10)
+        self.offer_pubs = tuple(self.create_publisher(JointTrajectory,
+                                                      f'/{a.name}/target_trajectory', 10)
+                                for a in (lead, foll))
+        self.mirror_by_joints = joints_mirror(lead, foll)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
         self.diagnostics = Diagnostics(self, self.status_pub)  # and on /diagnostics
         self.error_pub = self.create_publisher(Float64, '~/mirror_error', 10)
         self.create_subscription(PointStamped, '/collab/target', guarded(self, self._on_target),
                                  10)
+        self.create_subscription(JointTrajectory, '/collab/target_trajectory',
+                                 guarded(self, self._on_offer), 10)
         self._state_sub = None  # /joint_states only while mirroring (nothing to measure else)
         self._set_enabled(self.enabled)
         for arm in self.cell.arms:
@@ -124,6 +137,25 @@ class ReplicationManager(Node):
         mirrored = conv.make_point_stamped(mirror_point(lead, foll, xyz), 'world')
         mirrored.header.stamp = stamp
         self.foll_pub.publish(mirrored)
+
+    def _on_offer(self, msg: JointTrajectory) -> None:
+        """Pass the leader's plan on; offer the follower its mirror image (or the end point)."""
+        lead, foll = self.cell.leader, self.cell.follower
+        _, t, q, qd, qdd = conv.trajectory_arrays(msg, lead.joint_names)
+        if proto.stamp_ns(msg.header.stamp) == 0:  # "now": one common start for both arms
+            msg.header.stamp = conv.to_time(conv.now(self) + self.lead)
+        self.offer_pubs[0].publish(msg)
+        if not self.enabled:
+            return
+        if self.mirror_by_joints and qd is not None and qdd is not None:
+            out = conv.trajectory_msg(foll.joint_names, t, mirror_joints(q), mirror_joints(qd),
+                                      mirror_joints(qdd))
+            pub = self.offer_pubs[1]
+        else:  # the follower's planner plans it
+            out = conv.make_point_stamped(mirror_point(lead, foll, fk(lead, q[-1])), 'world')
+            pub = self.foll_pub
+        out.header.stamp = msg.header.stamp  # the same request: the move's id
+        pub.publish(out)
 
     def _on_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
