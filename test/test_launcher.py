@@ -466,6 +466,29 @@ def test_the_lockstep_watch_names_only_a_node_that_leaves_a_clock_unanswered():
         launcher.parse_args(['--silent-timeout', '0'])
 
 
+def test_the_lockstep_watch_is_off_in_one_process():
+    """With every node in one process the watch subscribes nothing (nobody can be behind).
+
+    A hung node there stops the one thread, the bridge with it: the stall check ends the run.
+    The answers would each cost the container a delivery to the launcher's process.
+    """
+    import rclpy
+    from scara_collab.nodes import lockstep
+    from scara_collab.run.liveness import Liveness
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        off = Liveness([], 10.0, ctx)
+        assert off.silent(5.0, 100.0) is None and off._node is None
+        off.close()
+        on = Liveness(['collision_monitor'], 10.0, ctx)
+        topics = on._node.get_subscriber_names_and_types_by_node('launch_cell_watch', '/')
+        assert [t for t, _ in topics] == [lockstep.TOPIC]
+        on.close()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
 def test_the_job_start_is_asked_again_while_the_manager_is_not_connected(tmp_path, monkeypatch):
     """Ask for the job's start again every 0.5 s while the manager refuses it as not connected.
 

@@ -29,7 +29,7 @@ also watches the lockstep answers on ``/sim/lockstep`` (:mod:`scara_collab.run.l
 launched node that leaves a ``/clock`` unanswered for ``--silent-timeout`` wall seconds
 (default 10, longer than the bridge's ``lockstep_timeout`` so that the bridge has already held
 the arms if the node is the collision monitor) ends the run, named with the sim time it
-reached.
+reached (not with ``--one-process``: a hung node there stops them all, the bridge too).
 Sim time that stands still with every node up to date is the bridge's stall
 (``--stall-timeout``).
 
@@ -263,7 +263,8 @@ class Launcher:
         self._next_poll = self._next_checkpoint = self._next_watch = 0.0
         self.rtf = args.rtf
         self.launch_rtf = args.launch_rtf
-        self.liveness = Liveness([s.name for s in self.stages],
+        one_process = getattr(args, 'one_process', False)  # nobody can be behind: no watch
+        self.liveness = Liveness([] if one_process else [s.name for s in self.stages],
                                  getattr(args, 'silent_timeout', 10.0), self.context)
 
     def on_signal(self, signum, _frame) -> None:

@@ -4,6 +4,12 @@ The lockstep answers on ``/sim/lockstep`` (hundreds a second) go to a node
 (:class:`~scara_collab.nodes.lockstep_watch.LockstepWatchNode`) and an executor of their own,
 which :meth:`Liveness.silent` drains when the launcher looks (once a second): a look never
 waits, and a slow launcher is never a burden on the nodes (best effort, the newest 200).
+
+With every node in one process (``--one-process``) there is nothing to watch: a node that
+hangs stops that process's one thread, the bridge with it, so no node is ever behind the
+others (sim time stands still instead: the launcher's stall check). The watch is then off and
+subscribes nothing, which saves the container a delivery to another process for each of its
+hundreds of answers a second (about 6 % of its CPU).
 """
 from typing import Iterable, Optional, Tuple
 
@@ -17,7 +23,7 @@ from scara_collab.nodes.lockstep_watch import LockstepWatch, LockstepWatchNode, 
 class Liveness:
     """Watch the lockstep answers of the launched nodes.
 
-    :param names: the launched nodes' names (``collision_monitor``).
+    :param names: the launched nodes' names (``collision_monitor``); none: the watch is off.
     :param limit: wall seconds a node may leave a ``/clock`` unanswered (``--silent-timeout``).
     :param context: the launcher's rclpy context.
     """
@@ -26,12 +32,16 @@ class Liveness:
         """Create the watch node and its executor."""
         self.watch = LockstepWatch([lockstep.full_name(n) for n in names], limit)
         self.silent_node: Optional[str] = None  # the node found silent, once one is
-        self._node = LockstepWatchNode(self.watch, context=context)
-        self._executor = SingleThreadedExecutor(context=context)
-        self._executor.add_node(self._node)
+        self._node = self._executor = None
+        if self.watch.names:
+            self._node = LockstepWatchNode(self.watch, context=context)
+            self._executor = SingleThreadedExecutor(context=context)
+            self._executor.add_node(self._node)
 
     def take_answers(self) -> None:
         """Take the answers kept since the last look (at most the queue, never waiting)."""
+        if self._node is None:
+            return
         idle = 0  # spin_once(0) takes a message only every other call or so: not the end yet
         for _ in range(4 * WATCH_QOS.depth):
             before = self._node.answers
@@ -56,5 +66,6 @@ class Liveness:
 
     def close(self) -> None:
         """Shut down the executor and destroy the watch node."""
-        self._executor.shutdown(timeout_sec=1.0)
-        self._node.destroy_node()
+        if self._node is not None:
+            self._executor.shutdown(timeout_sec=1.0)
+            self._node.destroy_node()
