@@ -426,6 +426,33 @@ def test_smallest_safe_delay_none_when_impossible(arms, belt_scenario):
     assert smallest_safe_delay(left, t_a, q_a, right, t_b, q_b, margin, max_delay=0.5) is None
 
 
+def test_smallest_safe_delay_stops_searching_once_the_leader_has_ended(
+        arms, belt_scenario, monkeypatch):
+    """A follower whose waiting pose blocks the leader is refused after a few checks.
+
+    Beyond the delay at which the follower starts after the leader's end, every delay is the
+    same check (leader moves, follower waits; then the follower moves alone); the search
+    stops at the first such delay instead of scanning up to ``max_delay`` (121 checks).
+    """
+    from scara_collab.core import collision
+    left, right = arms
+    at_l = planar_ik(left, BELT_POINT)
+    t_park, q_park = joint_path([[0.0, *at_l, 0.0], [1.0, *at_l, 0.4], [2.0, *at_l, 0.0]])
+    q_near = [*planar_ik(right, (2.0, 0.15), -1.0), 0.0]
+    t_near, q_near = joint_path([[0.0, *q_near], [1.0, np.pi / 2, 0.0, 0.0]])
+    checks = []
+    grid_safe = collision._grid_safe
+    monkeypatch.setattr(collision, '_grid_safe', lambda *a: checks.append(1) or grid_safe(*a))
+    assert smallest_safe_delay(left, t_park, q_park, right, t_near, q_near, 0.10,
+                               max_delay=30.0) is None
+    assert 1 <= len(checks) <= 2.0 / 0.25 + 2, len(checks)  # scan points up to the leader's end
+    # a delay that exists is the one the plain search over every delay finds
+    t_a, q_a, t_b, q_b = belt_scenario
+    plain = collision.first_safe_delay(lambda k: trajectory_min_distance(
+        left, t_a, q_a, right, t_b, q_b, start_b=k * 0.01)[0] >= 0.10, 30.0)
+    assert smallest_safe_delay(left, t_a, q_a, right, t_b, q_b, 0.10) == plain > 0.0
+
+
 def test_smallest_safe_delay_when_safety_is_not_monotonic(arms):
     """With two leader visits the first safe window is found, although later ones are not."""
     left, right = arms
