@@ -104,6 +104,12 @@ class Run:
 
 
 # --- injections -------------------------------------------------------------------------------
+#: the readers of /joint_states in a collaborative run: both planners, the collision monitor,
+#: the automation manager and the launcher's recorder (the replication manager listens only
+#: while mirroring)
+STATE_READERS = 5
+
+
 def _names() -> List[str]:
     from scara_collab.core.model import load_cell
     return [n for arm in load_cell().arms for n in arm.joint_names]
@@ -120,7 +126,7 @@ def nan_state_then_target(run: Run) -> None:
     from sensor_msgs.msg import JointState
     from scara_collab.nodes import conversions as conv
     with Probe() as probe:
-        pub = probe.publisher(JointState, '/joint_states')
+        pub = probe.publisher(JointState, '/joint_states', STATE_READERS)
         probe.wait_state()
         for _ in range(5):
             probe.spin(0.1)  # take the newest state
@@ -139,7 +145,7 @@ def wall_clock_states(run: Run) -> None:
     from sensor_msgs.msg import JointState
     from scara_collab.nodes import conversions as conv
     with Probe() as probe:
-        pub = probe.publisher(JointState, '/joint_states')
+        pub = probe.publisher(JointState, '/joint_states', STATE_READERS)
         for _ in range(60):
             pub.publish(conv.joint_state(1.79e9, _names(), [0.0] * 6, [0.0] * 6, [0.0] * 6))
             probe.spin(0.05)

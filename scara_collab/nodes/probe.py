@@ -46,15 +46,23 @@ class Probe:
             raise RuntimeError('no /joint_states heard from the launched graph')
         return self.state
 
-    def publisher(self, msg_type, topic: str):
-        """Return a publisher on ``topic``, once a subscriber has matched (at most 10 s).
+    def publisher(self, msg_type, topic: str, readers: int = 1, timeout: float = 10.0):
+        """Return a publisher on ``topic`` once ``readers`` of the graph have matched it.
+
+        A message published before a reader has matched is lost to that reader (DDS), so an
+        injection waits for the readers it means to reach (at most 10 s); the probe's own
+        subscription (``/joint_states``) does not count. After ``timeout`` wall seconds it is
+        returned anyway.
 
         :param msg_type: the message class.
         :param topic: the fully qualified topic name.
+        :param readers: how many subscriptions outside the probe to wait for.
+        :param timeout: wall seconds to wait at most.
         """
         pub = self.node.create_publisher(msg_type, topic, 10)
-        end = time.monotonic() + 10.0
-        while pub.get_subscription_count() == 0 and time.monotonic() < end:
+        own = sum(1 for sub in self.node.subscriptions if sub.topic_name == topic)
+        end = time.monotonic() + timeout
+        while pub.get_subscription_count() - own < readers and time.monotonic() < end:
             self.spin(0.05)
         return pub
 
