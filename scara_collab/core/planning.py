@@ -142,6 +142,21 @@ def plan_path(arm: ArmModel, q_start, target, frame: str = 'world', mode: str = 
     raise ValueError(f'unknown mode {mode!r}; expected one of {MODES}')
 
 
+def path_options(trajectory_cfg: dict) -> dict:
+    """Return :func:`plan_path`'s keyword options from ``controllers.yaml`` ``trajectory``.
+
+    The planners and the sorting job plan with the same options (the job's plans are offered
+    to the planners), so both read them here.
+
+    >>> path_options({'sample_period': 0.01, 'dls_threshold': 0.5, 'dls_max_damping': 0.15,
+    ...               'offer_tolerance': 0.002})
+    {'dt': 0.01, 'dls_threshold': 0.5, 'dls_max_damping': 0.15}
+    """
+    return {'dt': float(trajectory_cfg['sample_period']),
+            'dls_threshold': float(trajectory_cfg['dls_threshold']),
+            'dls_max_damping': float(trajectory_cfg['dls_max_damping'])}
+
+
 def offered_move(arm: ArmModel, t, q, qd, qdd) -> Trajectory:
     """Return a move offered as a plan (the sorting job's), checked to be a plan of ``arm``.
 

@@ -43,7 +43,7 @@ from scara_collab.core.config import Rule
 from scara_collab.core.job import GripCommand, JobSettings, MoveCommand, SortingJob
 from scara_collab.core.kinematics import IKError
 from scara_collab.core.model import load_cell
-from scara_collab.core.planning import plan_path
+from scara_collab.core.planning import path_options, plan_path
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
@@ -73,14 +73,12 @@ class AutomationManager(Node):
                                                 planning_buffer=cfg['controllers']
                                                 ['planning_buffer'])
         self.mode = self.settings.mode
-        traj = cfg['controllers']['trajectory']  # the planners' own settings: plan once
+        options = path_options(cfg['controllers']['trajectory'])  # the planners' own
 
         def plan(robot, q0, target):
             try:
                 return plan_path(self.cell.arm(robot), q0, target, mode='line_or_joint',
-                                 dt=traj['sample_period'],
-                                 dls_threshold=traj['dls_threshold'],
-                                 dls_max_damping=traj['dls_max_damping'])
+                                 **options)
             except IKError as exc:
                 raise ValueError(str(exc)) from None
 

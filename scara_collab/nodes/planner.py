@@ -37,7 +37,7 @@ the planner reports WARN "waiting", retries whenever the other arm commits a new
 refuses after ``max_wait`` seconds.
 """
 from collections import OrderedDict
-from typing import Callable, Optional, Sequence, Tuple
+from typing import Callable, NamedTuple, Optional, Sequence, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
@@ -50,8 +50,8 @@ from trajectory_msgs.msg import JointTrajectory
 from scara_collab.core.config import load_config, Rule
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.model import load_cell
-from scara_collab.core.planning import (committed, MODES, offered_move, Plan, plan_path,
-                                        schedule, starts_at, Timeline)
+from scara_collab.core.planning import (committed, MODES, offered_move, path_options, Plan,
+                                        plan_path, schedule, starts_at, Timeline)
 from scara_collab.core.trajectory import path_metrics, Trajectory
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
@@ -73,6 +73,20 @@ def _rules(robots: Sequence[str]) -> Tuple[Rule, ...]:
             Rule('profile', 'text'),
             Rule('mode', 'str', lambda v: v in MODES, f'must be one of {MODES}'),
             *(Rule(key, 'positive') for key in TIMES))
+
+
+class Asked(NamedTuple):
+    """A move asked for: where to, the plan offered with it (or None), and its request id.
+
+    ``time``: the requested start while it is queued (0 = as soon as possible); once it is
+    planned or waiting, when it was first wanted (a wait counts into its delay).
+    """
+
+    xyz: np.ndarray
+    frame: str
+    time: float
+    offer: Optional[Trajectory]
+    request: int
 
 
 class Answers:
@@ -150,12 +164,11 @@ class Planner(Node):
         self.q_other: Optional[np.ndarray] = None
         self.mine: Optional[Plan] = None            # my committed move
         self.mine_id = ''                           # ... its move id
-        # a move asked for: (xyz, frame, stamp or asked, offered plan or None, request)
-        self.pending_target = None                  # my committed move's
+        self.pending_target: Optional[Asked] = None  # my committed move's
         self.theirs: Optional[Timeline] = None      # the other arm's committed move
         self.theirs_before: Optional[Timeline] = None  # ... and the one it replaced
-        self.queued = None                          # one to plan after mine
-        self.waiting = None                         # one blocked by the other arm
+        self.queued: Optional[Asked] = None         # one to plan after mine
+        self.waiting: Optional[Asked] = None        # one blocked by the other arm
 
         r, o = self.arm.name, self.other.name
         faults = declare_faults(self)
@@ -227,9 +240,9 @@ class Planner(Node):
             queued, self.queued = self.queued, None
             self._plan(*queued)
 
-    def _supersede(self, held: Optional[Tuple], why: str) -> None:
+    def _supersede(self, held: Optional[Asked], why: str) -> None:
         if held is not None:
-            self._status('superseded', held[-1], why)
+            self._status('superseded', held.request, why)
 
     def _on_target(self, msg: PointStamped) -> None:
         frame_id, xyz, stamp = conv.point_stamped(msg)
@@ -270,7 +283,7 @@ class Planner(Node):
         self.waiting = self.queued = None
         if self.mine is not None and self.mine.end > self._now():
             # the bridge replaces a running trajectory: hold this one until mine has ended
-            self.queued = (xyz, frame, stamp, offer, request)
+            self.queued = Asked(xyz, frame, stamp, offer, request)
             self._status('queued', request, f'behind the running move (ends '
                          f't={self.mine.end:.3f} s)')
             return
@@ -287,9 +300,7 @@ class Planner(Node):
         else:
             try:
                 traj = plan_path(self.arm, self.q, xyz, frame, self.mode,
-                                 dt=self.traj_cfg['sample_period'],
-                                 dls_threshold=self.traj_cfg['dls_threshold'],
-                                 dls_max_damping=self.traj_cfg['dls_max_damping'])
+                                 **path_options(self.traj_cfg))
             except (IKError, ValueError) as exc:
                 self._status('refused', request, str(exc))
                 return
@@ -299,12 +310,12 @@ class Planner(Node):
         plan = schedule(self.arm, traj, start, self.other, other, self.margin, self.leader,
                         self.max_delay)
         if plan is None:
-            self._wait((xyz, frame, asked, offer, request))
+            self._wait(Asked(xyz, frame, asked, offer, request))
             return
         if plan.start - asked > 1e-9:  # count the time spent waiting, not just the last delay
             plan = Plan(plan.traj, plan.start, plan.start - asked)
         self.waiting = None
-        self.pending_target = (xyz, frame, asked, offer, request)
+        self.pending_target = Asked(xyz, frame, asked, offer, request)
         self._publish(plan, request)
 
     def _on_other_execution(self, msg: DiagnosticStatus) -> None:
@@ -332,16 +343,16 @@ class Planner(Node):
         elif st.state in ('refused', 'preempted', 'held'):
             self.mine = None  # nothing of mine runs: the next target is planned at once
 
-    def _wait(self, move: Tuple) -> None:
+    def _wait(self, move: Asked) -> None:
         """Wait for the other arm: it blocks ``move`` even after its committed motion."""
-        asked, request = move[2], move[-1]
+        asked, request = move.time, move.request
         now = self._now()
         if now - asked > self.max_wait:
             self.waiting = None
             self._status('refused', request, f'{self.other.name} has blocked the move for '
                          f'{now - asked:.1f} s')
             return
-        first = self.waiting is None or self.waiting[-1] != request
+        first = self.waiting is None or self.waiting.request != request
         self.waiting = move
         if first:
             self._status('waiting', request, f'{self.other.name} blocks it: no start within '
@@ -365,7 +376,7 @@ class Planner(Node):
         replan = schedule(self.arm, self.mine.traj, self.mine.start, self.other,
                           self.theirs.since(now), self.margin, leader=False,
                           max_delay=self.max_delay)
-        asked, request = self.pending_target[2], self.pending_target[-1]
+        asked, request = self.pending_target.time, self.pending_target.request
         if replan is None:
             self.mine = None
             self.traj_pub.publish(conv.trajectory_msg(
