@@ -14,7 +14,7 @@ all in one container), ``setup.py`` (the console scripts, so ``ros2 run`` has th
 names), the in-process graph of the benchmarks (:func:`scara_collab.bench.job.run_job`) and
 the tests' graphs (``test/ros_harness.py``). In launch order::
 
-    pybullet_bridge      clock, /joint_states, trajectories, belt, gripper   ready: /clock runs
+    pybullet_bridge      clock, /joint_states, trajectories, belt, gripper   ready: service
     left_planner         /scara_left/target(_trajectory) -> trajectory       ready: subscribed
     right_planner        /scara_right/target(_trajectory) -> trajectory      ready: subscribed
     replication_manager  /collab/target(_trajectory) -> both arms, mirrored  ready: service
@@ -48,10 +48,10 @@ ROBOTS = ('scara_left', 'scara_right')  # the arms' namespaces (config/cell.yaml
 class Readiness:
     """What a node shows on the graph once it is ready.
 
-    ``kind``: ``'clock'`` (sim time runs: ``/clock`` is published), ``'subscribed'`` (the node
-    subscribes to the topic ``name``), ``'published'`` (it publishes it), ``'service'`` (the
-    service ``name`` of type ``srv_type``, ``'package/srv/Type'``, answers), ``'page'``
-    (subscribed to ``name`` and its web page answers on the node's ``port`` parameter).
+    ``kind``: ``'subscribed'`` (the node subscribes to the topic ``name``), ``'published'``
+    (it publishes it), ``'service'`` (the service ``name`` of type ``srv_type``,
+    ``'package/srv/Type'``, answers), ``'page'`` (subscribed to ``name`` and its web page
+    answers on the node's ``port`` parameter).
     """
 
     kind: str
@@ -60,8 +60,6 @@ class Readiness:
 
     def describe(self, node: str, params: Mapping[str, str]) -> str:
         """Return what the launcher waits for, in words (for its console lines)."""
-        if self.kind == 'clock':
-            return '/clock messages'
         if self.kind == 'subscribed':
             return f'node {node} subscribed to {self.name}'
         if self.kind == 'service':
@@ -81,6 +79,7 @@ class NodeSpec:
     ready: Readiness
     fixed: Mapping[str, str] = field(default_factory=dict)  # the class's own keywords
     optional: bool = False     # started only when asked for (the viewer, transforms)
+    lockstep: bool = False     # answers /clock on /sim/lockstep (scara_collab.nodes.lockstep)
 
     def build(self, **kwargs):
         """Build the node in this process: ``Class(**fixed, **kwargs)`` (``context``, ...)."""
@@ -94,22 +93,26 @@ def _n(module: str) -> str:
 
 NODES: Tuple[NodeSpec, ...] = (
     NodeSpec('pybullet_bridge', _n('pybullet_bridge:main'), _n('pybullet_bridge:PyBulletBridge'),
-             ('simulation', 'controllers'), Readiness('clock')),
+             ('simulation', 'controllers'), Readiness('service', '/sim/resume',
+                                                      'std_srvs/srv/Trigger')),
     NodeSpec('left_planner', _n('planner:main_left'), _n('planner:Planner'), ('controllers',),
              Readiness('subscribed', f'/{ROBOTS[0]}/target'),
-             {'robot': ROBOTS[0], 'node_name': 'left_planner'}),
+             {'robot': ROBOTS[0], 'node_name': 'left_planner'}, lockstep=True),
     NodeSpec('right_planner', _n('planner:main_right'), _n('planner:Planner'), ('controllers',),
              Readiness('subscribed', f'/{ROBOTS[1]}/target'),
-             {'robot': ROBOTS[1], 'node_name': 'right_planner'}),
+             {'robot': ROBOTS[1], 'node_name': 'right_planner'}, lockstep=True),
     NodeSpec('replication_manager', _n('replication_manager:main'),
              _n('replication_manager:ReplicationManager'), (),
-             Readiness('service', '/replication_manager/enable', 'std_srvs/srv/SetBool')),
+             Readiness('service', '/replication_manager/enable', 'std_srvs/srv/SetBool'),
+             lockstep=True),
     NodeSpec('collision_monitor', _n('collision_monitor:main'),
              _n('collision_monitor:CollisionMonitor'), (),
-             Readiness('service', '/collision_monitor/clear', 'std_srvs/srv/Trigger')),
+             Readiness('service', '/collision_monitor/clear', 'std_srvs/srv/Trigger'),
+             lockstep=True),
     NodeSpec('automation_manager', _n('automation_manager:main'),
              _n('automation_manager:AutomationManager'), ('automation', 'controllers'),
-             Readiness('service', '/automation_manager/start', 'std_srvs/srv/Trigger')),
+             Readiness('service', '/automation_manager/start', 'std_srvs/srv/Trigger'),
+             lockstep=True),
     NodeSpec('cell_viewer', _n('cell_viewer:main'), _n('cell_viewer:CellViewer'), (),
              Readiness('page', '/joint_states'), optional=True),
     NodeSpec('state_publisher', _n('state_publisher:main'),
@@ -241,6 +244,15 @@ def job_nodes(automation: bool = True, viewer: bool = False,
     wanted = {'cell_viewer': viewer, 'state_publisher': transforms}
     return [n for n in NODES if (automation or n.name != 'automation_manager')
             and (not n.optional or wanted.get(n.name, False))]
+
+
+def lockstep_expect(nodes: Sequence[NodeSpec]) -> List[str]:
+    """Return the bridge's ``lockstep_expect`` for a run of ``nodes``: those that answer.
+
+    >>> lockstep_expect(job_nodes())[:2]
+    ['/left_planner', '/right_planner']
+    """
+    return [f'/{n.name}' for n in nodes if n.lockstep]
 
 
 def job_params(mode: str) -> Dict[str, Dict[str, str]]:

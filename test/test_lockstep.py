@@ -270,3 +270,63 @@ def test_a_guard_holds_the_arms_before_it_is_dropped_and_clears_when_it_answers(
     gate.receive(Header(stamp=lockstep.END_OF_TIME, frame_id='/collision_monitor'))
     assert events[-1][:3] == ('/collision_monitor', False, 'left the lockstep')
     assert gate.absent
+
+
+def test_expected_participants_hold_sim_time_from_the_start(bare):
+    """``expect``: sim time waits for the named nodes before their first answer.
+
+    One that never answers is dropped after its timeout, like any silent participant.
+    """
+    wall = Wall()
+    gate = lockstep.LockstepGate(bare.node, 0.02, 5.0, wall_clock=wall,
+                                 expect=['planner', '/monitor'])
+    assert set(gate.reached) == {'/planner', '/monitor'}
+    assert gate.limit(0.0) == pytest.approx(0.02)    # one window, then their first answers
+    assert gate.limit(0.02) == pytest.approx(0.02)
+    answer(gate, '/planner', 0.02)
+    assert gate.limit(0.02) == pytest.approx(0.02), 'the monitor has not answered yet'
+    wall.now = 5.1
+    assert gate.limit(0.02) == pytest.approx(0.04) and set(gate.dropped) == {'/monitor'}
+
+
+def test_unthrottled_the_answer_steps_the_bridge_in_its_own_callback():
+    """Unthrottled, the answer that completes a round steps the bridge, in its callback.
+
+    One window per round of answers; no timer thread decides when.
+    """
+    g = Graph()
+    try:
+        g.bridge = g.add(PyBulletBridge(context=g.context, cli_args=params_args(
+            'simulation', 'controllers', overrides={
+                'real_time_factor': 0.0, 'feed_interval': 0.0, 'lockstep_window': 0.02,
+                'lockstep_expect': ['/stand_in']})))
+        gate = g.bridge.gate
+        assert g.spin_until(lambda: g.bridge._parked, 10.0)
+        assert g.bridge.sim.time == pytest.approx(0.02)  # one window, then it waits
+        for _ in range(50):
+            g.executor.spin_once(timeout_sec=0.005)
+        assert g.bridge.sim.time == pytest.approx(0.02), 'no step without the answer'
+        for k in range(1, 4):  # each answer moves the limit one window: stepped at once
+            answer(gate, '/stand_in', 0.02 * k)
+            assert g.bridge.sim.time == pytest.approx(0.02 * (k + 1))
+            assert g.bridge._parked
+    finally:
+        g.close()
+
+
+def test_started_paused_the_bridge_steps_only_after_resume():
+    """``paused``: the bridge starts at sim time 0 and stays there until ``/sim/resume``."""
+    from std_srvs.srv import Trigger
+    g = Graph()
+    try:
+        g.bridge = g.add(PyBulletBridge(context=g.context, cli_args=params_args(
+            'simulation', 'controllers', overrides={
+                'real_time_factor': 0.0, 'feed_interval': 0.0, 'paused': True})))
+        for _ in range(50):
+            g.executor.spin_once(timeout_sec=0.005)
+        assert g.bridge.sim.time == 0.0 and g.bridge.control.paused
+        res = g.call(Trigger, '/sim/resume', Trigger.Request())
+        assert res.success and 'resumed at sim t=0.000 s' in res.message, res.message
+        assert g.spin_until(lambda: g.bridge.sim.time > 0.5, 20.0)
+    finally:
+        g.close()

@@ -55,7 +55,8 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
     seed = int(load_config('simulation')['item_seed'] if seed is None else seed)
     g = InProcess()  # the executables' executor ($SCARA_COLLAB_EXECUTOR)
     params = graph.job_params(mode)  # as the launcher starts them
-    params['pybullet_bridge'].update(real_time_factor=0.0, feed_interval=feed, item_seed=seed)
+    params['pybullet_bridge'].update(real_time_factor=0.0, feed_interval=feed, item_seed=seed,
+                                     lockstep_expect=graph.lockstep_expect(graph.job_nodes()))
     params['automation_manager']['auto_start'] = 'true'
     built: Dict[str, object] = {}
     for spec in graph.job_nodes():

@@ -51,6 +51,7 @@ from scara_collab.nodes.faults import call_with_faults, declare_faults
 from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import LATCHED
 from scara_collab.nodes.runner import guarded, run_node
+from scara_collab.nodes.sim_timer import every
 
 
 class AutomationManager(Node):
@@ -115,8 +116,9 @@ class AutomationManager(Node):
         self.create_subscription(Bool, '/emergency_stop', guarded(self, self._on_estop), LATCHED)
         self.create_service(Trigger, '~/start', guarded(self, self._on_start, service=True))
         self.create_service(Trigger, '~/stop', guarded(self, self._on_stop, service=True))
-        self.create_timer(float(params['tick']), guarded(self, self._tick))
-        self.create_timer(1.0, guarded(self, self._publish_stats))
+        # on the sim clock, before joining the lockstep: each answer follows the tick's work
+        every(self, float(params['tick']), self._tick)
+        every(self, 1.0, self._publish_stats)
         # auto_start: the job starts on the first tick that finds the graph connected
         self.start_pending = params['auto_start']
         self.lockstep = lockstep.join(self)  # sim time waits while this node computes

@@ -40,6 +40,7 @@ from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.params import declare_checked
 from scara_collab.nodes.qos import LATCHED, LATEST
 from scara_collab.nodes.runner import guarded, run_node
+from scara_collab.nodes.sim_timer import every
 
 PARTS = ('link 1', 'link 2', 'quill')
 #: the monitor's own parameters and their defaults
@@ -115,8 +116,8 @@ class CollisionMonitor(Node):
             self.create_subscription(
                 DiagnosticStatus, f'/{arm.name}/execution_status',
                 guarded(self, self._on_execution), 50)
-        self.create_timer(self.stale_after / 2, guarded(self, self._watch))
-        self.create_timer(1.0, guarded(self, self._publish_status))
+        every(self, self.stale_after / 2, self._watch)  # on the sim clock
+        every(self, 1.0, self._publish_status)
         self.estop_pub.publish(Bool(data=False))
         lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'watching {self.cell.leader.name} vs '

@@ -22,6 +22,12 @@ The protocol, on one topic ``/sim/lockstep`` (``std_msgs/Header``):
   later), never from the age of its last answer alone: while sim time stands still nobody
   gets a new ``/clock`` to answer, so the others' answers age too, and one frozen node must
   not take them all down. ``timeouts`` overrides ``timeout`` for named nodes;
+* the bridge may *expect* participants (``lockstep_expect``: the launcher and the in-process
+  job name the nodes they start): it waits for them from the start, as if they had answered
+  sim time 0, so the first steps do not depend on how soon each node answers;
+* unthrottled, the bridge steps to its limit at once and the answer that moves the limit
+  steps it on, in that answer's callback: in one process every step takes its turn in the
+  executor's order, and the same seed gives the same run (README, *Repeatable runs*);
 * a *guard* (the collision monitor) is a participant without which the arms must not move:
   before the gate drops a guard, or when a guard leaves, it tells the bridge (``on_guard``),
   which holds both arms and refuses trajectories until the guard answers again
@@ -29,8 +35,9 @@ The protocol, on one topic ``/sim/lockstep`` (``std_msgs/Header``):
 
 Nodes join with :func:`join` (parameter ``lockstep``, default true; only on sim time). The
 bridge's parameters ``lockstep_window`` (sim s, 0 = off), ``lockstep_timeout`` (wall s),
-``lockstep_timeouts`` (``['/node:seconds', ...]``, :func:`parse_timeouts`) and
-``lockstep_guards`` (node names, default ``['/collision_monitor']``) configure the gate.
+``lockstep_timeouts`` (``['/node:seconds', ...]``, :func:`parse_timeouts`),
+``lockstep_guards`` (node names, default ``['/collision_monitor']``) and ``lockstep_expect``
+(node names) configure the gate.
 Messages are the standard ``std_msgs/Header``, so ``ros2 topic echo /sim/lockstep`` shows who
 is answering.
 """
@@ -147,13 +154,16 @@ class LockstepGate:
         left (``present`` false: hold the arms), or answers again (true). Called before the
         gate lets sim time go on without the guard.
     :param wall_clock: wall time source, s (tests pass a fake one).
+    :param expect: full names of participants waited for from the start, as if they had
+        answered sim time 0 (dropped after their timeout like any other).
     """
 
     def __init__(self, node: Node, window: float, timeout: float,
                  on_answer: Optional[Callable[[], None]] = None,
                  timeouts: Optional[Dict[str, float]] = None, guards: Iterable[str] = (),
                  on_guard: Optional[Callable[[str, bool, str], None]] = None,
-                 wall_clock: Callable[[], float] = time.monotonic):
+                 wall_clock: Callable[[], float] = time.monotonic,
+                 expect: Iterable[str] = ()):
         """Store the settings; with a window, subscribe ``/sim/lockstep``."""
         self.node = node
         self.window = float(window)
@@ -169,6 +179,10 @@ class LockstepGate:
         self.since: Dict[str, float] = {}       # participant holding sim time -> wall since
         self.absent: Dict[str, str] = {}        # guard -> why it is missing (arms held)
         if self.window > 0:
+            self.reached.update({full_name(n): 0.0 for n in expect})
+            if self.reached:
+                node.get_logger().info(f'lockstep: waiting from the start for '
+                                       f'{", ".join(sorted(self.reached))}')
             from scara_collab.nodes.runner import guarded  # runner imports this module
             node.create_subscription(Header, TOPIC, guarded(node, self.receive), QOS)
 

@@ -30,7 +30,9 @@ waited for; the wait is counted for each node on its own, so one frozen node doe
 others down. The arms never move without the nodes named in ``lockstep_guards`` (default
 ``['/collision_monitor']``): before such a node is dropped, or when it leaves, both arms are
 held (status ``held``, reason ``<node> silent ...: holding``) and trajectories are refused
-until it answers again (status ``cleared``).
+until it answers again (status ``cleared``). The nodes named in ``lockstep_expect`` are waited
+for from the start (as if they had answered sim time 0), so the first steps do not depend on
+how soon they answer; the launcher and the in-process job name the nodes they start.
 """
 import math
 import time
@@ -153,7 +155,8 @@ class PyBulletBridge(Node):
         params = declare_checked(self, PARAMETERS, RULES)
         for key, default, what in (
                 ('lockstep_timeouts', [''], "per-node lockstep_timeout: ['/<node>:<s>', ...]"),
-                ('lockstep_guards', ['/collision_monitor'], 'nodes the arms never move without')):
+                ('lockstep_guards', ['/collision_monitor'], 'nodes the arms never move without'),
+                ('lockstep_expect', [''], 'participants waited for from the start')):
             self.declare_parameter(key, default, ParameterDescriptor(
                 type=ParameterType.PARAMETER_STRING_ARRAY, description=what))
         sim_cfg, ctl_cfg = cfg['simulation'], cfg['controllers']
@@ -206,12 +209,15 @@ class PyBulletBridge(Node):
             on_answer=self._wake,
             timeouts=parse_timeouts(self.get_parameter('lockstep_timeouts').value or []),
             guards=[g for g in self.get_parameter('lockstep_guards').value or [] if g.strip()],
-            on_guard=self._on_guard)
+            on_guard=self._on_guard,
+            expect=[n for n in self.get_parameter('lockstep_expect').value or [] if n.strip()])
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._timer = self.create_timer(self.pacer.period, self._tick, clock=self._steady)
         self._parked = False  # the stepping timer is off while the bridge waits for answers
         self.control = SimControl(self, self.sim, self.home, self._advance, self._on_pause,
                                   self._busy)
+        if self.control.paused:  # started paused: /sim/resume starts the stepping timer
+            self._timer.cancel()
         self.actions = (TrajectoryActions(self, self.cell, self.sim, self.execution)
                         if FollowJointTrajectory is not None else None)
         if self.gate.enabled:  # re-arm now and then, so a silent participant times out
@@ -236,9 +242,13 @@ class PyBulletBridge(Node):
                 self.sim.conveyor.set_feed(float(tree['feed_interval']))
 
     def _wake(self) -> None:
+        """Step on, if the bridge was waiting: an answer came (or the 0.25 s watch looks)."""
         if self._parked and not self.control.paused:
-            self._parked = False
-            self._timer.reset()
+            if self.pacer.rtf <= 0:
+                self._tick()  # unthrottled: in this callback, in turn with the messages
+            else:
+                self._parked = False
+                self._timer.reset()
 
     # --- lockstep guards: the arms never move unwatched -----------------------------------
     def _on_guard(self, name: str, present: bool, why: str) -> None:
@@ -262,18 +272,32 @@ class PyBulletBridge(Node):
         return f'{name} {why}: no move until it answers again'
 
     def _tick(self) -> None:
+        """Step what is due and the lockstep allows; wait for the answers without spinning.
+
+        Unthrottled, with participants, the bridge steps to the gate's limit at once and the
+        answer that moves the limit steps on (:meth:`_wake`): stepping takes its turn with the
+        messages in the executor's order, never when a timer thread looks, so a run in one
+        process repeats exactly (README, *Repeatable runs*).
+        """
         if self.control.paused:
             return
         due = self.pacer.due(self.sim.time)
         limit = self.gate.limit(self.sim.time)
-        if limit != float('inf'):
-            allowed = int(math.floor((limit - self.sim.time) / self.dt + 1e-6))
-            if allowed <= 0 < due:  # wait for the participants' answers, without spinning
-                self._parked = True
-                self._timer.cancel()
-                return
-            due = min(due, allowed)
-        self._advance(due)
+        if limit == float('inf'):  # nobody to wait for: the stepping timer runs
+            if self._parked:
+                self._parked = False
+                self._timer.reset()
+            self._advance(due)
+            return
+        allowed = int(math.floor((limit - self.sim.time) / self.dt + 1e-6))
+        if self.pacer.rtf <= 0:
+            self._advance(allowed)
+            self.gate.limit(self.sim.time)  # at the limit: the wait for the answers starts now
+        elif allowed > 0 or due <= 0:
+            self._advance(min(due, allowed))
+            return
+        self._parked = True
+        self._timer.cancel()
 
     def _advance(self, due: int) -> None:
         """Step ``due`` physics steps, publishing whatever falls due on the way."""

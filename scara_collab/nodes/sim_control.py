@@ -4,7 +4,9 @@ Gazebo's world control, for this cell: ``/sim/pause`` stops the clock (no physic
 ``/clock``; every node on sim time waits), ``/sim/resume`` lets it run again at the bridge's
 real-time factor, ``/sim/step`` advances a paused simulation by exactly ``sim_step_count``
 physics steps (parameter, default 10 = 10 ms at 1 kHz) and publishes what falls due, and
-``/sim/reset`` puts both arms back at their home pose, at rest. All four are idempotent
+``/sim/reset`` puts both arms back at their home pose, at rest. With the parameter ``paused``
+true the bridge starts paused (the launcher starts it so, and resumes it once the job has
+started, so a run starts at sim time 0 whatever the start-up took). All four are idempotent
 (pausing a paused simulation succeeds and says so); the answer's message says the sim time.
 Reset refuses, with the reason, while an arm executes a move or holds an item: that would lose
 the move or drop the item outside its bin. Items stay on the belt and sim time runs on (ROS
@@ -38,7 +40,10 @@ class SimControl:
         """Declare ``sim_step_count`` and serve ``/sim/{pause,resume,step,reset}``."""
         self.node, self.sim, self.home = node, sim, home
         self._advance, self._on_pause, self._busy = advance, on_pause, busy
-        self.paused = False
+        self.paused = bool(node.declare_parameter('paused', False, ParameterDescriptor(
+            type=ParameterType.PARAMETER_BOOL,
+            description='start paused (like gz sim without -r): /sim/resume starts the clock'))
+            .value)
         node.declare_parameter('sim_step_count', 10, ParameterDescriptor(
             type=ParameterType.PARAMETER_INTEGER,
             description='physics steps one /sim/step call advances (>= 1)'))

@@ -165,8 +165,6 @@ class GraphClient:
     def ready_check(self, stage: Stage) -> Callable[[], bool]:
         """Return the readiness predicate of a stage (from :mod:`scara_collab.graph`)."""
         name, ready = stage.name, graph.node(stage.name).ready
-        if ready.kind == 'clock':
-            return lambda: self.node.get_clock().now().nanoseconds > 0
         if ready.kind == 'subscribed':
             return lambda: self._has(name, ready.name, 'subscriber')
         if ready.kind == 'published':

@@ -13,12 +13,15 @@ line).
 Every wait has a timeout that ends the launch with an error naming the stage, and a node
 process that dies ends it at once (its name, exit code and the tail of its log are printed).
 
-The bridge is the clock and steps from the moment it starts. So that the launch does not burn
-sim time at full speed, the bridge starts at ``--launch-rtf`` (default 1.0) and is set to
-``--rtf`` (its dynamic parameter ``real_time_factor``) when the job starts; the belt feeds
-items from then on too (``feed_interval`` is 0 until the job starts). The nodes run in
-lockstep with the bridge (:mod:`scara_collab.nodes.lockstep`), so the job does not depend on
-how fast the machine is. The bridge
+The bridge is the clock. It starts paused at sim time 0 (its parameter ``paused``) and
+waits, once running, for the first answers of every launched node that takes part in the
+lockstep (``lockstep_expect``); once the job has started the launcher sets the feed (the belt
+feeds items from then on; ``feed_interval`` is 0 until then) and ``--rtf`` (its dynamic
+parameter ``real_time_factor``) and calls ``/sim/resume``. So every run starts at sim time 0
+with every node there, however long the start-up took. The nodes run in lockstep with the
+bridge (:mod:`scara_collab.nodes.lockstep`), so the job does not depend on how fast the
+machine is. At the end the bridge is slowed to ``--launch-rtf`` (default 1.0) while the job
+is stopped. The bridge
 picks its tick at start-up (2 ms when throttled) and steps ``step_chunk`` per tick, so when it
 will be released to more than 4x (or unthrottled) the launcher also passes ``step_chunk``
 0.02 s, which allows up to 10x real time (``--step-chunk`` to change it; ``--launch-rtf 0``
@@ -121,8 +124,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    help='real-time factor of the bridge, 0 = as fast as possible '
                    '(default: config/simulation.yaml)')
     p.add_argument('--launch-rtf', type=float, default=1.0, metavar='FACTOR',
-                   help='real-time factor while the graph starts, at most --rtf; 0 = start '
-                   'the bridge at --rtf at once (default: %(default)s)')
+                   help='real-time factor while the job is stopped at the end, at most '
+                   '--rtf (the graph starts paused); 0 = stay at --rtf (default: %(default)s)')
     p.add_argument('--step-chunk', type=float, default=None, metavar='SIM_SECONDS',
                    help='bridge step_chunk: sim time stepped per 2 ms bridge tick, which '
                    'bounds the real-time factor at step_chunk / 0.002 (default: '
@@ -334,9 +337,7 @@ class Launcher:
             child.ready_after = ready_after = time.monotonic() - child.started
             extra = ''
             if stage.name == 'pybullet_bridge':
-                extra = f', sim t={self.recorder.sim_time:.2f} s'
-                if self.launch_rtf != self.rtf:
-                    extra += f', held at rtf {self.launch_rtf:g} until the job starts'
+                extra = ', paused at sim t=0 until the job starts'
             self.console.say(f'[launch] {stage.name:<20} ready in {ready_after:4.1f} s '
                              f'(pid {child.proc.pid}): {stage.ready}{extra}')
 
@@ -367,6 +368,10 @@ class Launcher:
         if release:
             self.ros.set_bridge(**release)
             self.rtf_released = 'real_time_factor' in release
+        res = self.ros.call(Trigger, '/sim/resume', Trigger.Request(), self.args.ready_timeout,
+                            'pybullet_bridge')
+        if not res.success:
+            raise RunEnd(f'pybullet_bridge refused to resume: {res.message}')
         self.recorder.extra['launch_wall_seconds'] = time.monotonic() - self.t_launch
         self.cpu.mark(self.processes.cpu_now(), self.recorder.sim_time)
         job = f'{self.args.mode} job started' if self.job_started else 'graph idle'

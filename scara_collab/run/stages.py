@@ -32,10 +32,15 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
     """Return the graph for ``args``, in launch order (the nodes of :mod:`scara_collab.graph`)."""
     common = {} if args.profile is None else {'profile': args.profile}
     by_mode = graph.job_params(args.mode)
+    port = getattr(args, 'viewer', None)
+    specs = graph.job_nodes(automation=with_automation, viewer=port is not None,
+                            transforms=bool(getattr(args, 'tf', False)))
     own: Dict[str, Dict[str, str]] = {
+        # paused until the job has started (Launcher.start_job), so every run starts at sim
+        # time 0 with every node there; the belt feeds from then on
         'pybullet_bridge': {'real_time_factor': repr(float(args.launch_rtf)),
-                            # the belt feeds from when the job starts (Launcher.start_job)
-                            'feed_interval': '0.0'},
+                            'feed_interval': '0.0', 'paused': 'true',
+                            'lockstep_expect': graph.param_value(graph.lockstep_expect(specs))},
         'automation_manager': {'auto_start': 'false'},  # the launcher starts the job
     }
     bridge = own['pybullet_bridge']
@@ -45,13 +50,11 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
         bridge['gui'] = 'true'
     if args.seed is not None:
         bridge['item_seed'] = str(args.seed)
-    port = getattr(args, 'viewer', None)
     if port is not None:
         own['cell_viewer'] = {'port': str(port)}
     faults = getattr(args, 'fault', [])
     out = []
-    for spec in graph.job_nodes(automation=with_automation, viewer=port is not None,
-                                transforms=bool(getattr(args, 'tf', False))):
+    for spec in specs:
         params = dict(common, **by_mode[spec.name], **own.get(spec.name, {}))
         if faults:  # every node applies the entries naming its own publishers and clients
             params['faults'] = graph.param_value(faults)
