@@ -330,3 +330,31 @@ def test_started_paused_the_bridge_steps_only_after_resume():
         assert g.spin_until(lambda: g.bridge.sim.time > 0.5, 20.0)
     finally:
         g.close()
+
+
+@pytest.mark.parametrize('pause_at', [0.5, 0.207])
+def test_pause_at_stops_the_clock_exactly_there(pause_at):
+    """``pause_at``: the bridge pauses by itself at that sim time, and a resume runs on.
+
+    Its clock and state are published there, even off their periods' grid (0.207 s).
+    """
+    from sensor_msgs.msg import JointState
+    from std_srvs.srv import Trigger
+    g = Graph()
+    try:
+        clocks, states = g.collect(Clock, '/clock', 50), g.collect(JointState, '/joint_states', 50)
+        g.bridge = g.add(PyBulletBridge(context=g.context, cli_args=params_args(
+            'simulation', 'controllers', overrides={
+                'real_time_factor': 0.0, 'feed_interval': 0.0, 'pause_at': pause_at})))
+        assert g.spin_until(lambda: g.bridge.control.paused, 20.0)
+        assert g.bridge.sim.time == pytest.approx(pause_at, abs=1e-9)
+        assert g.spin_until(lambda: clocks and conv.to_sec(clocks[-1].clock) >= pause_at - 1e-9)
+        assert g.spin_until(lambda: states and conv.to_sec(states[-1].header.stamp)
+                            >= pause_at - 1e-9)
+        for _ in range(20):
+            g.executor.spin_once(timeout_sec=0.005)
+        assert g.bridge.sim.time == pytest.approx(pause_at, abs=1e-9), 'it stays paused'
+        assert g.call(Trigger, '/sim/resume', Trigger.Request()).success
+        assert g.spin_until(lambda: g.bridge.sim.time > pause_at + 0.2, 20.0)
+    finally:
+        g.close()

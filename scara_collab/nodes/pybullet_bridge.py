@@ -300,7 +300,13 @@ class PyBulletBridge(Node):
         self._timer.cancel()
 
     def _advance(self, due: int) -> None:
-        """Step ``due`` physics steps, publishing whatever falls due on the way."""
+        """Step ``due`` physics steps, publishing whatever falls due on the way.
+
+        Never past ``pause_at``: there the simulation pauses, its clock published.
+        """
+        left = self.control.steps_to_pause(self.dt)
+        if left is not None:
+            due = min(due, left)
         while due > 0:
             t = self.sim.time
             to_next = min(self._next.values()) - t
@@ -308,6 +314,11 @@ class PyBulletBridge(Node):
             self.sim.step(n)
             due -= n
             self._publish_due()
+        if left is not None and self.control.steps_to_pause(self.dt) == 0:
+            for key, publish in (('clock', self._publish_clock), ('state', self._publish_state)):
+                if self._next[key] - self._periods[key] < self.sim.time - 1e-9:
+                    publish()  # the instant it pauses at, even off the period's grid
+            self.control.pause_here()
 
     def _on_pause(self, paused: bool) -> None:
         if paused:
@@ -335,11 +346,10 @@ class PyBulletBridge(Node):
     def _publish_due(self) -> None:
         t = self.sim.time + 1e-9
         if t >= self._next['clock']:
-            self.clock_pub.publish(ClockMsg(clock=conv.to_time(self.sim.time)))
+            self._publish_clock()
             self._next['clock'] += self._periods['clock']
         if t >= self._next['state']:
-            names, pos, vel, eff = self.sim.joint_state()
-            self.state_pub.publish(conv.joint_state(self.sim.time, names, pos, vel, eff))
+            self._publish_state()
             self._next['state'] += self._periods['state']
         if t >= self._next['markers']:
             self.items_pub.publish(conv.item_markers(self.sim.items(), self.cell.item_classes,
@@ -354,6 +364,13 @@ class PyBulletBridge(Node):
         if self.actions is not None:
             self.actions.tick()
         self.execution.poll()
+
+    def _publish_clock(self) -> None:
+        self.clock_pub.publish(ClockMsg(clock=conv.to_time(self.sim.time)))
+
+    def _publish_state(self) -> None:
+        names, pos, vel, eff = self.sim.joint_state()
+        self.state_pub.publish(conv.joint_state(self.sim.time, names, pos, vel, eff))
 
     def _publish_all(self) -> None:
         for k in self._next:

@@ -4,15 +4,18 @@ Gazebo's world control, for this cell: ``/sim/pause`` stops the clock (no physic
 ``/clock``; every node on sim time waits), ``/sim/resume`` lets it run again at the bridge's
 real-time factor, ``/sim/step`` advances a paused simulation by exactly ``sim_step_count``
 physics steps (parameter, default 10 = 10 ms at 1 kHz) and publishes what falls due, and
-``/sim/reset`` puts both arms back at their home pose, at rest. With the parameter ``paused``
-true the bridge starts paused (the launcher starts it so, and resumes it once the job has
-started, so a run starts at sim time 0 whatever the start-up took). All four are idempotent
+``/sim/reset`` puts both arms back at their home pose, at rest. All four are idempotent
 (pausing a paused simulation succeeds and says so); the answer's message says the sim time.
+With the parameter ``paused`` true the bridge starts paused (the launcher starts it so, and
+resumes it once the job has started, so a run starts at sim time 0 whatever the start-up
+took); with ``pause_at`` > 0 it pauses by itself when sim time reaches it (to the physics
+step), once, like ``gz sim --iterations`` (the launcher ends a run's job window there,
+whatever the launcher's own turn).
 Reset refuses, with the reason, while an arm executes a move or holds an item: that would lose
 the move or drop the item outside its bin. Items stay on the belt and sim time runs on (ROS
 time never goes back); the feed goes on when the simulation resumes.
 """
-from typing import Callable, Dict
+from typing import Callable, Dict, Optional
 
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
@@ -44,6 +47,11 @@ class SimControl:
             type=ParameterType.PARAMETER_BOOL,
             description='start paused (like gz sim without -r): /sim/resume starts the clock'))
             .value)
+        self.pause_at = float(node.declare_parameter('pause_at', 0.0, ParameterDescriptor(
+            type=ParameterType.PARAMETER_DOUBLE,
+            description='sim time (s) at which to pause by itself, once; 0 = never')).value)
+        if not (self.pause_at >= 0.0 and self.pause_at < float('inf')):
+            raise ValueError(f'pause_at must be a sim time >= 0 s, got {self.pause_at}')
         node.declare_parameter('sim_step_count', 10, ParameterDescriptor(
             type=ParameterType.PARAMETER_INTEGER,
             description='physics steps one /sim/step call advances (>= 1)'))
@@ -57,6 +65,20 @@ class SimControl:
         if not isinstance(n, int) or n < 1:
             raise ValueError(f'sim_step_count must be an integer >= 1, got {n!r}')
         return n
+
+    def steps_to_pause(self, dt: float) -> Optional[int]:
+        """Return the physics steps of ``dt`` left until ``pause_at`` (None: none due)."""
+        if self.pause_at <= 0.0:
+            return None
+        return max(int(round((self.pause_at - self.sim.time) / dt)), 0)
+
+    def pause_here(self) -> None:
+        """Pause now, as ``pause_at`` asks (once: a later resume runs on)."""
+        self.pause_at = 0.0
+        if not self.paused:
+            self.paused = True
+            self._on_pause(True)
+            self.node.get_logger().info(f'simulation paused at {self._at()} (pause_at)')
 
     def _at(self) -> str:
         return f'sim t={self.sim.time:.3f} s'

@@ -40,6 +40,8 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
         # time 0 with every node there; the belt feeds from then on
         'pybullet_bridge': {'real_time_factor': repr(float(args.launch_rtf)),
                             'feed_interval': '0.0', 'paused': 'true',
+                            # the job window ends at sim t=duration exactly (it starts at 0)
+                            'pause_at': repr(float(args.duration)),
                             'lockstep_expect': graph.param_value(graph.lockstep_expect(specs))},
         'automation_manager': {'auto_start': 'false'},  # the launcher starts the job
     }
