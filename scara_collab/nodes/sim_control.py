@@ -75,10 +75,7 @@ class SimControl:
     def pause_here(self) -> None:
         """Pause now, as ``pause_at`` asks (once: a later resume runs on)."""
         self.pause_at = 0.0
-        if not self.paused:
-            self.paused = True
-            self._on_pause(True)
-            self.node.get_logger().info(f'simulation paused at {self._at()} (pause_at)')
+        self._set_paused(True, Trigger.Response())
 
     def _at(self) -> str:
         return f'sim t={self.sim.time:.3f} s'
