@@ -122,7 +122,7 @@ def test_idle_run_writes_report_and_files(launch, tmp_path):
     the state publisher is started and ready once it publishes ``/robot_description``.
     """
     out = tmp_path / 'idle'
-    la = launch('--mode', 'idle', '--duration', '3', '--rtf', '0', '--output', str(out),
+    la = launch('--mode', 'idle', '--duration', '3', '--rtf', '1', '--output', str(out),
                 '--record', '--animation', '--tf')
     assert la.wait() == 0, la.output
     text = la.output
@@ -138,9 +138,9 @@ def test_idle_run_writes_report_and_files(launch, tmp_path):
     assert 3.0 - 1e-6 <= summary['sim_seconds'] < 3.5  # float sums of 1 ms steps
     assert summary['wall_seconds'] > 0 and summary['real_time_factor'] > 0
     assert summary['mirror_error_max_m'] is None and summary['margin_ok'] is True
-    # 3 sim s at 100 Hz from sim t=0 (the graph starts paused); the recorder is not in
-    # lockstep, so unthrottled it may miss a few
-    rows = assert_complete_csv(out / 'timeseries.csv', min_rows=200)
+    # 3 sim s at 100 Hz from sim t=0 (the graph starts paused, and pauses at the end); at 1x
+    # the recorder (not in lockstep) keeps up with every state
+    rows = assert_complete_csv(out / 'timeseries.csv', min_rows=295)
     assert rows[0][0] == 't' and rows[0][-2:] == ['mirror_error_m', 'arm_distance_m']
     assert assert_complete_csv(out / 'events.csv', min_rows=0)[0] == [
         'time', 'kind', 'item', 'class', 'robot', 'cause']
@@ -466,6 +466,12 @@ def test_the_lockstep_watch_names_only_a_node_that_leaves_a_clock_unanswered():
     assert watch.silent(5.0, 26.0) == ('/b', 26.0, 1.0)
     watch.answer('/b', float(2**31 - 1), 27.0)  # it left the lockstep
     assert watch.silent(5.0, 40.0) is None
+    never = LockstepWatch(['/a', '/stopped_at_start'], limit=10.0)
+    never.expect(100.0)                     # sim time starts: nobody has answered yet
+    never.answer('/a', 0.02, 100.1)
+    assert never.silent(0.02, 105.0) is None
+    never.answer('/a', 0.04, 111.0)
+    assert never.silent(0.04, 111.0) == ('/stopped_at_start', 11.0, 0.0)
     with pytest.raises(SystemExit):
         launcher.parse_args(['--silent-timeout', '0'])
 

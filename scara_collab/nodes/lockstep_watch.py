@@ -51,6 +51,15 @@ class LockstepWatch:
         elif sim_t > self.reached.get(name, -1.0):
             self.reached[name], self.heard[name] = sim_t, wall
 
+    def expect(self, wall: float) -> None:
+        """Count every watched node not heard yet as having answered sim time 0 at ``wall``.
+
+        Called when sim time starts (the launcher resumes the paused bridge): a node that
+        never answers at all (stopped before its first answer) is silent like any other.
+        """
+        for name in self.names - set(self.reached):
+            self.reached[name], self.heard[name] = 0.0, wall
+
     def silent(self, sim_now: float, wall: float) -> Optional[Tuple[str, float, float]]:
         """Return ``(name, silent wall s, sim time it reached)`` of the longest silent one.
 

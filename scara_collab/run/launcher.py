@@ -267,7 +267,8 @@ class Launcher:
         self.rtf = args.rtf
         self.launch_rtf = args.launch_rtf
         one_process = getattr(args, 'one_process', False)  # nobody can be behind: no watch
-        self.liveness = Liveness([] if one_process else [s.name for s in self.stages],
+        self.liveness = Liveness([] if one_process else [
+            s.name for s in self.stages if graph.node(s.name).lockstep],
                                  getattr(args, 'silent_timeout', 10.0), self.context)
 
     def on_signal(self, signum, _frame) -> None:
@@ -372,6 +373,7 @@ class Launcher:
                             'pybullet_bridge')
         if not res.success:
             raise RunEnd(f'pybullet_bridge refused to resume: {res.message}')
+        self.liveness.expect(time.monotonic())  # a node that never answers is silent too
         self.recorder.extra['launch_wall_seconds'] = time.monotonic() - self.t_launch
         self.cpu.mark(self.processes.cpu_now(), self.recorder.sim_time)
         job = f'{self.args.mode} job started' if self.job_started else 'graph idle'

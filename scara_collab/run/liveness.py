@@ -23,7 +23,8 @@ from scara_collab.nodes.lockstep_watch import LockstepWatch, LockstepWatchNode, 
 class Liveness:
     """Watch the lockstep answers of the launched nodes.
 
-    :param names: the launched nodes' names (``collision_monitor``); none: the watch is off.
+    :param names: the launched nodes that answer the lockstep (``collision_monitor``); none:
+        the watch is off.
     :param limit: wall seconds a node may leave a ``/clock`` unanswered (``--silent-timeout``).
     :param context: the launcher's rclpy context.
     """
@@ -49,6 +50,10 @@ class Liveness:
             idle = idle + 1 if self._node.answers == before else 0
             if idle >= 3:
                 break
+
+    def expect(self, wall: float) -> None:
+        """Sim time starts now (``wall``): a node never heard is silent from here on."""
+        self.watch.expect(wall)
 
     def silent(self, sim_now: float, wall: float) -> Optional[Tuple[str, float, float]]:
         """Take the answers; return ``(node, silent wall s, sim time it reached)`` or None.
