@@ -358,3 +358,21 @@ def test_pause_at_stops_the_clock_exactly_there(pause_at):
         assert g.spin_until(lambda: g.bridge.sim.time > pause_at + 0.2, 20.0)
     finally:
         g.close()
+
+
+def test_the_graph_names_exactly_the_nodes_that_answer():
+    """``graph.NodeSpec.lockstep`` matches the nodes that join the lockstep on sim time.
+
+    The bridge and the launcher expect the nodes it names; a node that joined unnamed would
+    not be waited for from the start.
+    """
+    from scara_collab import graph
+    g = Graph()
+    try:
+        for spec in graph.job_nodes():
+            node = g.add(spec.build(context=g.context,
+                                    cli_args=params_args(*spec.configs)))
+            joined = isinstance(getattr(node, 'lockstep', None), lockstep.LockstepParticipant)
+            assert joined == spec.lockstep, spec.name
+    finally:
+        g.close()
