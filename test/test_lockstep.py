@@ -376,3 +376,14 @@ def test_the_graph_names_exactly_the_nodes_that_answer():
             assert joined == spec.lockstep, spec.name
     finally:
         g.close()
+
+
+def test_a_pause_at_that_is_not_a_sim_time_is_refused_at_start():
+    """``pause_at`` < 0 stops the bridge with the reason (and leaves no node behind)."""
+    g = Graph()
+    try:
+        with pytest.raises(ValueError, match='pause_at must be a sim time >= 0 s'):
+            PyBulletBridge(context=g.context, cli_args=params_args(
+                'simulation', 'controllers', overrides={'pause_at': -1.0}))
+    finally:
+        g.close()
