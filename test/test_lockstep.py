@@ -135,13 +135,17 @@ def test_nodes_on_wall_time_or_opted_out_do_not_join():
         g.close()
 
 
-def test_a_window_shorter_than_the_clock_period_is_refused():
-    """A lockstep window shorter than the clock period is refused when the bridge starts."""
+@pytest.mark.parametrize('overrides, reason', [
+    ({'lockstep_window': 0.005}, 'clock could never advance'),  # shorter than /clock's period
+    ({'pause_at': -1.0}, 'pause_at must be a sim time >= 0 s'),
+])
+def test_a_bad_lockstep_or_pause_setting_is_refused_at_start(overrides, reason):
+    """A window shorter than the clock period, or a pause_at that is not a sim time: refused."""
     g = Graph()
     try:
-        with pytest.raises(ValueError, match='clock could never advance'):
+        with pytest.raises(ValueError, match=reason):
             PyBulletBridge(context=g.context, cli_args=params_args(
-                'simulation', 'controllers', overrides={'lockstep_window': 0.005}))
+                'simulation', 'controllers', overrides=overrides))
     finally:
         g.close()
 
@@ -374,16 +378,5 @@ def test_the_graph_names_exactly_the_nodes_that_answer():
                                     cli_args=params_args(*spec.configs)))
             joined = isinstance(getattr(node, 'lockstep', None), lockstep.LockstepParticipant)
             assert joined == spec.lockstep, spec.name
-    finally:
-        g.close()
-
-
-def test_a_pause_at_that_is_not_a_sim_time_is_refused_at_start():
-    """``pause_at`` < 0 stops the bridge with the reason (and leaves no node behind)."""
-    g = Graph()
-    try:
-        with pytest.raises(ValueError, match='pause_at must be a sim time >= 0 s'):
-            PyBulletBridge(context=g.context, cli_args=params_args(
-                'simulation', 'controllers', overrides={'pause_at': -1.0}))
     finally:
         g.close()
