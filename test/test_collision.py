@@ -517,3 +517,53 @@ def test_closest_points_are_on_the_closest_capsule_axes(cell):
         i, j = np.unravel_index(int(np.argmin(pairs)), pairs.shape)
         radii = arm_capsules(left, q_l)[2][i] + arm_capsules(right, q_r)[2][j]
         assert np.linalg.norm(p - q) - radii == pytest.approx(d, abs=1e-9)
+
+
+SEGMENT_CASES = [  # crossing, parallel, collinear apart and overlapping, points, touching
+    ((0, 0, 0), (1, 1, 0), (0, 1, 0), (1, 0, 0)),
+    ((0, 0, 0), (2, 0, 0), (0, 1, 0), (2, 1, 0)),
+    ((0, 0, 0), (1, 0, 0), (2, 0, 0), (3, 0, 0)),
+    ((0, 0, 0), (2, 0, 0), (1, 0, 0), (3, 0, 0)),
+    ((0, 0, 0), (0, 0, 0), (1, -1, 1), (1, 1, 1)),
+    ((0, 0, 0), (1, 0, 0), (0.5, 0.5, 0.5), (0.5, 0.5, 0.5)),
+    ((1, 1, 1), (1, 1, 1), (1, 1, 1), (1, 1, 1)),
+    ((0, 0, 0), (1, 0, 0), (1, 0, 0), (1, 1, 0)),
+    ((0, 0, 0), (1, 0, 0), (1, 1e-9, 0), (-1, 1e-9, 1e-12)),
+]
+
+
+@pytest.mark.parametrize('p0, p1, q0, q1', SEGMENT_CASES)
+def test_the_float_segment_distance_is_the_vectorised_one(p0, p1, q0, q1):
+    """The single-pair float path gives segment_distance's distance, special cases included."""
+    from scara_collab.core.collision import _segment_distance_float
+    d, _, _ = segment_distance(p0, p1, q0, q1)
+    assert _segment_distance_float(p0, p1, q0, q1) == pytest.approx(float(d), abs=1e-15)
+
+
+@settings(max_examples=300, deadline=None)
+@given(arrays(float, (4, 3), elements=st.floats(-3, 3)), st.integers(0, 3))
+def test_the_float_segment_distance_agrees_on_random_segments(pts, degenerate):
+    """Random segments, with one made a point or the two made parallel now and then."""
+    from scara_collab.core.collision import _segment_distance_float
+    p0, p1, q0, q1 = pts
+    if degenerate == 1:
+        p1 = p0
+    elif degenerate == 2:
+        q1 = q0 + 0.7 * (p1 - p0)
+    d, _, _ = segment_distance(p0, p1, q0, q1)
+    got = _segment_distance_float(*(tuple(v) for v in (p0, p1, q0, q1)))
+    assert got == pytest.approx(float(d), abs=1e-12)
+
+
+def test_one_state_of_each_arm_takes_the_float_path_with_the_same_result(cell):
+    """arm_pair_distances of one state pair equals the vectorised result to rounding."""
+    left, right = cell.arms
+    rng = np.random.default_rng(11)
+    q_l = np.vstack([rng.uniform(left.lower, left.upper, (500, 3)), np.zeros(3),
+                     [0.0, 0.0, left.upper[2]]])
+    q_r = np.vstack([rng.uniform(right.lower, right.upper, (500, 3)), np.zeros(3), np.zeros(3)])
+    batch = arm_pair_distances(left, q_l, right, q_r)
+    for k in range(len(q_l)):
+        one = arm_pair_distances(left, q_l[k], right, q_r[k])
+        assert one.shape == (3, 3)
+        assert_allclose(one, batch[k], rtol=0, atol=1e-12)

@@ -28,6 +28,7 @@ computes the exact distance only of the pairs whose bound is below the margin; t
 only of those whose bound does not exceed the exact distance at the state with the smallest
 bound. Both give the full computation's results, bit for bit.
 """
+import math
 from typing import Callable, Optional, Tuple
 
 import numpy as np
@@ -196,9 +197,72 @@ def arm_capsules(arm: ArmModel, q: ArrayLike) -> Tuple[np.ndarray, np.ndarray, n
     return _capsule_segments(arm, q)
 
 
+def _segment_distance_float(p0, p1, q0, q1) -> float:
+    """Return :func:`segment_distance` of one pair of segments given as float 3-tuples.
+
+    The same formulas in the same order, on plain floats (no numpy per-call overhead).
+    """
+    d1 = (p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2])
+    d2 = (q1[0] - q0[0], q1[1] - q0[1], q1[2] - q0[2])
+    r = (p0[0] - q0[0], p0[1] - q0[1], p0[2] - q0[2])
+    a = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]
+    e = d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2]
+    b = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
+    c = d1[0] * r[0] + d1[1] * r[1] + d1[2] * r[2]
+    f = d2[0] * r[0] + d2[1] * r[1] + d2[2] * r[2]
+    point_p, point_q = a <= _DEGENERATE_SQ, e <= _DEGENERATE_SQ
+    safe_a, safe_e = (1.0 if point_p else a), (1.0 if point_q else e)
+    n0 = d1[1] * d2[2] - d1[2] * d2[1]
+    n1 = d1[2] * d2[0] - d1[0] * d2[2]
+    n2 = d1[0] * d2[1] - d1[1] * d2[0]
+    denom = n0 * n0 + n1 * n1 + n2 * n2
+    if point_p:
+        s = 0.0
+    elif point_q:
+        s = min(max(-c / safe_a, 0.0), 1.0)
+    elif denom <= _PARALLEL_SIN_SQ * a * e:  # parallel: any s will do
+        s = 0.0
+    else:  # (-r x d2) . normal / |normal|^2
+        m0 = -r[1] * d2[2] + r[2] * d2[1]
+        m1 = -r[2] * d2[0] + r[0] * d2[2]
+        m2 = -r[0] * d2[1] + r[1] * d2[0]
+        s = min(max((m0 * n0 + m1 * n1 + m2 * n2) / denom, 0.0), 1.0)
+    t_free = 0.0 if point_q else (b * s + f) / safe_e
+    t = min(max(t_free, 0.0), 1.0)
+    if not (point_p or t == t_free):
+        s = min(max((b * t - c) / safe_a, 0.0), 1.0)
+    g0 = r[0] + s * d1[0] - t * d2[0]
+    g1 = r[1] + s * d1[1] - t * d2[1]
+    g2 = r[2] + s * d1[2] - t * d2[2]
+    return math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
+
+
+def _capsules_float(arm: ArmModel, q) -> list:
+    """Return :func:`arm_capsules` of one state as ``[(start, end, radius)] * 3`` in floats."""
+    t1, t2, d3 = (float(v) for v in q)
+    h1 = float(arm.shoulder_height)
+    h2 = h1 + arm.elbow_rise
+    ex, ey = arm.l1 * math.cos(t1), arm.l1 * math.sin(t1)
+    tx, ty = ex + arm.l2 * math.cos(t1 + t2), ey + arm.l2 * math.sin(t1 + t2)
+    tip = h2 - d3
+    (r00, r01, r02, o0), (r10, r11, r12, o1), (r20, r21, r22, o2) = arm.base[:3].tolist()
+
+    def world(x, y, z):
+        return (r00 * x + r01 * y + r02 * z + o0, r10 * x + r11 * y + r12 * z + o1,
+                r20 * x + r21 * y + r22 * z + o2)
+    elbow1, elbow2, tool2 = world(ex, ey, h1), world(ex, ey, h2), world(tx, ty, h2)
+    return [(world(0.0, 0.0, h1), elbow1, arm.link_radius),
+            (elbow2, tool2, arm.link_radius),
+            (world(tx, ty, tip), world(tx, ty, tip + arm.quill_length), arm.quill_radius)]
+
+
 def arm_pair_distances(arm_a: ArmModel, q_a: ArrayLike, arm_b: ArmModel,
                        q_b: ArrayLike) -> np.ndarray:
     """Surface distance of every capsule of arm a to every capsule of arm b.
+
+    One state of each arm (the collision monitor's 100 Hz check, single-state queries) takes
+    a plain-float path, the same formulas as the vectorised one without numpy's per-call
+    overhead on 3-vectors (about a fifth of its cost; equal to rounding, tested).
 
     :param arm_a: the first arm.
     :param q_a: (..., 3) its joint states.
@@ -207,6 +271,11 @@ def arm_pair_distances(arm_a: ArmModel, q_a: ArrayLike, arm_b: ArmModel,
     :return: (..., 3, 3) distances, m; entry ``[..., i, j]`` is capsule i of a (link 1, link 2,
         quill) to capsule j of b; negative = overlap.
     """
+    if np.shape(q_a) == (3,) and np.shape(q_b) == (3,):
+        caps_b = _capsules_float(arm_b, q_b)
+        return np.array([[_segment_distance_float(p0, p1, q0, q1) - rp - rq
+                          for q0, q1, rq in caps_b]
+                         for p0, p1, rp in _capsules_float(arm_a, q_a)])
     start_a, end_a, radii_a = arm_capsules(arm_a, q_a)
     start_b, end_b, radii_b = arm_capsules(arm_b, q_b)
     dist, _, _ = segment_distance(start_a[..., :, None, :], end_a[..., :, None, :],
