@@ -71,7 +71,6 @@ import traceback
 from typing import List, Optional, Sequence
 
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import Trigger
 
@@ -81,7 +80,7 @@ from scara_collab.core.paths import config_dir
 from scara_collab.nodes import lockstep
 from scara_collab.nodes.faults import FaultPlan, parse_faults
 from scara_collab.nodes.recorder import RunRecorder
-from scara_collab.nodes.runner import localhost_by_default
+from scara_collab.nodes.runner import localhost_by_default, make_executor
 from scara_collab.records.report import format_progress, format_report
 from scara_collab.records.telemetry import CpuMeter
 from scara_collab.run.console import Console
@@ -257,7 +256,7 @@ class Launcher:
                            urdf=self.recorder.cell.urdf)  # + /robot_description, /tf
             self.recorder.sinks.append(mcap)
             console.say(f'[launch] recording {len(mcap.topics)} topics to {mcap.path}')
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = make_executor(context=self.context)
         self.executor.add_node(self.recorder)
         self.ros = GraphClient(self.recorder, self.executor, console,
                                FaultPlan(getattr(args, 'fault', [])), self.check, self.signals,
