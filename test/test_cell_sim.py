@@ -456,3 +456,48 @@ def test_payload_is_felt_by_the_arm(cell):
         assert after - before == pytest.approx(-2.5 * g, rel=0.01)
         npt.assert_allclose(sim.arm_state(LEFT)[0], q0, atol=1e-4)
         assert math.isclose(sim.items()[0].position[2], 0.35, abs_tol=2e-3)
+
+
+def test_when_a_trajectory_arrives_before_its_start_does_not_change_the_run(cell):
+    """A trajectory sent 80 ms or 20 ms before its start gives the same states, bit for bit.
+
+    In lockstep a trajectory reaches the bridge at either end of a window (README, *Repeatable
+    runs*); until its start the arm keeps its reference, never the position measured on
+    arrival, so the run does not depend on which end it was.
+    """
+    states = []
+    for arrive in (20, 80):  # steps after the first move's end; the next starts at 100
+        with _make(cell) as sim:
+            q0 = _home(sim, LEFT, [3.0, -0.6, 0.4])
+            first = joint_move(cell.arm(LEFT), q0, q0 + [0.4, -0.3, 0.05])
+            sim.execute(LEFT, first.t, first.q, first.qd, first.qdd)
+            sim.step(int(round(first.duration / sim.dt)) + arrive)  # settling: still creeping
+            back = joint_move(cell.arm(LEFT), first.q[-1], q0)
+            sim.execute(LEFT, first.duration + 0.1 + back.t, back.q, back.qd, back.qdd)
+            assert sim.active(LEFT)  # before its start too
+            sim.step(100 - arrive)
+            npt.assert_allclose(sim.reference(LEFT)[0], first.q[-1], atol=1e-12)  # the hold
+            sim.step(int(round(back.duration / sim.dt)) + 20)
+            assert not sim.active(LEFT)
+            states.append(np.concatenate(sim.arm_state(LEFT)))
+    npt.assert_array_equal(states[0], states[1])
+
+
+def test_a_new_trajectory_takes_over_at_its_start(cell):
+    """Sent while another runs, a trajectory replaces it at its own start, not on arrival."""
+    with _make(cell) as sim:
+        q0 = _home(sim, LEFT, [3.0, -0.6, 0.4])
+        first = joint_move(cell.arm(LEFT), q0, q0 + [0.5, 0.0, 0.0])
+        sim.execute(LEFT, sim.time + first.t, first.q, first.qd, first.qdd)
+        sim.step(int(round(0.3 * first.duration / sim.dt)))
+        t_new = sim.time + 0.02  # one lockstep window on: within the start tolerance
+        mid = first.q[np.searchsorted(first.t, t_new)]
+        second = joint_move(cell.arm(LEFT), mid, mid + [0.0, 0.2, 0.0])
+        sim.execute(LEFT, t_new + second.t, second.q, second.qd, second.qdd)
+        sim.step(4)
+        ref_a = sim.reference(LEFT)[0]
+        sim.step(8)  # still the first one's reference, moving on in theta1 only
+        ref_b = sim.reference(LEFT)[0]
+        assert ref_b[0] > ref_a[0] + 1e-3 and ref_b[1] == pytest.approx(q0[1], abs=1e-9)
+        sim.step(int(round((0.02 + second.duration) / sim.dt)))  # the second one's end, held
+        npt.assert_allclose(sim.reference(LEFT)[0], second.q[-1], atol=1e-9)

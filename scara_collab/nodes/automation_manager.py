@@ -46,6 +46,7 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.planning import path_options, plan_path
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.clock_order import clock_order
 from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.faults import call_with_faults, declare_faults
 from scara_collab.nodes.params import declare_checked, declare_config
@@ -119,6 +120,7 @@ class AutomationManager(Node):
         # on the sim clock, before joining the lockstep: each answer follows the tick's work
         every(self, float(params['tick']), self._tick)
         every(self, 1.0, self._publish_stats)
+        self.order = clock_order(self)  # the bridge's messages after the tick of their clock
         # auto_start: the job starts on the first tick that finds the graph connected
         self.start_pending = params['auto_start']
         self.lockstep = lockstep.join(self)  # sim time waits while this node computes
@@ -138,20 +140,26 @@ class AutomationManager(Node):
 
     # --- inputs -----------------------------------------------------------------------------
     def _on_items(self, msg: MarkerArray) -> None:
-        self.job.on_items([sorting.SeenItem(i, cls, xyz, stamp)
-                           for i, (cls, xyz, stamp) in conv.item_positions(msg).items()
-                           if sorting.on_belt(self.cell, xyz)])  # not held, falling, binned
+        items = [sorting.SeenItem(i, cls, xyz, stamp)
+                 for i, (cls, xyz, stamp) in conv.item_positions(msg).items()
+                 if sorting.on_belt(self.cell, xyz)]  # not held, falling, binned
+        stamp = conv.to_sec(msg.markers[0].header.stamp) if msg.markers else 0.0
+        self.order.admit(stamp, lambda: self.job.on_items(items))
 
     def _on_event(self, msg: DiagnosticStatus) -> None:
         ev = proto.ItemEvent.from_msg(msg)
-        self.job.on_item_event(ev.kind, ev.item, ev.robot)
+        self.order.admit(ev.time, lambda: self.job.on_item_event(ev.kind, ev.item, ev.robot))
 
     def _on_state(self, msg: JointState) -> None:
         if not conv.admit_state(self, self.stamps, msg):
             return
-        for a in self.cell.arms:
-            q, _ = conv.joint_state_arrays(msg, a.joint_names)  # refuses non-finite states
-            self.job.on_arm_state(a.name, q)
+        qs = [(a.name, conv.joint_state_arrays(msg, a.joint_names)[0])  # refuses non-finite
+              for a in self.cell.arms]
+        self.order.admit(conv.to_sec(msg.header.stamp), lambda: self._take_state(qs))
+
+    def _take_state(self, qs) -> None:
+        for robot, q in qs:
+            self.job.on_arm_state(robot, q)
 
     def _on_planner(self, msg: DiagnosticStatus) -> None:
         st = proto.PlannerStatus.from_msg(msg)

@@ -58,6 +58,7 @@ class Servo:
             joint_gains(ctl_cfg['computed_torque'], 'kd'), g=gravity,
             friction_smoothing=friction_smoothing)
         self._traj: List[Optional[HermiteReference]] = [None] * len(arms)
+        self._next: List[Optional[HermiteReference]] = [None] * len(arms)  # from its start
         self.tau = np.zeros((len(arms), 3))
         self.ref_q = np.array(q, dtype=float)
         self.ref_qd = np.zeros_like(self.ref_q)
@@ -69,6 +70,9 @@ class Servo:
         :param q, qd: ``(arms, 3)`` measured joints; :param payload: kg held per arm.
         """
         for a, ref in enumerate(self._traj):
+            nxt = self._next[a]
+            if nxt is not None and now >= nxt.start:  # a new trajectory takes over
+                ref, self._traj[a], self._next[a] = nxt, nxt, None
             if ref is None or now < ref.start:
                 continue
             self.ref_q[a], self.ref_qd[a], self.ref_qdd[a] = ref.sample(now)
@@ -83,14 +87,17 @@ class Servo:
     def execute(self, a: int, t: ArrayLike, q: ArrayLike, qd: Optional[ArrayLike],
                 qdd: Optional[ArrayLike], q_now: np.ndarray, qd_now: np.ndarray,
                 now: float) -> None:
-        """Run a joint trajectory on arm ``a``, replacing the running one.
+        """Run a joint trajectory on arm ``a``, replacing the running one from ``t[0]`` on.
 
-        Before ``t[0]`` the arm holds the position it has now; between points the reference
-        is the cubic Hermite spline of positions and velocities (velocities by central finite
-        differences, zero at both ends, if not given; accelerations its derivative unless
-        given); after ``t[-1]`` it holds the last point. While the emergency stop is set, only
-        a move that takes this arm away from the other one, standing still, is run
-        (:meth:`check_recovery`): the way to part arms that stopped too close.
+        Until ``t[0]`` the arm keeps its reference (the hold, or the running trajectory), as
+        ros2_control's trajectory controller replaces a trajectory at the new one's start; so
+        what the arm does never depends on when, before its start, a trajectory arrived (in
+        lockstep, at either end of a window: README, *Repeatable runs*). Between points the
+        reference is the cubic Hermite spline of positions and velocities (velocities by
+        central finite differences, zero at both ends, if not given; accelerations its
+        derivative unless given); after ``t[-1]`` it holds the last point. While the emergency
+        stop is set, only a move that takes this arm away from the other one, standing still,
+        is run (:meth:`check_recovery`): the way to part arms that stopped too close.
 
         :param t: ``(N,)`` absolute sim times, s, strictly increasing.
         :param q: ``(N, 3)`` joint positions; :param qd, qdd: ``(N, 3)`` or ``None``.
@@ -113,11 +120,14 @@ class Servo:
             raise TrajectoryError(
                 f'the trajectory starts {jump[j]:.4f} away from the measured position of joint '
                 f'{j + 1} ({q_now[a][j]:.4f}); at most {self.start_tolerance} is allowed')
-        self.follow(a, ref, q_now[a])
+        if ref.start > now:
+            self._next[a] = ref
+        else:  # late or now: at once
+            self._traj[a], self._next[a] = ref, None
 
     def hold(self, a: int, q: np.ndarray) -> None:
-        """Drop arm ``a``'s trajectory: it holds ``q`` ``(3,)`` at rest."""
-        self._traj[a] = None
+        """Drop arm ``a``'s trajectories (running and next): it holds ``q`` ``(3,)`` at rest."""
+        self._traj[a] = self._next[a] = None
         self.ref_q[a] = q
         self.ref_qd[a] = 0.0
         self.ref_qdd[a] = 0.0
@@ -130,7 +140,7 @@ class Servo:
     def active(self, a: int, now: float) -> bool:
         """Return True while arm ``a`` has a trajectory to run (also before its start)."""
         ref = self._traj[a]
-        return ref is not None and now < ref.end
+        return self._next[a] is not None or (ref is not None and now < ref.end)
 
     def reference(self, a: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return arm ``a``'s reference ``(q, qd, qdd)`` as of the last tick (copies)."""
