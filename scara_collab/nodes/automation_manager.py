@@ -31,7 +31,6 @@ from typing import List
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool, Trigger
@@ -46,11 +45,10 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.planning import path_options, plan_path
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
-from scara_collab.nodes.clock_order import clock_order
 from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.faults import call_with_faults, declare_faults
 from scara_collab.nodes.params import declare_checked, declare_config
-from scara_collab.nodes.qos import LATCHED
+from scara_collab.nodes.qos import DEFAULT, LATCHED
 from scara_collab.nodes.runner import guarded, run_node
 from scara_collab.nodes.sim_timer import every
 
@@ -107,20 +105,22 @@ class AutomationManager(Node):
                                          guarded(self, self._on_execution), 50),
                 self.create_subscription(JointTrajectory, f'/{a.name}/joint_trajectory',
                                          guarded(self, self._on_trajectory), 10))
+        # every state and item list, each in turn: with a depth of 1, the callback of one
+        # takes the newest (one published after the next /clock, if the node is behind), and
+        # the tick sees it or not by timing (README, *Repeatable runs*)
         self.world_subs = (
             self.create_subscription(MarkerArray, '/conveyor/items',
-                                     guarded(self, self._on_items), QoSProfile(depth=1)),
+                                     guarded(self, self._on_items), DEFAULT),
             self.create_subscription(DiagnosticStatus, '/conveyor/events',
                                      guarded(self, self._on_event), 100),
             self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
-                                     QoSProfile(depth=1)))
+                                     DEFAULT))
         self.create_subscription(Bool, '/emergency_stop', guarded(self, self._on_estop), LATCHED)
         self.create_service(Trigger, '~/start', guarded(self, self._on_start, service=True))
         self.create_service(Trigger, '~/stop', guarded(self, self._on_stop, service=True))
         # on the sim clock, before joining the lockstep: each answer follows the tick's work
         every(self, float(params['tick']), self._tick)
         every(self, 1.0, self._publish_stats)
-        self.order = clock_order(self)  # the bridge's messages after the tick of their clock
         # auto_start: the job starts on the first tick that finds the graph connected
         self.start_pending = params['auto_start']
         self.lockstep = lockstep.join(self)  # sim time waits while this node computes
@@ -143,23 +143,18 @@ class AutomationManager(Node):
         items = [sorting.SeenItem(i, cls, xyz, stamp)
                  for i, (cls, xyz, stamp) in conv.item_positions(msg).items()
                  if sorting.on_belt(self.cell, xyz)]  # not held, falling, binned
-        stamp = conv.to_sec(msg.markers[0].header.stamp) if msg.markers else 0.0
-        self.order.admit(stamp, lambda: self.job.on_items(items))
+        self.job.on_items(items)
 
     def _on_event(self, msg: DiagnosticStatus) -> None:
         ev = proto.ItemEvent.from_msg(msg)
-        self.order.admit(ev.time, lambda: self.job.on_item_event(ev.kind, ev.item, ev.robot))
+        self.job.on_item_event(ev.kind, ev.item, ev.robot)
 
     def _on_state(self, msg: JointState) -> None:
         if not conv.admit_state(self, self.stamps, msg):
             return
-        qs = [(a.name, conv.joint_state_arrays(msg, a.joint_names)[0])  # refuses non-finite
-              for a in self.cell.arms]
-        self.order.admit(conv.to_sec(msg.header.stamp), lambda: self._take_state(qs))
-
-    def _take_state(self, qs) -> None:
-        for robot, q in qs:
-            self.job.on_arm_state(robot, q)
+        for a in self.cell.arms:
+            q, _ = conv.joint_state_arrays(msg, a.joint_names)  # refuses non-finite states
+            self.job.on_arm_state(a.name, q)
 
     def _on_planner(self, msg: DiagnosticStatus) -> None:
         st = proto.PlannerStatus.from_msg(msg)

@@ -38,7 +38,7 @@ from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.params import declare_checked
-from scara_collab.nodes.qos import LATCHED, LATEST
+from scara_collab.nodes.qos import DEFAULT, LATCHED
 from scara_collab.nodes.runner import guarded, run_node
 from scara_collab.nodes.sim_timer import every
 
@@ -106,8 +106,9 @@ class CollisionMonitor(Node):
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
         self.diagnostics = Diagnostics(self, self.status_pub)  # and on /diagnostics
         self.marker_pub = self.create_publisher(MarkerArray, '~/capsules', 10)
+        # every state (a depth of 1 would skip one whenever the monitor is a state behind)
         self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
-                                 LATEST)
+                                 DEFAULT)
         self.create_service(Trigger, '~/clear', guarded(self, self._on_clear, True))
         for arm in self.cell.arms:
             self.create_subscription(

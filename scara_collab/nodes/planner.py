@@ -57,7 +57,7 @@ from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.faults import declare_faults, FaultyPublisher
 from scara_collab.nodes.params import declare_checked, declare_config
-from scara_collab.nodes.qos import EVENTS, LATEST
+from scara_collab.nodes.qos import DEFAULT, EVENTS
 from scara_collab.nodes.runner import guarded, run_node
 
 HISTORY = 64  # requests whose last status is kept, to answer a re-sent one
@@ -177,9 +177,10 @@ class Planner(Node):
         status_pub = FaultyPublisher(self, faults, self.create_publisher(
             DiagnosticStatus, f'/{r}/planner_status', EVENTS))
         self.answers = Answers(lambda st: status_pub.publish(st.to_msg()))
-        # only the latest state matters: a backlog of old ones would make plans start stale
+        # every state, each in turn: with a depth of 1, the callback of one takes the newest,
+        # and a queued move would start at one state or the next by timing
         self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
-                                 LATEST)
+                                 DEFAULT)
         self.create_subscription(PointStamped, f'/{r}/target', guarded(self, self._on_target),
                                  10)
         self.create_subscription(JointTrajectory, f'/{r}/target_trajectory',

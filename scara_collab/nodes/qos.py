@@ -30,7 +30,7 @@ PROFILES: Dict[str, QoSProfile] = {name: _profile(spec) for name, spec in graph.
 DEFAULT = PROFILES['default']
 #: latched state (``/emergency_stop``): a late subscriber gets the last value
 LATCHED = PROFILES['latched']
-#: only the newest message matters (joint states for planning: a backlog would be stale)
+#: only the newest message matters (the TF publisher: a backlog of states would be stale)
 LATEST = PROFILES['latest']
 #: a stream to keep whole (events, statuses)
 EVENTS = PROFILES['events']

@@ -42,7 +42,7 @@ from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.params import declare_checked
-from scara_collab.nodes.qos import EVENTS, LATEST
+from scara_collab.nodes.qos import DEFAULT, EVENTS
 from scara_collab.nodes.runner import guarded, run_node
 
 SAME_START = 1e-6  # s: two starts closer than this are the same physics instant
@@ -107,7 +107,7 @@ class ReplicationManager(Node):
         self.enabled = on
         if on and self._state_sub is None:
             self._state_sub = self.create_subscription(
-                JointState, '/joint_states', guarded(self, self._on_state), LATEST)
+                JointState, '/joint_states', guarded(self, self._on_state), DEFAULT)  # each
         elif not on and self._state_sub is not None:
             self.destroy_subscription(self._state_sub)
             self._state_sub = None
