@@ -380,3 +380,33 @@ def test_the_graph_names_exactly_the_nodes_that_answer():
             assert joined == spec.lockstep, spec.name
     finally:
         g.close()
+
+
+def test_an_awaited_reply_holds_sim_time_until_it_comes_or_its_deadline():
+    """A participant awaiting a reply does not answer: the bridge waits one window past it.
+
+    The reply releases the answer (sim time goes on); a reply that never comes is given up
+    after its wall deadline, with the answer owed sent then.
+    """
+    g = make_graph(0.02)
+    try:
+        node = g.add(Node('asker', context=g.context,
+                          parameter_overrides=[Parameter('use_sim_time', value=True)]))
+        part = lockstep.join(node)
+        assert g.spin_until(lambda: g.bridge.sim.time >= 0.1, 10.0)
+        part.await_reply('offer 1')
+        assert g.spin_until(lambda: part.owed, 5.0)  # the next /clock came: answer held
+        held_at = g.bridge.sim.time
+        for _ in range(50):
+            g.executor.spin_once(timeout_sec=0.005)
+        assert g.bridge.sim.time <= held_at + 0.02 + 1e-9, 'stepped past the held answer'
+        part.reply('someone else')  # not awaited: still held
+        assert part.owed
+        part.reply('offer 1')
+        assert not part.owed and g.spin_until(lambda: g.bridge.sim.time > held_at + 0.05, 5.0)
+        part.await_reply('lost', seconds=0.2)  # never replied: answered after 0.2 s wall
+        assert g.spin_until(lambda: part.late == 1 and not part.owed, 5.0)
+        t = g.bridge.sim.time
+        assert g.spin_until(lambda: g.bridge.sim.time > t + 0.05, 5.0)
+    finally:
+        g.close()

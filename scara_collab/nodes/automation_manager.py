@@ -159,6 +159,8 @@ class AutomationManager(Node):
     def _on_planner(self, msg: DiagnosticStatus) -> None:
         st = proto.PlannerStatus.from_msg(msg)
         self.job.on_planner(st.robot, st.request, st.state, st.start, st.end, st.reason)
+        if self.lockstep is not None:
+            self.lockstep.reply((st.robot, st.request))
 
     def _on_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
@@ -258,6 +260,8 @@ class AutomationManager(Node):
             pub = self.collab_pub if cmd.mirrored else self.target_pub[cmd.robot]
         msg.header.stamp = conv.time_from_ns(cmd.request)  # exact: it is the move's id
         pub.publish(msg)
+        if self.lockstep is not None and not cmd.mirrored:  # sim time waits for the planner
+            self.lockstep.await_reply((cmd.robot, cmd.request))
 
     # --- stats ------------------------------------------------------------------------------
     def stats(self) -> proto.JobStats:

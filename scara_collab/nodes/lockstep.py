@@ -15,6 +15,11 @@ The protocol, on one topic ``/sim/lockstep`` (``std_msgs/Header``):
 * the bridge (:class:`LockstepGate`) never steps more than ``window`` sim seconds beyond the
   oldest answer of the participants it has heard. A busy node therefore holds sim time
   (within ``window``) until it is done, as if the whole graph ran in one thread;
+* a participant may hold its answer until another node has replied to what it sent (the
+  automation manager, until a planner's status for the move it offered:
+  :meth:`LockstepParticipant.await_reply`), at most ``REPLY_WAIT`` wall seconds: sim time
+  then waits for the reply too, and the next ``/clock`` finds it taken, however the
+  processes were scheduled (README, *Repeatable runs*);
 * a participant that leaves says so (stamp = the end of time); one that keeps the bridge
   waiting for ``timeout`` wall seconds is dropped with a warning, and joins again with its
   next answer. The simulation never hangs on a dead node. The wait is counted per
@@ -45,7 +50,7 @@ import time
 from typing import Callable, Dict, Iterable, Optional
 
 from builtin_interfaces.msg import Time
-from rclpy.clock import JumpThreshold
+from rclpy.clock import Clock, ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -54,6 +59,8 @@ from std_msgs.msg import Header
 TOPIC = '/sim/lockstep'
 QOS = QoSProfile(depth=50)
 END_OF_TIME = Time(sec=2**31 - 1, nanosec=0)
+#: wall s a participant holds its answer for an awaited reply (a lost one: then it answers)
+REPLY_WAIT = 0.5
 
 
 def _sec(stamp) -> float:
@@ -104,10 +111,48 @@ class LockstepParticipant:
             JumpThreshold(min_forward=Duration(nanoseconds=1), min_backward=None,
                           on_clock_change=False), post_callback=self._on_advance)
         self.answered = 0
+        self.awaited: Dict[object, float] = {}  # reply key -> wall deadline
+        self.owed = False  # an answer held back for a reply
+        self.late = 0  # replies given up on (their wall deadline passed)
+        self._timer = None
 
     def _on_advance(self, _jump) -> None:
+        if self.awaited:
+            self.owed = True
+            return
+        self._answer()
+
+    def _answer(self) -> None:
+        self.owed = False
         self._pub.publish(Header(stamp=self._clock.now().to_msg(), frame_id=self.name))
         self.answered += 1
+
+    def await_reply(self, key, seconds: float = REPLY_WAIT) -> None:
+        """Hold this node's answers until :meth:`reply` ``(key)``, at most ``seconds`` (wall)."""
+        self.awaited[key] = time.monotonic() + seconds
+        if self._timer is None:  # the deadline is wall time: sim time waits for this node
+            from scara_collab.nodes.runner import guarded  # runner imports this module
+            self._timer = self.node.create_timer(
+                0.05, guarded(self.node, self._expire),
+                clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+    def reply(self, key) -> None:
+        """Take the reply ``key`` (others are ignored); answer when none is awaited any more."""
+        if self.awaited.pop(key, None) is not None and not self.awaited and self.owed:
+            self._answer()
+
+    def _expire(self) -> None:
+        now = time.monotonic()
+        lost = [k for k, deadline in self.awaited.items() if deadline <= now]
+        for key in lost:
+            del self.awaited[key]
+        if lost:
+            self.late += len(lost)
+            self.node.get_logger().warning(
+                f'lockstep: no reply to {lost} within {REPLY_WAIT} s (wall); answering '
+                'without it', throttle_duration_sec=5.0)
+            if self.owed and not self.awaited:
+                self._answer()
 
     def leave(self) -> None:
         """Tell the bridge not to wait for this node any more (best effort)."""
