@@ -140,10 +140,9 @@ class AutomationManager(Node):
 
     # --- inputs -----------------------------------------------------------------------------
     def _on_items(self, msg: MarkerArray) -> None:
-        items = [sorting.SeenItem(i, cls, xyz, stamp)
-                 for i, (cls, xyz, stamp) in conv.item_positions(msg).items()
-                 if sorting.on_belt(self.cell, xyz)]  # not held, falling, binned
-        self.job.on_items(items)
+        self.job.on_items([sorting.SeenItem(i, cls, xyz, stamp)
+                           for i, (cls, xyz, stamp) in conv.item_positions(msg).items()
+                           if sorting.on_belt(self.cell, xyz)])  # not held, falling, binned
 
     def _on_event(self, msg: DiagnosticStatus) -> None:
         ev = proto.ItemEvent.from_msg(msg)

@@ -149,8 +149,8 @@ class LockstepParticipant:
         if lost:
             self.late += len(lost)
             self.node.get_logger().warning(
-                f'lockstep: no reply to {lost} within {REPLY_WAIT} s (wall); answering '
-                'without it', throttle_duration_sec=5.0)
+                f'lockstep: no reply to {lost} by its deadline (wall); answering without '
+                'it', throttle_duration_sec=5.0)
             if self.owed and not self.awaited:
                 self._answer()
 
