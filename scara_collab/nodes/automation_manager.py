@@ -16,7 +16,9 @@ retries, :mod:`scara_collab.nodes.protocol` for the statuses):
   ``/collab/target_trajectory`` or ``/collab/target``; either way the stamp is the requested
   start and the move's id (:mod:`scara_collab.nodes.protocol`); ``/<robot>/gripper`` calls
   (std_srvs/SetBool; each answer goes back to the job with its request's token, a lost one is
-  asked again).
+  asked again). Its lockstep answer waits for the planners' status of each move it sent (at
+  most ``lockstep.REPLY_WAIT`` wall seconds), so the next ``/clock`` always finds the reply
+  taken (README, *Repeatable runs*).
 
 Services ``~/start`` and ``~/stop`` (std_srvs/Trigger, idempotent: starting a running job
 succeeds; a start before every endpoint the job uses is matched is refused, naming what is
@@ -259,8 +261,10 @@ class AutomationManager(Node):
             pub = self.collab_pub if cmd.mirrored else self.target_pub[cmd.robot]
         msg.header.stamp = conv.time_from_ns(cmd.request)  # exact: it is the move's id
         pub.publish(msg)
-        if self.lockstep is not None and not cmd.mirrored:  # sim time waits for the planner
-            self.lockstep.await_reply((cmd.robot, cmd.request))
+        if self.lockstep is not None:  # sim time waits for the planners' replies
+            # a mirrored move: the replication manager passes the request on to both planners
+            for robot in ([a.name for a in self.cell.arms] if cmd.mirrored else [cmd.robot]):
+                self.lockstep.await_reply((robot, cmd.request))
 
     # --- stats ------------------------------------------------------------------------------
     def stats(self) -> proto.JobStats:
