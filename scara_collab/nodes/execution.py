@@ -3,11 +3,12 @@
 Executed like ros2_control's joint trajectory controller: a header stamp of zero starts the
 trajectory now, else at the stamp (a stamp in the past starts it at once, with a warning); a
 first point after ``t = 0`` is reached from the current state; a new trajectory replaces the
-running one (status ``preempted`` for the old one); a bad one is refused with the reason and
-the arm keeps its current command. Every outcome is an
+running one from its own start (status ``preempted`` for the old one, at once); a bad one is
+refused with the reason and the arm keeps its current command. Every outcome is an
 :class:`~scara_collab.nodes.protocol.ExecutionStatus` for the move named by the trajectory's
 ``header.frame_id``: ``accepted`` (with its start and end), ``refused``, ``preempted``,
-``finished`` (:meth:`Execution.poll`, when its end has passed), ``held`` (:meth:`Execution.hold`).
+``finished`` (:meth:`Execution.poll`, when its end has passed), ``held``
+(:meth:`Execution.hold`).
 """
 from typing import Callable, Dict, Optional, Tuple
 

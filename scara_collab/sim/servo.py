@@ -1,11 +1,12 @@
 """The arms' servo, without PyBullet: the reference each arm follows and the law that tracks it.
 
 Each arm follows a reference: a hold (its last point at rest) or a trajectory
-(:class:`scara_collab.sim.reference.HermiteReference`, from its start time on; before it the
-arm holds). At every servo tick :meth:`Servo.update` samples both references and evaluates the
-control law for both arms at once (:mod:`scara_collab.sim.controllers`: PID on torque, or
-computed torque with one vectorised inverse-dynamics call), clamped to the effort limits; the
-simulator applies :attr:`Servo.tau` until the next tick.
+(:class:`scara_collab.sim.reference.HermiteReference`, from its start time on; until then the
+arm keeps the reference it had, as ros2_control's trajectory controller replaces a trajectory
+at the new one's start). At every servo tick :meth:`Servo.update` samples both references and
+evaluates the control law for both arms at once (:mod:`scara_collab.sim.controllers`: PID on
+torque, or computed torque with one vectorised inverse-dynamics call), clamped to the effort
+limits; the simulator applies :attr:`Servo.tau` until the next tick.
 
 The emergency stop is the servo's too (:meth:`Servo.set_estop`): every arm brakes at its
 acceleration limits (:func:`scara_collab.core.safety.braking`) and holds, and while it is set
@@ -133,7 +134,10 @@ class Servo:
         self.ref_qdd[a] = 0.0
 
     def follow(self, a: int, ref: HermiteReference, q: np.ndarray) -> None:
-        """Run ``ref`` on arm ``a`` (replacing its trajectory); until its start it holds ``q``."""
+        """Run ``ref`` on arm ``a`` at once (a brake), replacing both its trajectories.
+
+        Until ``ref``'s start (now, for a brake) the arm holds ``q``.
+        """
         self.hold(a, q)
         self._traj[a] = ref
 
