@@ -52,7 +52,7 @@ from scara_collab.core.lanes import (FAILED_MOVE, GripCommand, GripTrack, Lane, 
 from scara_collab.core.model import CellModel
 from scara_collab.core.sharing import SharedBelt
 
-__all__ = ['CANDIDATES', 'FAILED_MOVE', 'GripCommand', 'GripTrack', 'ItemNotes',
+__all__ = ['FAILED_MOVE', 'GripCommand', 'GripTrack', 'ItemNotes',
            'items_per_minute', 'JobSettings', 'Lane', 'LOOK_AGAIN', 'MODES', 'MOVE_STATES',
            'MoveCommand', 'MoveTrack', 'MOVING', 'PHASES', 'SAVABLE', 'SortingJob']
 
@@ -62,8 +62,6 @@ LOOK_AGAIN = 0.1
 #: urgent items an arm can still save by taking them first, most urgent first; with more, the
 #: feed is faster than the arm and it takes the item that makes the shortest cycle
 SAVABLE = 2
-#: how many candidates (most urgent first) an idle arm compares
-CANDIDATES = 6
 
 
 def items_per_minute(sorted_count: int, seconds: float) -> float:
@@ -318,9 +316,8 @@ class SortingJob(SharedBelt):
         if self.s.mode != 'mirrored':  # the shortest cycles first, urgent savable items first
             order = sorting.rank_by_cycle(self.cell, arm, self.q[lane.robot], order,
                                           now + self.s.decision_lead, self.s.pick_z,
-                                          self.s.drop_clearance, sharing.URGENT_SLACK, SAVABLE,
-                                          CANDIDATES)
-        self.notes.ranked(lane.robot, order[:CANDIDATES], now)
+                                          self.s.drop_clearance, sharing.URGENT_SLACK, SAVABLE)
+        self.notes.ranked(lane.robot, order, now)
         for item in [it for _, it in order[:2]]:
             if not self._chase(lane, item, now):
                 self.notes.note(item.id, now, f'{lane.robot} could not meet it (or not yet)')

@@ -262,8 +262,8 @@ def mirror_partner(cell: CellModel, item: SeenItem, others: Sequence[SeenItem],
 
 def rank_by_cycle(cell: CellModel, arm: ArmModel, q_start, order: Sequence[Tuple[int, SeenItem]],
                   t_start: float, z: float, drop_clearance: float, urgent_slack: float,
-                  savable: int, candidates: int) -> List[Tuple[int, SeenItem]]:
-    """Reorder the first ``candidates`` of ``order`` (most urgent first): cheap cycles first.
+                  savable: int) -> List[Tuple[int, SeenItem]]:
+    """Reorder ``order`` (most urgent first, every item in reach): cheap cycles first.
 
     ``order`` is :func:`order_candidates` with its groups (0: the arm's own items and the
     other half's it must take with them, 1: the other half's it takes only after them);
@@ -276,7 +276,7 @@ def rank_by_cycle(cell: CellModel, arm: ArmModel, q_start, order: Sequence[Tuple
     anyway are left, not the ones that make its cycles short).
     """
     ranked = []
-    for k, (group, item) in enumerate(order[:candidates]):
+    for k, (group, item) in enumerate(order):
         p = predict(cell, item, t_start)
         urgent = time_in_reach(cell, arm, p, z) < urgent_slack
         cost = cycle_bound(cell, arm, q_start, item, t_start, z, drop_clearance)
@@ -285,7 +285,7 @@ def rank_by_cycle(cell: CellModel, arm: ArmModel, q_start, order: Sequence[Tuple
         for e in ranked:
             e[0] = False  # more urgent items than the arm can save: cost alone
     ranked.sort(key=lambda e: (not e[0], e[3] if e[0] else 0, e[1], e[2], e[3]))
-    return [e[4] for e in ranked] + list(order[candidates:])
+    return [e[4] for e in ranked]
 
 
 def carry_sweeps(cell: CellModel, path: np.ndarray, times: np.ndarray,
