@@ -180,3 +180,38 @@ def test_line_move_is_unchanged_on_the_sequential_path(monkeypatch, name, a, b):
     for field in ('t', 'q', 'qd', 'qdd', 'p'):
         assert_allclose(getattr(got, field), getattr(ref, field), rtol=0, atol=1e-10,
                         err_msg=field)
+
+
+def _reference_scaling(s, dq, d2q, vmax, amax):
+    """Run the phase-plane passes of ``time_optimal_scaling`` with the builtin max and min."""
+    xmax = trajectory._max_sdot_sq(dq, d2q, vmax, amax).tolist()
+    ds = np.diff(s).tolist()
+    c, d = trajectory._accel_coefficients(dq, d2q, amax)
+    c, d = c.tolist(), d.tolist()
+    m = len(s)
+    back = [0.0] * m
+    for i in range(m - 2, -1, -1):
+        xb = back[i + 1]
+        umin = max(c[i + 1][k] + d[i + 1][k] * xb for k in range(3))
+        back[i] = max(0.0, min(xmax[i], xb - 2.0 * ds[i] * umin))
+    x = [0.0] * m
+    for i in range(m - 1):
+        umax = min(d[i][k] * x[i] - c[i][k] for k in range(3))
+        x[i + 1] = max(0.0, min(back[i + 1], xmax[i + 1], x[i] + 2.0 * ds[i] * umax))
+    return np.sqrt(np.maximum(np.asarray(x), 0.0))
+
+
+def test_the_written_out_phase_plane_passes_equal_the_builtin_max_min_exactly():
+    """Random paths (joints that stay, zero and large curvature): equal to the last bit."""
+    arm = CELL.arms[0]
+    rng = np.random.default_rng(3)
+    for k in range(60):
+        m = int(rng.integers(50, 600))
+        s = np.linspace(0.0, 1.0, m)
+        dq = rng.normal(size=(m, 3)) * rng.uniform(0.1, 3.0)
+        if k % 4 == 0:
+            dq[:, k % 3] = 0.0  # a joint that does not move bounds nothing
+        d2q = rng.normal(size=(m, 3)) * rng.uniform(0.0, 5.0) * (k % 5 != 0)
+        got = trajectory.time_optimal_scaling(s, dq, d2q, arm.max_velocity, arm.max_acceleration)
+        want = _reference_scaling(s, dq, d2q, arm.max_velocity, arm.max_acceleration)
+        assert np.array_equal(got, want), k

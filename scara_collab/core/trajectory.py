@@ -206,16 +206,38 @@ def time_optimal_scaling(s: np.ndarray, dq: np.ndarray, d2q: np.ndarray, vmax: A
     c0, c1, c2 = c.T.tolist()
     d0, d1, d2 = d.T.tolist()
     m = len(s)
+    # the max / min of three below are written out: the same result as the builtins (the
+    # first extreme value wins), without a call per grid point (a third of a move's planning)
     back = [0.0] * m  # decelerate as hard as allowed into the end
+    xb = 0.0
     for i in range(m - 2, -1, -1):
-        j, xb = i + 1, back[i + 1]
-        umin = max(c0[j] + d0[j] * xb, c1[j] + d1[j] * xb, c2[j] + d2[j] * xb)
-        back[i] = max(0.0, min(xmax[i], xb - 2.0 * ds[i] * umin))
+        j = i + 1
+        u, v = c0[j] + d0[j] * xb, c1[j] + d1[j] * xb
+        if v > u:
+            u = v
+        v = c2[j] + d2[j] * xb
+        if v > u:
+            u = v
+        v, w = xb - 2.0 * ds[i] * u, xmax[i]
+        if v < w:
+            w = v
+        xb = back[i] = w if w > 0.0 else 0.0
     x = [0.0] * m  # accelerate as hard as allowed from rest, under both caps
+    xi = 0.0
     for i in range(m - 1):
-        xi = x[i]
-        umax = min(d0[i] * xi - c0[i], d1[i] * xi - c1[i], d2[i] * xi - c2[i])
-        x[i + 1] = max(0.0, min(back[i + 1], xmax[i + 1], xi + 2.0 * ds[i] * umax))
+        u, v = d0[i] * xi - c0[i], d1[i] * xi - c1[i]
+        if v < u:
+            u = v
+        v = d2[i] * xi - c2[i]
+        if v < u:
+            u = v
+        w, v = back[i + 1], xmax[i + 1]
+        if v < w:
+            w = v
+        v = xi + 2.0 * ds[i] * u
+        if v < w:
+            w = v
+        xi = x[i + 1] = w if w > 0.0 else 0.0
     return np.sqrt(np.maximum(np.asarray(x), 0.0))
 
 
