@@ -267,10 +267,12 @@ def test_an_arm_in_the_way_parks_and_a_deadlock_is_broken_by_the_follower(cell):
     # both wait for each other: the follower's lane gives way (it parks), the leader stays
     job = make_job(cell)
     job.on_items([item_on_belt(cell, 1, y=-0.2), item_on_belt(cell, 2, x=1.0, y=0.2)])
-    out = moves(job.tick(0.0))
-    assert sorted(m.robot for m in out) == sorted([lead, foll])
-    for m in out:
-        job.on_planner(m.robot, m.request, 'waiting', None, None, 'the other arm blocks it')
+    out = moves(job.tick(0.0))  # the follower's move goes out once the leader's is answered
+    assert [m.robot for m in out] == [lead]
+    job.on_planner(lead, out[0].request, 'waiting', None, None, 'the other arm blocks it')
+    out = moves(job.tick(0.02))
+    assert [m.robot for m in out] == [foll]
+    job.on_planner(foll, out[0].request, 'waiting', None, None, 'the other arm blocks it')
     job.tick(job.s.unblock_after + 0.1)
     assert job.phases() == {lead: 'to_item', foll: 'to_park'}
     assert 'scara_right gives way' in job.last_give_up
@@ -526,6 +528,36 @@ def test_a_chase_asked_in_the_same_tick_is_respected_before_its_answer(cell):
         assert timed is not None and timed.delay <= tolerance
     else:
         assert lane.phase == 'idle' and 97 not in job.claimed
+
+
+def test_the_followers_move_goes_out_after_the_leaders_planner_has_answered(cell):
+    """Both lanes ask in one tick: the follower's offer is held for the leader's answer.
+
+    Its planner schedules against the leader's trajectories; sent in the same tick, the offer
+    could reach it before or after the leader's new trajectory (README, *Repeatable runs*).
+    Held, it goes out, unchanged, in the first tick after the leader's planner answers, or
+    after ``answer_timeout`` if that answer is lost.
+    """
+    lead, foll = cell.leader, cell.follower
+    for lost in (False, True):
+        job = make_job(cell)
+        job.on_items([item_on_belt(cell, 1, x=1.2, y=-0.2), item_on_belt(cell, 2, x=1.2, y=0.2)])
+        out = moves(job.tick(0.0))
+        assert [c.robot for c in out] == [lead.name]
+        held = next(la for la in job.lanes if la.robot == foll.name)
+        assert held.phase == 'to_item' and held.moves[foll.name].state == 'asked'
+        assert moves(job.tick(0.02)) == []  # the leader has not answered yet
+        if not lost:
+            job.on_planner(lead.name, out[0].request, 'planned', out[0].start, out[0].start + 1)
+            late = moves(job.tick(0.04))
+        else:
+            assert moves(job.tick(job.s.answer_timeout - 0.01)) == []
+            late = [c for c in moves(job.tick(job.s.answer_timeout)) if c.robot == foll.name]
+        assert [(c.robot, c.request) for c in late] == [(foll.name, held.request)]
+    single = make_job(cell, mode='single')
+    single.on_items([item_on_belt(cell, 1, x=1.2, y=-0.2)])
+    # one lane: nothing held (the unused arm's park goes out beside the leader's pick)
+    assert {c.robot for c in moves(single.tick(0.0))} == {lead.name, foll.name}
 
 
 def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):

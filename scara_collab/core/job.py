@@ -230,6 +230,7 @@ class SortingJob(SharedBelt):
         self._now = now
         self.plan.forget()
         if self.estop or len(self.q) < len(self.cell.arms):
+            self._held = []  # nothing new is commanded; a lane re-sends after answer_timeout
             return self._out
         if self.running and not self._parked_unused:
             self._park_unused(now)
@@ -243,7 +244,7 @@ class SortingJob(SharedBelt):
                 self._tick_grip(lane, now)
         if len(self.lanes) > 1:
             self._unblock(now)
-        return self._out
+        return self._in_turn(self._out, now)
 
     # --- after a move -----------------------------------------------------------------------
     def _arrived(self, lane: Lane, now: float) -> None:

@@ -11,7 +11,7 @@ then as the planner published it (:meth:`SharedBelt.on_trajectory`, :meth:`Share
 read back by :meth:`SharedBelt._committed`. The geometry is
 :mod:`scara_collab.core.pairing`'s; with one lane nothing here acts.
 """
-from typing import Dict, Optional
+from typing import Dict, List, Optional
 
 import numpy as np
 
@@ -35,13 +35,44 @@ class SharedBelt(LaneProtocol):
     items: Dict[int, sorting.SeenItem]
 
     def __init__(self, *args, **kwargs):
-        """Set up the lanes (:class:`LaneProtocol`); no arm parked yet."""
+        """Set up the lanes (:class:`LaneProtocol`); no arm parked yet, no move held."""
         super().__init__(*args, **kwargs)
         self._parked_unused = False
+        self._held: List[MoveCommand] = []  # the follower's moves, held for the leader's answer
+        self._held_since = 0.0
 
     def _chase(self, lane: Lane, item: sorting.SeenItem, now: float) -> bool:
         """Ask for the move that meets ``item``; return False if the arm cannot."""
         raise NotImplementedError
+
+    # --- in turn: the leader's move first ----------------------------------------------------
+    def _in_turn(self, out: List[object], now: float) -> List[object]:
+        """Return ``out`` with the follower's moves held while the leader's awaits its planner.
+
+        The follower's planner schedules its move against the leader's trajectories (the
+        priority rule). Sent in the same tick, the follower's offer can reach its planner
+        before or after the leader's new trajectory, depending on how the processes are
+        scheduled: the follower then plans at once or answers "waiting", and the run differs
+        (seen with two CPU hogs on two cores). Held until the leader's planner has answered
+        (its trajectory goes out before its status), the follower's offer always comes after
+        it. A leader's answer that does not come releases them after ``answer_timeout`` (the
+        leader's move is then sent again). With one lane nothing is held.
+        """
+        if len(self.lanes) < 2:
+            return out
+        lead = self.cell.leader.name
+        mine = [c for c in out if isinstance(c, MoveCommand) and c.robot != lead]
+        if mine:
+            out = [c for c in out if not (isinstance(c, MoveCommand) and c.robot != lead)]
+            if not self._held:
+                self._held_since = now
+            self._held += mine
+        leader = next(lane for lane in self.lanes if lane.robot == lead)
+        asking = leader.phase in MOVING and any(t.state == 'asked'
+                                                for t in leader.moves.values())
+        if self._held and (not asking or now - self._held_since >= self.s.answer_timeout):
+            out, self._held = out + self._held, []
+        return out
 
     # --- what each arm has booked ------------------------------------------------------------
     def on_trajectory(self, robot: str, request: int, t: np.ndarray, q: np.ndarray) -> None:
