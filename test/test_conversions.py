@@ -81,3 +81,50 @@ def test_target_frames_are_world_or_the_arms_base():
     for frame in ('', 'map', 'scara_right_base'):
         with pytest.raises(conv.MessageError, match='use world or scara_left_base'):
             conv.target_frame(frame, 'scara_left')
+
+
+def _reference_joint_state_arrays(msg, names):
+    """Return what ``joint_state_arrays`` returned with numpy (before its plain-float path)."""
+    index = {n: i for i, n in enumerate(msg.name)}
+    missing = [n for n in names if n not in index]
+    if missing:
+        raise conv.MessageError(f'joint_states lacks {missing}')
+    if len(msg.position) != len(msg.name):
+        raise conv.MessageError('joint_states: position and name lengths differ')
+    idx = [index[n] for n in names]
+    pos = np.asarray(msg.position, dtype=float)[idx]
+    vel = (np.asarray(msg.velocity, dtype=float)[idx] if len(msg.velocity) == len(msg.name)
+           else np.zeros(len(names)))
+    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(vel))):
+        raise conv.MessageError(f'joint_states: non-finite position or velocity of {list(names)}')
+    return pos, vel
+
+
+def test_joint_state_arrays_equals_the_numpy_reference_on_good_and_bad_states():
+    """Random states, good and malformed: the same arrays to the bit, or the same error."""
+    from sensor_msgs.msg import JointState
+    rng = np.random.default_rng(7)
+    pool = [f'j{k}' for k in range(6)]
+    outcomes = set()
+    for _ in range(3000):
+        n = int(rng.integers(0, 8))
+        msg = JointState()
+        msg.name = [pool[int(k)] for k in rng.integers(0, 6, size=n)]  # repeats, gaps
+        values = rng.normal(size=(2, max(0, n + int(rng.choice([0, 0, 0, -1, 1])))))
+        if values.size and rng.random() < 0.2:
+            values.flat[int(rng.integers(values.size))] = rng.choice([np.nan, np.inf, -np.inf])
+        msg.position = values[0].tolist()
+        msg.velocity = values[1].tolist() if rng.random() < 0.8 else []
+        names = [pool[int(k)] for k in rng.integers(0, 6, size=3)]
+        try:
+            want = _reference_joint_state_arrays(msg, names)
+        except conv.MessageError as exc:
+            with pytest.raises(conv.MessageError) as got:
+                conv.joint_state_arrays(msg, names)
+            assert str(got.value) == str(exc)
+            outcomes.add(str(exc).split(' ')[1])
+            continue
+        got = conv.joint_state_arrays(msg, names)
+        assert all(np.array_equal(g, w) and g.dtype == w.dtype for g, w in zip(got, want))
+        outcomes.add('ok')
+    assert outcomes == {'ok', 'lacks', 'position', 'non-finite'}
