@@ -64,19 +64,18 @@ def joint_state_arrays(msg: JointState, names: Sequence[str]) -> Tuple[np.ndarra
         finite (a NaN state is refused at the door, never planned from or measured).
     """
     have = msg.name
+    missing = [n for n in names if n not in have]
+    if missing:
+        raise MessageError(f'joint_states lacks {missing}')
     if len(msg.position) != len(have):
-        if any(n not in have for n in names):
-            raise MessageError(f'joint_states lacks {[n for n in names if n not in have]}')
         raise MessageError('joint_states: position and name lengths differ')
     # plain floats: every node takes every state (100 Hz), a few joints at a time; numpy's
     # per-call overhead was three quarters of this function's cost
-    try:
-        idx = [have.index(n) for n in names]
-    except ValueError:
-        raise MessageError(f'joint_states lacks {[n for n in names if n not in have]}') from None
     if len(set(have)) < len(have):  # a name given twice: its last value, as a dict has it
         last = {n: i for i, n in enumerate(have)}
         idx = [last[n] for n in names]
+    else:
+        idx = [have.index(n) for n in names]
     position, velocity = msg.position, msg.velocity
     pos = [position[i] for i in idx]
     vel = [velocity[i] for i in idx] if len(velocity) == len(have) else [0.0] * len(idx)
