@@ -61,12 +61,14 @@ class SharedBelt(LaneProtocol):
         if len(self.lanes) < 2:
             return out
         lead = self.cell.leader.name
-        mine = [c for c in out if isinstance(c, MoveCommand) and c.robot != lead]
-        if mine:
-            out = [c for c in out if not (isinstance(c, MoveCommand) and c.robot != lead)]
+        keep, follower = [], []
+        for c in out:
+            (follower if isinstance(c, MoveCommand) and c.robot != lead else keep).append(c)
+        if follower:
             if not self._held:
                 self._held_since = now
-            self._held += mine
+            self._held += follower
+        out = keep
         leader = next(lane for lane in self.lanes if lane.robot == lead)
         asking = leader.phase in MOVING and any(t.state == 'asked'
                                                 for t in leader.moves.values())
