@@ -171,6 +171,7 @@ TOPICS: Tuple[Topic, ...] = (
     Topic('/collab/target_trajectory', _TRAJECTORY),               # ... its plan of a move
     Topic('/collision_monitor/min_distance', 'std_msgs/msg/Float64'),
     Topic('/collision_monitor/status', _STATUS),
+    Topic('/collision_monitor/stops', _STATUS, 'events'),          # protective / emergency
     Topic('/collision_monitor/capsules', 'visualization_msgs/msg/MarkerArray'),
     Topic('/replication_manager/mirror_error', 'std_msgs/msg/Float64'),
     Topic('/replication_manager/status', _STATUS),

@@ -15,6 +15,7 @@ topic                             type                publisher
 ``/automation_manager/stats``     :class:`JobStats`        automation manager
 ``/replication_manager/status``   :class:`MirrorStatus`    replication manager
 ``/collision_monitor/status``     :class:`MonitorStatus`   collision monitor
+``/collision_monitor/stops``      :class:`StopEvent`       collision monitor
 ================================  ==================  =======================================
 
 **Move identity.** A move is named by the request that asked for it: its id is
@@ -400,19 +401,62 @@ class MonitorStatus(_Status):
     margin: float
     stopped: bool
     reason: str = ''
+    kind: str = ''          # the standing stop's kind (:data:`STOP_KINDS`), '' if none
+    protective: int = 0     # protective stops so far
+    emergency: int = 0      # emergency stops so far
 
     KIND: ClassVar[str] = 'collision_monitor'
 
     def level(self) -> str:
-        """Return ``'ERROR'`` while the emergency stop is latched, else ``'OK'``."""
-        return 'ERROR' if self.stopped else 'OK'
+        """Return ``'ERROR'`` under an emergency stop, ``'WARN'`` under a protective one."""
+        if not self.stopped:
+            return 'OK'
+        return 'WARN' if self.kind == 'protective' else 'ERROR'
 
     def text(self) -> str:
-        """Return the stop's reason, or the arms' distance and the margin."""
+        """Return the stop's kind and reason, or the arms' distance and the margin."""
         if self.stopped:
-            return f'emergency stop: {self.reason}'
+            return f'{self.kind or "emergency"} stop: {self.reason}'
         d = 'n/a' if self.distance is None else f'{self.distance:.3f} m'
         return f'arms {d} apart (margin {self.margin} m)'
+
+
+#: ISO 10218's two stops: ``protective`` (a predicted conflict, an unusable or stale joint
+#: state, a silent guard: released by itself once the cause is gone) and ``emergency`` (an
+#: outside request, a broken margin: held until ``/collision_monitor/clear``)
+STOP_KINDS = ('protective', 'emergency')
+
+
+@dataclass(frozen=True)
+class StopEvent(_Status):
+    """A stop of both arms begins or ends (``/collision_monitor/stops``).
+
+    ``state`` ``begin`` at sim time ``time`` with its ``cause``; ``end`` when it is released
+    (``since``: when it began, so ``time - since`` is the sim time it cost). ``kind`` is one
+    of :data:`STOP_KINDS`.
+    """
+
+    kind: str
+    state: str
+    time: float
+    cause: str
+    since: Optional[float] = None
+
+    KIND: ClassVar[str] = 'collision_monitor/stop'
+    CHOICES: ClassVar[Tuple[str, tuple]] = ('kind', STOP_KINDS)
+
+    def level(self) -> str:
+        """Return ``'ERROR'`` for an emergency stop's begin, ``'WARN'`` for a protective one."""
+        if self.state == 'end':
+            return 'OK'
+        return 'ERROR' if self.kind == 'emergency' else 'WARN'
+
+    def text(self) -> str:
+        """Return the stop, its time and cause (and its cost when it ends)."""
+        if self.state == 'end':
+            lost = '' if self.since is None else f' after {self.time - self.since:.3f} s'
+            return f'{self.kind} stop released at t={self.time:.3f} s{lost}: {self.cause}'
+        return f'{self.kind} stop at t={self.time:.3f} s: {self.cause}'
 
 
 @dataclass(frozen=True)
