@@ -1,10 +1,14 @@
 """The bridge's trajectory execution: what each arm runs, and the statuses that say so.
 
-Executed like ros2_control's joint trajectory controller: a header stamp of zero starts the
+Executed like ros2_control's joint trajectory controller, by the rules of the cell's
+committed-motion model (:mod:`scara_collab.core.motion`): a header stamp of zero starts the
 trajectory now, else at the stamp (a stamp in the past starts it at once, with a warning); a
 first point after ``t = 0`` is reached from the current state; a new trajectory replaces the
 running one from its own start (status ``preempted`` for the old one, at once); a bad one is
-refused with the reason and the arm keeps its current command. Every outcome is an
+refused with the reason and the arm keeps its current command. A trajectory that would bring
+the arms within the admission margin against the other arm's committed motion is refused at
+the door, whoever sent it; one waiting for its start is judged again when it takes over and,
+if it no longer keeps the margin, ``refused`` then (the arm keeps what it ran). Every outcome is an
 :class:`~scara_collab.nodes.protocol.ExecutionStatus` for the move named by the trajectory's
 ``header.frame_id``: ``accepted`` (with its start and end), ``refused``, ``preempted``,
 ``finished`` (:meth:`Execution.poll`, when its end has passed), ``held``
@@ -15,6 +19,7 @@ from typing import Callable, Dict, Optional, Tuple
 import numpy as np
 from trajectory_msgs.msg import JointTrajectory
 
+from scara_collab.core import motion
 from scara_collab.core.model import CellModel
 from scara_collab.nodes import conversions as conv
 from scara_collab.sim.cell_sim import CellSim
@@ -57,14 +62,13 @@ class Execution:
         except conv.MessageError as exc:
             return self._refuse(robot, move, f'{exc}; {KEEPS}')
         now = self.sim.time
-        start = now if stamp == 0.0 else stamp
-        if start + t[-1] < now:
-            return self._refuse(robot, move, f'it ended {now - start - t[-1]:.3f} s ago; '
-                                f'{KEEPS}')
-        if start < now - self.sim.dt:
-            self.warn(f'{robot}: move {move or "(no id)"} start {start:.3f} s is '
-                      f'{now - start:.3f} s late; starting now')
-            start = now
+        try:
+            start = motion.start_time(stamp, float(t[-1]), now, self.sim.dt)
+        except motion.Refused as exc:
+            return self._refuse(robot, move, f'{exc}; {KEEPS}')
+        if stamp > 0.0 and start > stamp:
+            self.warn(f'{robot}: move {move or "(no id)"} start {stamp:.3f} s is '
+                      f'{now - stamp:.3f} s late; starting now if it keeps the margin')
         if t[0] > 0.0:  # like ros2_control: move from the current state to the first point
             q_now, qd_now = self.sim.arm_state(robot)
             t = np.concatenate(([0.0], t))
@@ -72,7 +76,7 @@ class Execution:
             qd = None if qd is None else np.vstack([qd_now, qd])
             qdd = None if qdd is None else np.vstack([np.zeros(3), qdd])
         try:
-            self.sim.execute(robot, start + t, q, qd, qdd)
+            self.sim.execute(robot, start + t, q, qd, qdd, move, stamp)
         except ValueError as exc:
             return self._refuse(robot, move, f'{exc}; {KEEPS}')
         old = self.running.get(robot)
@@ -88,7 +92,11 @@ class Execution:
         self.report(robot, 'refused', move, reason)
 
     def poll(self) -> None:
-        """Report every move whose end has passed as ``finished``."""
+        """Report every move whose end has passed as ``finished``, and those dropped at start."""
+        for robot, move, reason in self.sim.pop_dropped():
+            if self.running.get(robot, ('',))[0] == move:
+                del self.running[robot]
+            self._refuse(robot, move, f'{reason}; {KEEPS}')
         for robot, (move, end) in list(self.running.items()):
             if self.sim.time >= end - 1e-9:
                 del self.running[robot]

@@ -212,6 +212,10 @@ class CellSim:
         self._item_every = _divisor(self.physics_rate, float(cfg['item_rate']), 'item_rate')
         self._servo_dt = self._servo_every * self.dt
         self._seed = int(cfg['item_seed'] if seed is None else seed)
+        allowance = float(self.ctl_cfg.get('admission_allowance', 0.0))
+        #: m between the arms' commitments that an admitted trajectory keeps (0: no check)
+        self.admission_margin = (self.cell.safety_margin + allowance if allowance >= 0
+                                 else 0.0)
         self.arms = self.cell.arms
         self.robots = tuple(a.name for a in self.arms)
         self.joint_names = tuple(n for a in self.arms for n in a.joint_names)
@@ -249,7 +253,8 @@ class CellSim:
         self.servo = Servo(self.arms, self.ctl_cfg, self.control_mode, -self._gravity[2],
                            self._eps, self._servo_dt, self._read()[0],
                            float(self.sim_cfg['velocity_tolerance']),
-                           float(self.sim_cfg['start_tolerance']))
+                           float(self.sim_cfg['start_tolerance']),
+                           margin=self.admission_margin, physics_dt=self.dt)
         self.conveyor = Conveyor(pb, self.cell, self.sim_cfg, lambda: self.time, world.body,
                                  world.belt, world.link_names, self._seed)
         self.grippers = Grippers(pb, self.conveyor, world.body, world.quills, self.robots,
@@ -314,16 +319,35 @@ class CellSim:
         return self.servo.reference(self._index(robot))
 
     def execute(self, robot: str, t: ArrayLike, q: ArrayLike, qd: Optional[ArrayLike] = None,
-                qdd: Optional[ArrayLike] = None) -> None:
+                qdd: Optional[ArrayLike] = None, move_id: str = '', stamp: float = 0.0):
         """Run a joint trajectory on one arm, replacing the running one (:meth:`Servo.execute`).
 
         :param robot: arm name, e.g. ``scara_left``.
         :param t: ``(N,)`` absolute sim times, s; :param q: ``(N, 3)`` joint positions;
         :param qd, qdd: ``(N, 3)`` or ``None``.
+        :param move_id: the move's name; :param stamp: the start it asked for (0: now).
+        :return: the :class:`~scara_collab.core.motion.Move` it replaced at once, if any.
         :raises TrajectoryError: (a ``ValueError``) with the reason (:meth:`Servo.execute`);
-            the arm keeps doing what it did.
+            :class:`~scara_collab.core.motion.Refused` if it would bring the arms within
+            :attr:`admission_margin`. The arm keeps doing what it did.
         """
-        self.servo.execute(self._index(robot), t, q, qd, qdd, *self._read(), self.time)
+        return self.servo.execute(self._index(robot), t, q, qd, qdd, *self._read(), self.time,
+                                  move_id, stamp)
+
+    @property
+    def motion(self):
+        """The arms' commitments (:class:`~scara_collab.core.motion.CellMotion`)."""
+        return self.servo.motion
+
+    def pop_dropped(self) -> List[Tuple[str, str, str]]:
+        """Return ``(robot, move id, reason)`` of moves dropped at their start since the last call.
+
+        A move waiting for its start is judged again when it takes over
+        (:meth:`scara_collab.core.motion.CellMotion.advance`); one that no longer keeps the
+        margin is dropped and the arm keeps what it ran.
+        """
+        out, self.servo.dropped = self.servo.dropped, []
+        return out
 
     def hold(self, robot: str) -> None:
         """Drop the running trajectory and hold the arm where it is now."""

@@ -3,7 +3,11 @@
 Each arm follows a reference: a hold (its last point at rest) or a trajectory
 (:class:`scara_collab.sim.reference.HermiteReference`, from its start time on; until then the
 arm keeps the reference it had, as ros2_control's trajectory controller replaces a trajectory
-at the new one's start). At every servo tick :meth:`Servo.update` samples both references and
+at the new one's start). Which trajectory runs, from when, and whether it may run at all next
+to the other arm is decided by the cell's committed-motion model
+(:class:`scara_collab.core.motion.CellMotion`, :attr:`Servo.motion`): a trajectory that would
+bring the arms within its margin is refused, and one waiting for its start is judged again
+when it takes over. At every servo tick :meth:`Servo.update` samples both references and
 evaluates the control law for both arms at once (:mod:`scara_collab.sim.controllers`: PID on
 torque, or computed torque with one vectorised inverse-dynamics call), clamped to the effort
 limits; the simulator applies :attr:`Servo.tau` until the next tick.
@@ -19,6 +23,8 @@ from numpy.typing import ArrayLike
 
 from scara_collab.core import safety
 from scara_collab.core.model import ArmModel
+from scara_collab.core.motion import CellMotion, Move
+from scara_collab.core.planning import Timeline
 from scara_collab.sim.controllers import ComputedTorqueController, joint_gains, PidController
 from scara_collab.sim.reference import HermiteReference, TrajectoryError, validate_trajectory
 
@@ -37,12 +43,16 @@ class Servo:
     :param q: ``(arms, 3)`` the joints now: each arm holds them.
     :param velocity_tolerance: relative slack on the velocity limits of a trajectory.
     :param start_tolerance: rad | m, how far a trajectory may start from the measured joints.
+    :param margin: m the arms' commitments keep (:class:`~scara_collab.core.motion.CellMotion`);
+        0 admits every valid trajectory.
+    :param physics_dt: s per physics step (the model's start rule).
     :raises ValueError: for an unknown ``control_mode``.
     """
 
     def __init__(self, arms: Sequence[ArmModel], ctl_cfg: dict, control_mode: str,
                  gravity: float, friction_smoothing: float, dt: float, q: np.ndarray,
-                 velocity_tolerance: float = 0.01, start_tolerance: float = 0.05):
+                 velocity_tolerance: float = 0.01, start_tolerance: float = 0.05,
+                 margin: float = 0.0, physics_dt: float = 0.001):
         """Make both control laws; every arm holds ``q``."""
         if control_mode not in CONTROL_MODES:
             raise ValueError(f'control_mode must be one of {CONTROL_MODES}, '
@@ -58,8 +68,12 @@ class Servo:
             arms, joint_gains(ctl_cfg['computed_torque'], 'kp'),
             joint_gains(ctl_cfg['computed_torque'], 'kd'), g=gravity,
             friction_smoothing=friction_smoothing)
-        self._traj: List[Optional[HermiteReference]] = [None] * len(arms)
-        self._next: List[Optional[HermiteReference]] = [None] * len(arms)  # from its start
+        self.names = tuple(a.name for a in arms)
+        self.motion = CellMotion(arms, q, margin, physics_dt)
+        self.motion.checking = margin > 0
+        #: ``(robot, move id, reason)`` of waiting moves dropped as they took over (the bridge
+        #: reports and empties it)
+        self.dropped: List[Tuple[str, str, str]] = []
         self.tau = np.zeros((len(arms), 3))
         self.ref_q = np.array(q, dtype=float)
         self.ref_qd = np.zeros_like(self.ref_q)
@@ -70,15 +84,18 @@ class Servo:
 
         :param q, qd: ``(arms, 3)`` measured joints; :param payload: kg held per arm.
         """
-        for a, ref in enumerate(self._traj):
-            nxt = self._next[a]
-            if nxt is not None and now >= nxt.start:  # a new trajectory takes over
-                ref, self._traj[a], self._next[a] = nxt, nxt, None
-            if ref is None or now < ref.start:
+        poses = dict(zip(self.names, q))
+        ended = {}
+        for robot, event, move, reason in self.motion.advance(now, poses):
+            if event == 'dropped':
+                self.dropped.append((robot, move.id, reason))
+            elif event == 'finished':
+                ended[robot] = move  # sampled once more: its last point, at rest
+        for a, robot in enumerate(self.names):
+            move = self.motion[robot].running or ended.get(robot)
+            if move is None or move.ref is None or now < move.start:
                 continue
-            self.ref_q[a], self.ref_qd[a], self.ref_qdd[a] = ref.sample(now)
-            if now >= ref.end:
-                self._traj[a] = None  # done: hold the last point (sample() gave it at rest)
+            self.ref_q[a], self.ref_qd[a], self.ref_qdd[a] = move.ref.sample(now)
         if self.control_mode == 'pid':
             tau = self._pid(q, qd, self.ref_q, self.ref_qd, self.dt)
         else:
@@ -87,7 +104,7 @@ class Servo:
 
     def execute(self, a: int, t: ArrayLike, q: ArrayLike, qd: Optional[ArrayLike],
                 qdd: Optional[ArrayLike], q_now: np.ndarray, qd_now: np.ndarray,
-                now: float) -> None:
+                now: float, move_id: str = '', stamp: float = 0.0) -> Optional[Move]:
         """Run a joint trajectory on arm ``a``, replacing the running one from ``t[0]`` on.
 
         Until ``t[0]`` the arm keeps its reference (the hold, or the running trajectory), as
@@ -103,11 +120,14 @@ class Servo:
         :param t: ``(N,)`` absolute sim times, s, strictly increasing.
         :param q: ``(N, 3)`` joint positions; :param qd, qdd: ``(N, 3)`` or ``None``.
         :param q_now, qd_now: ``(arms, 3)`` the measured joints now; :param now: sim time, s.
+        :param move_id: the move's name; :param stamp: the start it asked for (0: now).
+        :return: the move it replaced at once, if any.
         :raises TrajectoryError: (a ``ValueError``) with the reason: emergency stop active and
             the move not separating, bad shape, non-finite value, non-increasing times, a
             position outside the joint limits, a velocity above the limits (also between
             points), or a start more than ``start_tolerance`` away from the measured position.
-            The arm keeps doing what it did.
+            :class:`scara_collab.core.motion.Refused` (a ``ValueError`` too): it would bring
+            the arms within the margin. The arm keeps doing what it did.
         """
         arm = self.arms[a]
         valid = validate_trajectory(t, q, qd, arm.lower, arm.upper, arm.max_velocity,
@@ -121,30 +141,19 @@ class Servo:
             raise TrajectoryError(
                 f'the trajectory starts {jump[j]:.4f} away from the measured position of joint '
                 f'{j + 1} ({q_now[a][j]:.4f}); at most {self.start_tolerance} is allowed')
-        if ref.start > now:
-            self._next[a] = ref
-        else:  # late or now: at once
-            self._traj[a], self._next[a] = ref, None
+        move = Move(move_id, Timeline(valid.t, valid.q), float(stamp), ref)
+        return self.motion.take(self.names[a], move, now, dict(zip(self.names, q_now)))
 
     def hold(self, a: int, q: np.ndarray) -> None:
         """Drop arm ``a``'s trajectories (running and next): it holds ``q`` ``(3,)`` at rest."""
-        self._traj[a] = self._next[a] = None
+        self.motion[self.names[a]].hold(q)
         self.ref_q[a] = q
         self.ref_qd[a] = 0.0
         self.ref_qdd[a] = 0.0
 
-    def follow(self, a: int, ref: HermiteReference, q: np.ndarray) -> None:
-        """Run ``ref`` on arm ``a`` at once (a brake), replacing both its trajectories.
-
-        Until ``ref``'s start (now, for a brake) the arm holds ``q``.
-        """
-        self.hold(a, q)
-        self._traj[a] = ref
-
     def active(self, a: int, now: float) -> bool:
         """Return True while arm ``a`` has a trajectory to run (also before its start)."""
-        ref = self._traj[a]
-        return self._next[a] is not None or (ref is not None and now < ref.end)
+        return self.motion[self.names[a]].active(now)
 
     def reference(self, a: int) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return arm ``a``'s reference ``(q, qd, qdd)`` as of the last tick (copies)."""
@@ -157,9 +166,13 @@ class Servo:
         self.hold(a, q)
 
     def brake(self, a: int, q: np.ndarray, qd: np.ndarray, now: float) -> None:
-        """Stop arm ``a`` from ``(q, qd)`` ``(3,)`` each at its acceleration limits, then hold."""
-        t, pos, vel, acc = safety.braking(self.arms[a], q, qd, self.dt)
-        self.follow(a, HermiteReference(now + t, pos, vel, acc), q)
+        """Stop arm ``a`` from ``(q, qd)`` ``(3,)`` each at its acceleration limits, then hold.
+
+        Until the brake's first sample (now) the arm holds ``q``.
+        """
+        self.hold(a, q)
+        self.motion[self.names[a]].brake(self.arms[a], q, qd, now, self.dt,
+                                         ref_of=HermiteReference)
 
     def set_estop(self, on: bool, q: np.ndarray, qd: np.ndarray, now: float) -> None:
         """Set or clear the emergency stop; setting it brakes every arm from ``(q, qd)``.

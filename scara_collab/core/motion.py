@@ -1,0 +1,400 @@
+"""What each arm is committed to do, and when: the one model of the bridge's execution rules.
+
+An arm runs at most one trajectory and has at most one more waiting for its start, as
+ros2_control's joint trajectory controller keeps them. The rules, written here once:
+
+- **Start.** A trajectory stamped 0 starts now; one stamped in the future starts at its stamp;
+  one stamped in the past by more than a physics step starts now, *late*; one that would
+  already have ended is refused (:func:`start_time`). If its first point is after its start,
+  the arm moves there from where it is (:func:`resolve`).
+- **Replace.** A new trajectory takes over at its own start: until then the arm keeps what
+  it runs (or holds), and a trajectory still waiting for its start is replaced at once
+  (:meth:`ArmMotion.take`, :meth:`ArmMotion.advance`).
+- **Hold, brake.** A hold drops both and keeps a pose; a brake runs the stop at the
+  acceleration limits (:func:`scara_collab.core.safety.braking`) at once
+  (:meth:`ArmMotion.hold`, :meth:`ArmMotion.brake`).
+- **Safe against the other arm.** A trajectory is admitted only if, against what the other
+  arm is committed to (its running move, a brake included, and its waiting one), the capsules
+  stay ``margin`` apart (:meth:`CellMotion.admit`). The priority rule of
+  :mod:`scara_collab.core.planning` applies: the leader does not wait for a follower move
+  that starts at or after its own start, because that follower move is checked again when it
+  takes over (:meth:`CellMotion.advance`): a move that would start later than the moment its
+  safety was judged for is judged again, never started blindly.
+
+:class:`CellMotion` is what the bridge's simulator executes from (the servo samples the moves
+it admits). Observers that only hear the trajectories and the bridge's statuses (the collision
+monitor, the planners) keep the same :class:`ArmMotion` through :class:`Heard`, so every node
+predicts the arms with the same rules.
+
+All times are absolute sim seconds.
+"""
+from dataclasses import dataclass, replace
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from scara_collab.core import collision, safety
+from scara_collab.core.model import ArmModel
+from scara_collab.core.planning import Timeline
+
+
+class Refused(ValueError):
+    """A trajectory the rules do not run; the message says why."""
+
+
+@dataclass(frozen=True)
+class Move:
+    """A trajectory an arm runs or will run.
+
+    :ivar id: the move's name (the trajectory's ``header.frame_id``; ``''`` for none).
+    :ivar timeline: its motion in absolute time.
+    :ivar stamp: the start it asked for (0: now).
+    :ivar ref: the executor's own form of it (the servo's reference), or None.
+    """
+
+    id: str
+    timeline: Timeline
+    stamp: float = 0.0
+    ref: Any = None
+
+    @property
+    def start(self) -> float:
+        """When it takes over, s."""
+        return self.timeline.start
+
+    @property
+    def end(self) -> float:
+        """When it ends, s (the arm then holds its last point)."""
+        return self.timeline.end
+
+    @property
+    def late(self) -> float:
+        """Seconds it starts after its stamp (0 if on time or unstamped)."""
+        return max(0.0, self.start - self.stamp) if self.stamp > 0 else 0.0
+
+    def shifted(self, start: float) -> 'Move':
+        """Return the same move starting at ``start``."""
+        return replace(self, timeline=self.timeline.shifted(start - self.start))
+
+
+def start_time(stamp: float, duration: float, now: float, dt: float) -> float:
+    """Return when a trajectory stamped ``stamp`` and ``duration`` long starts, at ``now``.
+
+    Stamp 0 is now; a stamp more than one physics step ``dt`` in the past is now (late).
+
+    >>> start_time(0.0, 2.0, now=5.0, dt=0.001), start_time(6.0, 2.0, 5.0, 0.001)
+    (5.0, 6.0)
+    >>> start_time(4.5, 2.0, 5.0, 0.001)   # late: starts now
+    5.0
+
+    :raises Refused: it would have ended before ``now``.
+    """
+    start = now if stamp == 0.0 else float(stamp)
+    if start + duration < now:
+        raise Refused(f'it ended {now - start - duration:.3f} s ago')
+    return now if start < now - dt else start
+
+
+def resolve(move_id: str, stamp: float, t: ArrayLike, q: ArrayLike, now: float, dt: float,
+            q_now: Optional[ArrayLike] = None) -> Move:
+    """Return the move a trajectory makes, received at ``now`` (:func:`start_time`).
+
+    :param t: ``(N,)`` times from the start, s; :param q: ``(N, 3)`` joint positions.
+    :param q_now: ``(3,)`` where the arm is: it moves from there to a first point later than
+        ``t = 0``; None if unknown (then the first point is held until it is reached).
+    :raises Refused: it would have ended before ``now``.
+    """
+    t, q = np.asarray(t, dtype=float), np.asarray(q, dtype=float).reshape(-1, 3)
+    start = start_time(stamp, float(t[-1]), now, dt)
+    if t[0] > 0.0 and q_now is not None:
+        t = np.concatenate(([0.0], t))
+        q = np.vstack([np.asarray(q_now, dtype=float).reshape(1, 3), q])
+    return Move(move_id, Timeline(start + t, q), float(stamp))
+
+
+def splice(before: Timeline, after: Timeline) -> Timeline:
+    """Return ``before`` until ``after`` starts, then ``after`` (a move taking over)."""
+    keep = before.t < after.start
+    if not np.any(keep):
+        return after
+    return Timeline(np.concatenate([before.t[keep], after.t]),
+                    np.vstack([before.q[keep], after.q]))
+
+
+class ArmMotion:
+    """One arm's commitments: the move it runs and the one waiting for its start.
+
+    :param name: the arm; :param q: ``(3,)`` the pose it holds.
+    """
+
+    def __init__(self, name: str, q: ArrayLike):
+        """The arm holds ``q``."""
+        self.name = name
+        self.running: Optional[Move] = None
+        self.waiting: Optional[Move] = None
+        self.rest = np.asarray(q, dtype=float).reshape(3).copy()
+
+    def take(self, move: Move, now: float) -> Optional[Move]:
+        """Commit to ``move``; return the move it replaces at once, if any.
+
+        A move that starts later waits, replacing a waiting one; one that starts now replaces
+        the running one and the waiting one.
+        """
+        if move.start > now:
+            old, self.waiting = self.waiting, move
+            return old
+        old = self.waiting or self.running
+        self.running, self.waiting = move, None
+        return old
+
+    def advance(self, now: float) -> List[Tuple[str, Move]]:
+        """Move on to ``now``: ``('started', move)`` and ``('finished', move)`` events."""
+        out = []
+        if self.waiting is not None and now >= self.waiting.start:
+            if self.running is not None:
+                self.rest = self.running.timeline.at(now)
+            self.running, self.waiting = self.waiting, None
+            out.append(('started', self.running))
+        if self.running is not None and now >= self.running.end:
+            done, self.running = self.running, None
+            self.rest = done.timeline.q[-1].copy()
+            out.append(('finished', done))
+        return out
+
+    def hold(self, q: ArrayLike) -> List[Move]:
+        """Drop both moves and hold ``q``; return the moves dropped."""
+        dropped = [m for m in (self.running, self.waiting) if m is not None]
+        self.running = self.waiting = None
+        self.rest = np.asarray(q, dtype=float).reshape(3).copy()
+        return dropped
+
+    def brake(self, arm: ArmModel, q: ArrayLike, qd: ArrayLike, now: float,
+              dt: float = 0.01, ref_of=None) -> Move:
+        """Stop from ``(q, qd)`` at the acceleration limits, at once; return the brake move.
+
+        :param ref_of: makes the executor's form of the stop from ``(t, q, qd, qdd)``.
+        """
+        t, pos, vel, acc = safety.braking(arm, q, qd, dt)
+        move = Move('', Timeline(now + t, pos), 0.0,
+                    None if ref_of is None else ref_of(now + t, pos, vel, acc))
+        self.hold(q)
+        self.running = move
+        return move
+
+    def active(self, now: float) -> bool:
+        """Return True while the arm has a move to run (also one waiting for its start)."""
+        return self.waiting is not None or (self.running is not None and now < self.running.end)
+
+    def current(self, now: float, q: Optional[ArrayLike] = None) -> Timeline:
+        """Return what the arm does from ``now`` without its waiting move.
+
+        :param q: ``(3,)`` the measured pose, for an arm that holds (default its last pose).
+        """
+        if self.running is not None and self.running.end > now:
+            return self.running.timeline.since(now)
+        return Timeline.hold(now, self.rest if q is None else q)
+
+    def motion(self, now: float, q: Optional[ArrayLike] = None,
+               before: Optional[float] = None) -> Timeline:
+        """Return everything the arm is committed to from ``now``: the running, then the waiting.
+
+        :param before: count the waiting move only if it starts before this time (the
+            priority rule's view of a follower), default always.
+        """
+        now_on = self.current(now, q)
+        w = self.waiting
+        if w is None or (before is not None and w.start >= before):
+            return now_on
+        return splice(now_on, w.timeline.since(now))
+
+
+@dataclass(frozen=True)
+class Check:
+    """How a move was judged against the other arm.
+
+    :ivar ok: admitted; :ivar reason: why not (``''`` if admitted).
+    :ivar breach: the first predicted time within the margin, or None.
+    """
+
+    ok: bool
+    reason: str = ''
+    breach: Optional[float] = None
+
+
+class CellMotion:
+    """Every arm's commitments and the admission rule between them (module docstring).
+
+    :param arms: the arms, the leader first.
+    :param q: ``(arms, 3)`` the poses they hold.
+    :param margin: m between capsule surfaces that an admitted move keeps.
+    :param dt: the physics step, s (the start rule's slack).
+    :param step: s between predicted samples (:func:`scara_collab.core.safety.first_breach`).
+    """
+
+    def __init__(self, arms: Sequence[ArmModel], q: ArrayLike, margin: float, dt: float,
+                 step: float = safety.PREDICTION_STEP):
+        """Every arm holds its pose in ``q``."""
+        self.models = {a.name: a for a in arms}
+        self.leader = arms[0].name
+        self.arms: Dict[str, ArmMotion] = {a.name: ArmMotion(a.name, p)
+                                           for a, p in zip(arms, np.asarray(q, dtype=float))}
+        self.margin, self.dt, self.step = float(margin), float(dt), float(step)
+        self.checking = True  # False: admit without the check (an arm alone)
+
+    def __getitem__(self, robot: str) -> ArmMotion:
+        """Return ``robot``'s commitments."""
+        return self.arms[robot]
+
+    def others(self, robot: str) -> List[str]:
+        """Return the other arms' names."""
+        return [r for r in self.arms if r != robot]
+
+    def judge(self, robot: str, move: Move, now: float, q: Dict[str, np.ndarray]) -> Check:
+        """Judge ``move`` of ``robot`` against every other arm's commitments from ``now``.
+
+        ``robot`` runs what it runs until ``move`` starts, then ``move``. The leader's view of
+        a follower leaves out a follower move waiting to start at or after the leader's
+        start. Arms already within the margin (stopped too close) may only be parted: the
+        move must take ``robot`` away from arms that stand still
+        (:func:`scara_collab.core.safety.separating`).
+
+        :param q: ``{robot: (3,)}`` the measured poses.
+        """
+        if not self.checking:
+            return Check(True)
+        me = self.models[robot]
+        mine = splice(self.arms[robot].current(now, q.get(robot)), move.timeline.since(now))
+        for other in self.others(robot):
+            view = self.arms[other].motion(now, q.get(other),
+                                           before=move.start if robot == self.leader else None)
+            d_now = float(collision.arm_distance(me, mine.at(now), self.models[other],
+                                                 view.at(now)))
+            if d_now < self.margin:
+                still = view.end <= now
+                if still and safety.separating(me, np.vstack([mine.at(now), move.timeline.q]),
+                                               self.models[other], view.at(now)):
+                    continue
+                return Check(False, f'{robot} and {other} are {d_now:.3f} m apart now (< '
+                             f'{self.margin} m): only a move that parts them from an arm '
+                             'standing still is run', now)
+            breach = safety.first_breach(me, mine, self.models[other], view, self.margin, now,
+                                         self.step)
+            if breach is not None:
+                what = (f'its running move {self.arms[other].running.id or "(brake)"}'
+                        if self.arms[other].running is not None else 'where it stands')
+                return Check(False, f'it would bring {robot} within {self.margin} m of {other} '
+                             f'({what}{" and its next move" if self.arms[other].waiting else ""})'
+                             f' at t={breach:.3f} s', breach)
+        return Check(True)
+
+    def take(self, robot: str, move: Move, now: float, q: Dict[str, np.ndarray]) -> Optional[Move]:
+        """Admit ``move`` (:meth:`judge`) and commit ``robot`` to it (:meth:`ArmMotion.take`).
+
+        :return: the move it replaces at once, if any.
+        :raises Refused: with the reason, if it would break the margin; nothing changes.
+        """
+        check = self.judge(robot, move, now, q)
+        if not check.ok:
+            raise Refused(check.reason)
+        return self.arms[robot].take(move, now)
+
+    def advance(self, now: float, q: Dict[str, np.ndarray]) -> List[Tuple[str, str, Move, str]]:
+        """Move every arm on to ``now``, judging each waiting move again as it takes over.
+
+        The leader goes first, so a follower move taking over at the same instant is judged
+        against the leader's. A waiting move that no longer keeps the margin is dropped (the
+        arm keeps what it ran).
+
+        :return: ``(robot, event, move, reason)``: ``started``, ``finished``, or ``dropped``
+            with the reason.
+        """
+        out = []
+        for robot, arm in self.arms.items():
+            w = arm.waiting
+            if w is not None and now >= w.start:
+                check = self.judge(robot, w, now, q)
+                if not check.ok:
+                    arm.waiting = None
+                    out.append((robot, 'dropped', w, f'judged again at its start: '
+                                f'{check.reason}'))
+            out.extend((robot, ev, m, '') for ev, m in arm.advance(now))
+        return out
+
+
+class Heard:
+    """One arm's commitments as a node hears them: its trajectories, then the bridge's word.
+
+    A trajectory is taken as the bridge will take it (:func:`resolve`, :meth:`ArmMotion.take`)
+    as soon as it is heard; the bridge's status corrects it: ``accepted`` moves it to the
+    start the bridge gives (heard before the trajectory too: kept until it comes),
+    ``refused`` undoes it, ``held`` holds the arm, ``finished`` ends it.
+
+    :param name: the arm; :param q: ``(3,)`` where it is; :param dt: the physics step, s.
+    """
+
+    def __init__(self, name: str, q: ArrayLike = (0.0, 0.0, 0.0), dt: float = 0.001):
+        """Nothing heard yet: the arm holds ``q``."""
+        self.arm = ArmMotion(name, q)
+        self.dt = float(dt)
+        self._undo: Dict[str, Tuple[Optional[Move], Optional[Move]]] = {}
+        self._early: Dict[str, float] = {}  # move id -> its start, accepted before heard
+
+    def trajectory(self, move_id: str, stamp: float, t: ArrayLike, q: ArrayLike, now: float,
+                   q_now: Optional[ArrayLike] = None) -> Optional[Move]:
+        """Take a trajectory heard at ``now``; return its move (None: the bridge refuses it)."""
+        try:
+            move = resolve(move_id, stamp, t, q, now, self.dt, q_now)
+        except Refused:
+            return None
+        early = self._early.pop(move_id, None)
+        if early is not None and move_id:
+            move = move.shifted(early)
+        self._undo = {move_id: (self.arm.running, self.arm.waiting)}
+        self.arm.take(move, now)
+        return move
+
+    def status(self, state: str, move_id: str, now: float, start: Optional[float] = None,
+               q: Optional[ArrayLike] = None) -> bool:
+        """Take the bridge's status of a move at ``now``; return True if anything changed.
+
+        :param start: the start it reports (``accepted``); :param q: the arm's pose now.
+        """
+        arm = self.arm
+        if state == 'accepted' and start is not None:
+            m = next((m for m in (arm.waiting, arm.running) if m is not None and m.id == move_id),
+                     None)
+            if m is None:
+                self._early[move_id] = start
+                return False
+            if abs(m.start - start) < 1e-9:
+                return False
+            moved = m.shifted(start)
+            if arm.running is m:
+                arm.running = moved
+            elif moved.start > now:
+                arm.waiting = moved
+            else:
+                arm.running, arm.waiting = moved, None
+            return True
+        if state == 'refused' and move_id in self._undo:
+            arm.running, arm.waiting = self._undo.pop(move_id)
+            return True
+        if state == 'held':
+            arm.hold(arm.rest if q is None else q)
+            return True
+        if state == 'finished' and arm.running is not None and arm.running.id == move_id:
+            arm.advance(max(now, arm.running.end))
+            return True
+        return False
+
+    def motion(self, now: float, q: Optional[ArrayLike] = None,
+               before: Optional[float] = None) -> Timeline:
+        """Return the arm's commitments from ``now`` (:meth:`ArmMotion.motion`)."""
+        self.arm.advance(now)
+        return self.arm.motion(now, q, before)
+
+    def current(self, now: float, q: Optional[ArrayLike] = None) -> Timeline:
+        """Return what the arm runs from ``now``, without a move waiting for its start."""
+        self.arm.advance(now)
+        return self.arm.current(now, q)

@@ -1,0 +1,278 @@
+"""The committed-motion model: its rules, its admission check, and the simulator that obeys it.
+
+The rules are tested on their own (no rclpy, no PyBullet), then against what the PyBullet cell
+actually executes: the same trajectories, the start and end of each move to one physics step.
+The admission check is then driven by 200 random raw commands through the other arm's
+workspace, executed in physics: the measured capsule distance never falls below the margin.
+"""
+import numpy as np
+import numpy.testing as npt
+import pytest
+
+from scara_collab.core import collision, motion
+from scara_collab.core.config import load_config
+from scara_collab.core.kinematics import ik
+from scara_collab.core.motion import ArmMotion, CellMotion, Heard, Move, Refused
+from scara_collab.core.planning import Timeline
+from scara_collab.core.trajectory import joint_move
+from scara_collab.sim import CellSim
+
+LEFT, RIGHT = 'scara_left', 'scara_right'
+DT = 0.001
+
+
+def _move(move_id, start, q0, q1, duration=1.0, n=11):
+    t = np.linspace(0.0, duration, n)
+    q = np.asarray(q0, float) + np.outer(t / duration, np.asarray(q1, float) - q0)
+    return Move(move_id, Timeline(start + t, q))
+
+
+def _sim(cell):
+    return CellSim(cell, dict(load_config('simulation'), feed_interval=0.0))
+
+
+def _pose(cell, robot, xyz):
+    sol = ik(cell.arm(robot), xyz)
+    assert sol.ok, sol
+    return sol.q
+
+
+# --- the start rule ---------------------------------------------------------------------------
+def test_stamp_zero_starts_now_a_future_stamp_waits_a_past_one_starts_late():
+    assert motion.start_time(0.0, 1.0, 5.0, DT) == 5.0
+    assert motion.start_time(5.5, 1.0, 5.0, DT) == 5.5
+    assert motion.start_time(5.0 - DT / 2, 1.0, 5.0, DT) == 5.0 - DT / 2  # within a step
+    assert motion.start_time(4.2, 1.0, 5.0, DT) == 5.0                    # late
+    with pytest.raises(Refused, match='ended 0.500 s ago'):
+        motion.start_time(3.5, 1.0, 5.0, DT)
+
+
+def test_a_first_point_after_the_start_is_reached_from_where_the_arm_is():
+    m = motion.resolve('a/1', 0.0, [0.5, 1.0], [[1.0, 1.0, 0.1], [2.0, 1.0, 0.1]], now=3.0,
+                       dt=DT, q_now=[0.0, 1.0, 0.1])
+    npt.assert_allclose(m.timeline.t, [3.0, 3.5, 4.0])
+    npt.assert_allclose(m.timeline.q[0], [0.0, 1.0, 0.1])
+    assert m.late == 0.0
+    assert motion.resolve('a/2', 2.0, [0.0, 1.0], np.zeros((2, 3)), 2.5, DT).late == 0.5
+
+
+# --- one arm --------------------------------------------------------------------------------
+def test_a_new_move_takes_over_at_its_start_and_replaces_a_waiting_one():
+    arm = ArmMotion(LEFT, np.zeros(3))
+    a = _move('a', 0.0, np.zeros(3), np.ones(3))
+    assert arm.take(a, 0.0) is None and arm.running is a
+    b = _move('b', 0.6, a.timeline.at(0.6), np.zeros(3))
+    c = _move('c', 0.7, a.timeline.at(0.7), np.zeros(3))
+    arm.take(b, 0.1)
+    assert arm.take(c, 0.2) is b            # a waiting move is replaced at once
+    assert arm.running is a and arm.waiting is c
+    npt.assert_allclose(arm.motion(0.5).at(0.65), a.timeline.at(0.65))  # a runs until c
+    npt.assert_allclose(arm.motion(0.5).at(1.2), c.timeline.at(1.2))
+    assert arm.advance(0.69) == []
+    assert arm.advance(0.7) == [('started', c)]
+    assert arm.advance(1.7) == [('finished', c)] and not arm.active(1.7)
+    npt.assert_allclose(arm.rest, c.timeline.q[-1])
+
+
+def test_hold_drops_both_moves_and_a_brake_runs_at_once(cell):
+    cell_arm = cell.leader
+    arm = ArmMotion(LEFT, np.zeros(3))
+    arm.take(_move('a', 0.0, np.zeros(3), np.ones(3)), 0.0)
+    arm.take(_move('b', 2.0, np.ones(3), np.zeros(3)), 0.5)
+    assert [m.id for m in arm.hold([0.5, 0.5, 0.5])] == ['a', 'b']
+    assert not arm.active(0.5)
+    brake = arm.brake(cell_arm, [0.5, 0.5, 0.1], [1.0, -0.5, 0.0], now=0.5)
+    assert arm.running is brake and brake.start == 0.5
+    assert brake.end == pytest.approx(0.5 + 1.0 / cell_arm.max_acceleration[0])
+
+
+# --- two arms: admission ----------------------------------------------------------------------
+@pytest.fixture
+def poses(cell):
+    """Each arm's tool well out on its own side, and a pose reaching over the belt."""
+    return {'left_out': _pose(cell, LEFT, [2.8, -1.2, 0.4]),
+            'left_in': _pose(cell, LEFT, [2.0, 0.25, 0.4]),
+            'right_out': _pose(cell, RIGHT, [2.8, 1.2, 0.4]),
+            'right_in': _pose(cell, RIGHT, [2.0, -0.25, 0.4])}
+
+
+def _cell_motion(cell, poses):
+    return CellMotion(cell.arms, [poses['left_out'], poses['right_out']],
+                      cell.safety_margin, DT)
+
+
+def _q(cm):
+    return {r: a.rest for r, a in cm.arms.items()}
+
+
+def test_two_moves_into_the_same_place_at_the_same_time_the_second_is_refused(cell, poses):
+    cm = _cell_motion(cell, poses)
+    cm.take(LEFT, _move('L', 0.0, poses['left_out'], poses['left_in'], 2.0), 0.0, _q(cm))
+    with pytest.raises(Refused, match=r'within 0.1 m of scara_left \(its running move L\)'):
+        cm.take(RIGHT, _move('R', 0.5, poses['right_out'], poses['right_in'], 2.0), 0.0,
+                _q(cm))
+    assert cm[RIGHT].waiting is None  # nothing changed
+    # after the left arm is back out, the same move is fine
+    cm.take(LEFT, _move('L2', 2.0, poses['left_in'], poses['left_out'], 1.0), 0.0, _q(cm))
+    cm.take(RIGHT, _move('R', 3.5, poses['right_out'], poses['right_in'], 2.0), 0.0, _q(cm))
+
+
+def test_the_leader_does_not_wait_for_a_later_follower_move_which_is_judged_at_its_start(
+        cell, poses):
+    cm = _cell_motion(cell, poses)
+    follower = _move('R', 1.0, poses['right_out'], poses['right_in'], 2.0)
+    cm.take(RIGHT, follower, 0.0, _q(cm))
+    # the leader's move starts before the follower's: the follower will yield
+    cm.take(LEFT, _move('L', 0.5, poses['left_out'], poses['left_in'], 2.0), 0.0, _q(cm))
+    events = []
+    for k in range(0, 1200):
+        now = round(k * DT, 9)
+        q = {r: a.current(now).at(now) for r, a in cm.arms.items()}
+        events += cm.advance(now, q)
+    assert [(r, e, m.id) for r, e, m, _ in events] == [(LEFT, 'started', 'L'),
+                                                      (RIGHT, 'dropped', 'R')]
+    assert 'judged again at its start' in events[1][3]
+    assert cm[RIGHT].running is None and cm[RIGHT].waiting is None
+
+
+def test_a_follower_move_starting_first_binds_the_leader(cell, poses):
+    cm = _cell_motion(cell, poses)
+    cm.take(RIGHT, _move('R', 0.2, poses['right_out'], poses['right_in'], 2.0), 0.0, _q(cm))
+    with pytest.raises(Refused, match='its next move'):
+        cm.take(LEFT, _move('L', 0.5, poses['left_out'], poses['left_in'], 2.0), 0.0, _q(cm))
+
+
+def test_arms_stopped_too_close_may_only_be_parted(cell, poses):
+    near = _pose(cell, LEFT, [2.0, 0.25, 0.4])
+    close = _pose(cell, RIGHT, [2.0, 0.38, 0.4])
+    cm = CellMotion(cell.arms, [near, close], cell.safety_margin, DT)
+    q = {LEFT: near, RIGHT: close}
+    assert collision.arm_distance(cell.leader, near, cell.follower, close) < cell.safety_margin
+    with pytest.raises(Refused, match='only a move that parts them'):
+        cm.take(LEFT, _move('in', 0.0, near, _pose(cell, LEFT, [2.0, 0.4, 0.4]), 1.0), 0.0, q)
+    cm.take(LEFT, _move('out', 0.0, near, poses['left_out'], 1.0), 0.0, q)
+
+
+# --- what a node hears --------------------------------------------------------------------------
+def test_heard_follows_the_bridges_word():
+    heard = Heard(LEFT, np.zeros(3))
+    t, q = np.array([0.0, 1.0]), np.array([np.zeros(3), np.ones(3)])
+    m = heard.trajectory('L/1', 2.0, t, q, now=1.0)
+    assert heard.arm.waiting is m
+    assert heard.status('accepted', 'L/1', now=1.02, start=2.5)  # the bridge's own start
+    assert heard.arm.waiting.start == 2.5
+    heard.trajectory('L/2', 0.0, t, q + 1, now=1.1)
+    assert heard.status('refused', 'L/2', now=1.12)  # undone: L/1 waits again
+    assert heard.arm.waiting.id == 'L/1' and heard.arm.running is None
+    npt.assert_allclose(heard.motion(3.0).at(3.0), [0.5, 0.5, 0.5])
+    assert heard.status('held', 'L/1', now=3.0, q=[0.4, 0.4, 0.4])
+    assert not heard.arm.active(3.0)
+    # an accepted status heard before its trajectory: the trajectory takes the bridge's start
+    assert not heard.status('accepted', 'L/3', now=4.0, start=4.3)
+    assert heard.trajectory('L/3', 4.1, t, q, now=4.05).start == 4.3
+
+
+# --- the simulator executes what the model says ------------------------------------------------
+def test_the_simulator_starts_and_ends_each_move_when_the_model_says(cell, poses):
+    sim = _sim(cell)
+    sim.reset_arm(LEFT, poses['left_out'])
+    sim.reset_arm(RIGHT, poses['right_out'])
+    arm = cell.leader
+    a = joint_move(arm, poses['left_out'], _pose(cell, LEFT, [2.5, -1.2, 0.3]))
+    b = joint_move(arm, a.q[-1], _pose(cell, LEFT, [3.0, -0.9, 0.3]))
+    sim.execute(LEFT, 0.05 + a.t, a.q, a.qd, a.qdd, 'a', 0.05)
+    b_start = round(0.05 + 0.5 * a.duration, 3)
+    moving = None
+    last_ref = sim.reference(LEFT)[0]
+    while sim.time < b_start - 0.01 - 1e-9:  # b is sent 10 ms before its start
+        sim.step(1)
+        ref = sim.reference(LEFT)[0]
+        if moving is None and not np.array_equal(ref, last_ref):
+            moving = sim.time
+        last_ref = ref
+    ref_b = joint_move(arm, sim.motion[LEFT].running.timeline.at(b_start), b.q[-1])
+    sim.execute(LEFT, b_start + ref_b.t, ref_b.q, ref_b.qd, ref_b.qdd, 'b', b_start)
+    predicted = sim.motion[LEFT].motion(sim.time)
+    last_change = None
+    while sim.time < b_start + ref_b.duration + 0.1:
+        sim.step(1)
+        ref = sim.reference(LEFT)[0]
+        if not np.array_equal(ref, last_ref):
+            last_change = sim.time
+        last_ref = ref
+        if abs(sim.time - (b_start + 0.1)) < DT / 2:  # b has taken over: on b's path
+            npt.assert_allclose(ref, ref_b.q[np.searchsorted(ref_b.t, 0.1)], atol=0.02)
+    servo_dt = 1.0 / float(load_config('simulation')['servo_rate'])
+    assert abs(moving - 0.05) <= servo_dt + DT   # a starts at its stamp
+    # the reference stops changing when b ends (sampled at the servo's ticks)
+    assert abs(last_change - (b_start + ref_b.duration)) <= servo_dt + DT
+    npt.assert_allclose(predicted.at(sim.time), b.q[-1], atol=1e-9)
+    npt.assert_allclose(sim.arm_state(LEFT)[0], b.q[-1], atol=2e-3)
+
+
+def test_the_simulator_refuses_at_the_door_and_drops_at_the_start(cell, poses):
+    sim = _sim(cell)
+    sim.reset_arm(LEFT, poses['left_out'])
+    sim.reset_arm(RIGHT, poses['right_out'])
+    lead = joint_move(cell.leader, poses['left_out'], poses['left_in'])
+    follow = joint_move(cell.follower, poses['right_out'], poses['right_in'])
+    sim.execute(RIGHT, 0.5 + follow.t, follow.q, follow.qd, follow.qdd, 'R', 0.5)
+    sim.execute(LEFT, 0.2 + lead.t, lead.q, lead.qd, lead.qdd, 'L', 0.2)  # leader first
+    sim.step(int(0.6 / DT))
+    assert not sim.active(RIGHT)
+    with pytest.raises(Refused, match='within'):
+        sim.execute(RIGHT, sim.time + follow.t, follow.q, follow.qd, follow.qdd, 'R2', 0.0)
+
+
+def test_a_waiting_move_dropped_at_its_start_is_reported_once(cell, poses):
+    sim = _sim(cell)
+    sim.reset_arm(LEFT, poses['left_out'])
+    sim.reset_arm(RIGHT, poses['right_out'])
+    lead = joint_move(cell.leader, poses['left_out'], poses['left_in'])
+    follow = joint_move(cell.follower, poses['right_out'], poses['right_in'])
+    sim.execute(RIGHT, 0.5 + follow.t, follow.q, follow.qd, follow.qdd, 'R', 0.5)
+    sim.execute(LEFT, 0.2 + lead.t, lead.q, lead.qd, lead.qdd, 'L', 0.2)
+    sim.step(int(0.6 / DT))
+    dropped = sim.pop_dropped()
+    assert [(r, m) for r, m, _ in dropped] == [(RIGHT, 'R')]
+    assert sim.pop_dropped() == []
+
+
+# --- 200 raw commands through the other arm's workspace ----------------------------------------
+def test_random_raw_commands_never_bring_the_arms_within_the_margin(cell):
+    """200 joint moves to random targets over the belt, sent to either arm at random moments
+    (often mid-motion, often into the other arm's path), executed in physics: the capsule
+    distance measured at every millisecond never falls below the safety margin."""
+    rng = np.random.default_rng(7)
+    sim = _sim(cell)
+    sim.reset_arm(LEFT, _pose(cell, LEFT, [2.8, -1.2, 0.4]))
+    sim.reset_arm(RIGHT, _pose(cell, RIGHT, [2.8, 1.2, 0.4]))
+    admitted = refused = 0
+    worst = np.inf
+    for _ in range(200):
+        robot = LEFT if rng.random() < 0.5 else RIGHT
+        arm = cell.arm(robot)
+        side = np.sign(arm.base_position[1])
+        target = [rng.uniform(1.0, 3.0), side * rng.uniform(-0.9, 0.9), rng.uniform(0.3, 0.6)]
+        try:
+            q0 = sim.reference(robot)[0] if sim.active(robot) else sim.arm_state(robot)[0]
+            goal = ik(arm, target, q_current=q0)
+            if not goal.ok:
+                continue
+            traj = joint_move(arm, sim.arm_state(robot)[0], goal.q)
+            stamp = sim.time + rng.choice([0.0, 0.0, rng.uniform(0.0, 0.5)])
+            sim.execute(robot, stamp + traj.t, traj.q, traj.qd, traj.qdd, f'{robot}/{_}', stamp)
+            admitted += 1
+        except Refused:
+            refused += 1
+        except ValueError:
+            continue  # e.g. starting too far from a moving arm: refused for another reason
+        for _k in range(int(rng.uniform(0.05, 0.6) / DT / 5)):
+            sim.step(5)
+            q, _qd = sim._read()
+            worst = min(worst, float(collision.arm_distance(cell.leader, q[0], cell.follower,
+                                                            q[1])))
+        sim.pop_dropped()
+    print(f'admitted {admitted}, refused {refused}, closest {worst:.4f} m')
+    assert admitted >= 40 and refused >= 20
+    assert worst >= cell.safety_margin
