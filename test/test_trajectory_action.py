@@ -1,8 +1,9 @@
 """FollowJointTrajectory on the bridge, as ros2_control's joint trajectory controller serves it.
 
 Needs control_msgs (no PyPI wheel: ``./scripts/build_interfaces`` builds it, CI does): a goal
-moves an arm and succeeds with feedback; bad goals end with their error codes; cancel holds the
-arm; a new goal preempts the running one.
+moves an arm and succeeds with feedback; a malformed goal is rejected at the goal response and
+nothing moves or stops; bad goals end with their error codes; cancel holds the arm; a new goal
+preempts the running one.
 """
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ try:
     from action_msgs.msg import GoalStatus
     from control_msgs.action import FollowJointTrajectory
     from control_msgs.msg import JointTolerance
+    from rcl_interfaces.msg import Log
     from rclpy.action import ActionClient
 except ImportError:
     FollowJointTrajectory = None
@@ -49,11 +51,16 @@ def goal_to(g, dq, names=None, path_tolerance=None):
     return goal, q0 + np.asarray(dq), traj.duration
 
 
-def send(g, goal, feedback=None):
-    """Send ``goal``; return its accepted handle."""
+def respond(g, goal, feedback=None):
+    """Send ``goal``; return its handle once the goal response has come."""
     sent = g.client.send_goal_async(goal, feedback_callback=feedback)
     assert g.spin_until(sent.done)
-    handle = sent.result()
+    return sent.result()
+
+
+def send(g, goal, feedback=None):
+    """Send ``goal``; return its accepted handle."""
+    handle = respond(g, goal, feedback)
     assert handle.accepted
     return handle
 
@@ -81,13 +88,77 @@ def test_a_goal_moves_the_arm_and_succeeds_with_feedback(graph):
     assert max(abs(v) for v in fb.error.positions) < 0.01  # it tracks
 
 
+def malformed_goals(g):
+    """Return ``{why: goal}``: goals the trajectory controller rejects at the goal response."""
+    names = list(g.arm.joint_names)
+    out = {}
+    out['unknown joint'] = goal_to(g, [0.1, 0.0, 0.0], names=names[:2] + ['elbow'])[0]
+    goal = goal_to(g, [0.1, 0.0, 0.0])[0]
+    goal.trajectory.joint_names = names[:2]
+    for pt in goal.trajectory.points:
+        pt.positions, pt.velocities = pt.positions[:2], pt.velocities[:2]
+    out['missing joint'] = goal
+    out['repeated joint'] = goal_to(g, [0.1, 0.0, 0.0], names=names[:2] + names[:1])[0]
+    goal = goal_to(g, [0.1, 0.0, 0.0])[0]
+    goal.trajectory.points = []
+    out['no points'] = goal
+    goal = goal_to(g, [0.1, 0.0, 0.0])[0]
+    goal.trajectory.points[-1].positions = goal.trajectory.points[-1].positions[:2]
+    out['short positions'] = goal
+    return out
+
+
+def test_malformed_goals_are_rejected_and_the_arm_does_not_move(graph):
+    """Unknown, missing or repeated joints, no points, short positions: REJECTED, with a warning.
+
+    As the joint trajectory controller's goal response: the goal is never accepted, so nothing
+    runs, no move is numbered, and the arm stays where it stands.
+    """
+    g = graph
+    log = g.collect(Log, '/rosout')
+    q0 = g.bridge.sim.arm_state(g.arm.name)[0]
+    for why, goal in malformed_goals(g).items():
+        handle = respond(g, goal)
+        assert not handle.accepted, why
+    assert g.spin_until(lambda: sum('goal rejected' in m.msg for m in log) >= 5)
+    warned = [m.msg for m in log if 'goal rejected' in m.msg]
+    unknown = f"{list(g.arm.joint_names[:2]) + ['elbow']} do not match"
+    assert any(unknown in m for m in warned), warned
+    assert any('no points' in m for m in warned), warned
+    assert any('2 positions for 3 joints' in m for m in warned), warned
+    t = g.bridge.sim.time
+    assert g.spin_until(lambda: g.bridge.sim.time > t + 0.5)
+    q, qd = g.bridge.sim.arm_state(g.arm.name)
+    np.testing.assert_allclose(q, q0, atol=1e-4)
+    assert np.abs(qd).max() < 1e-3
+    assert g.bridge.actions.count == 0 and not g.bridge.actions.active
+    assert g.arm.name not in g.bridge.execution.running
+
+
+def test_a_rejected_goal_leaves_the_running_goal_alone(graph):
+    """A goal with no points sent mid-move is rejected; the running goal goes on to succeed."""
+    g = graph
+    goal, target, _ = goal_to(g, [0.6, -0.4, 0.0])
+    running = send(g, goal)
+    start = g.bridge.sim.time
+    assert g.spin_until(lambda: g.bridge.sim.time > start + 0.3)
+    assert not respond(g, malformed_goals(g)['no points']).accepted
+    status, result = result_of(g, running)
+    assert status == GoalStatus.STATUS_SUCCEEDED, result.error_string
+    np.testing.assert_allclose(g.bridge.sim.arm_state(g.arm.name)[0], target, atol=0.01)
+
+
 def test_bad_goals_end_with_their_error_codes(graph):
-    """Wrong joints: INVALID_JOINTS; beyond the joint limits: INVALID_GOAL, with the reason."""
+    """Accepted goals that cannot run end with their error codes, and say why.
+
+    A tolerance for an unknown joint: INVALID_JOINTS; beyond the joint limits: INVALID_GOAL.
+    """
     R = FollowJointTrajectory.Result
-    goal, _, _ = goal_to(graph, [0.1, 0.0, 0.0], names=['a', 'b', 'c'])
+    goal, _, _ = goal_to(graph, [0.1, 0.0, 0.0])
+    goal.goal_tolerance = [JointTolerance(name='elbow', position=0.1)]
     status, result = result_of(graph, send(graph, goal))
     assert status == GoalStatus.STATUS_ABORTED and result.error_code == R.INVALID_JOINTS
-    assert "not scara_left's" in result.error_string
+    assert "unknown joint 'elbow'" in result.error_string
     goal, _, _ = goal_to(graph, [0.1, 0.0, 0.0])
     goal.trajectory.points[-1].positions[0] = 3.0  # beyond +-150 deg
     status, result = result_of(graph, send(graph, goal))

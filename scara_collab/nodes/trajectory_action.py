@@ -5,10 +5,15 @@ ROS install has it), each arm serves ``control_msgs/action/FollowJointTrajectory
 joint trajectory controller's semantics, through the same execution as
 ``/<robot>/joint_trajectory`` (:class:`scara_collab.nodes.execution.Execution`):
 
-- a goal whose joints are not the arm's three ends at once with ``INVALID_JOINTS``, one the
-  execution refuses (limits, times, a start far from the arm, the e-stop) with
-  ``INVALID_GOAL``; the ``error_string`` says why (goals are accepted first, so the client
-  always gets the code);
+- a goal the trajectory controller would reject is rejected at the goal response, with a
+  warning that says why, and nothing runs or stops: no points, joint names that are not
+  exactly the arm's three (unknown, missing or repeated), points whose positions (or
+  velocities, accelerations) do not match them, times not strictly increasing, non-finite
+  numbers, too many points (:func:`scara_collab.nodes.conversions.trajectory_arrays`
+  refuses it);
+- an accepted goal with a tolerance for a joint not the arm's ends at once with
+  ``INVALID_JOINTS``, one the execution refuses (limits, an end already past, a start far
+  from the arm, the e-stop) with ``INVALID_GOAL``; the ``error_string`` says why;
 - feedback (desired = the servo's reference, actual, error) every ``FEEDBACK_PERIOD`` of sim
   time while it runs;
 - a path tolerance broken while it runs holds the arm (braking at the acceleration limits)
@@ -100,7 +105,7 @@ class TrajectoryActions:
         self.servers = [ActionServer(
             node, FollowJointTrajectory, f'{arm.name}/follow_joint_trajectory',
             execute_callback=functools.partial(self._execute, arm.name),
-            goal_callback=lambda request: GoalResponse.ACCEPT,
+            goal_callback=functools.partial(self._goal_response, arm.name),
             cancel_callback=lambda handle: CancelResponse.ACCEPT) for arm in cell.arms]
 
     def destroy(self) -> None:
@@ -108,6 +113,20 @@ class TrajectoryActions:
         for server in self.servers:
             server.destroy()
         self.servers = []
+
+    def _goal_response(self, robot: str, request) -> GoalResponse:
+        """Reject a goal whose trajectory the arm cannot take as it is, saying why.
+
+        The one check: the trajectory message's own (``trajectory_arrays``), as the trajectory
+        controller's ``validate_trajectory_msg`` rejects such a goal at its goal response.
+        """
+        try:
+            conv.trajectory_arrays(request.trajectory, self.cell.arm(robot).joint_names)
+        except conv.MessageError as exc:
+            self.node.get_logger().warning(
+                f'{robot}/follow_joint_trajectory: goal rejected: {exc}')
+            return GoalResponse.REJECT
+        return GoalResponse.ACCEPT
 
     async def _execute(self, robot: str, handle):
         result = FollowJointTrajectory.Result()
@@ -130,10 +149,7 @@ class TrajectoryActions:
         done = Future()
         goal = _Goal(handle, f'{robot}/-{self.count}', 0.0, np.full(3, np.inf),
                      np.full(3, GOAL_TOLERANCE), 0.0, done)
-        names = list(arm.joint_names)
-        if sorted(req.trajectory.joint_names) != sorted(names):
-            return self._end(goal, 'joints', f'joints {list(req.trajectory.joint_names)} are '
-                             f"not {robot}'s {names}")
+        names = list(arm.joint_names)  # the trajectory's are these (_goal_response)
         try:
             goal.path = _tolerances(names, req.path_tolerance, np.inf)
             goal.goal = _tolerances(names, req.goal_tolerance, GOAL_TOLERANCE)
