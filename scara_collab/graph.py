@@ -177,6 +177,7 @@ TOPICS: Tuple[Topic, ...] = (
     Topic('/replication_manager/status', _STATUS),
     Topic('/automation_manager/stats', _STATUS),
     Topic('/emergency_stop', 'std_msgs/msg/Bool', 'latched'),      # collision_monitor
+    Topic('/protective_stop', 'std_msgs/msg/Bool', 'latched'),     # collision_monitor
     Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),  # bridge, monitor, managers
     Topic('/robot_description', 'std_msgs/msg/String', 'latched'),  # state_publisher
     Topic('/rosout', 'rcl_interfaces/msg/Log', 'events'),  # rcl's (records.bag.ROSOUT_QOS)

@@ -1,4 +1,5 @@
 """The collision monitor alone: it fails closed, recovers, and reports the separation's source."""
+from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -11,6 +12,7 @@ from scara_collab.core.config import ConfigError
 from scara_collab.core.mirror import mirror_joints
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes.collision_monitor import CollisionMonitor
+from scara_collab.nodes.qos import LATCHED
 
 HOME = np.array([0.0, 1.5708, 0.0])
 
@@ -56,35 +58,68 @@ def test_a_state_before_the_first_clock_does_not_trip_the_watchdog(graph):
     assert not g.monitor.stopped, g.monitor.reason
 
 
-def test_fails_closed_on_a_nan_state_and_on_silence_then_clears(graph):
-    """A NaN state and then silence each stop the arms.
+def test_fails_closed_on_a_nan_state_and_on_silence_then_resumes_by_itself(graph):
+    """A NaN state and then silence each make a protective stop.
 
-    A fresh valid state in between lets the stop clear (idempotently).
+    Valid states of arms at rest and apart for ``resume_after`` release it by themselves (no
+    clear needed; a clear is still idempotent).
     """
+    from scara_collab.nodes.protocol import StopEvent
     g = graph
+    stops = g.collect(DiagnosticStatus, '/collision_monitor/stops')
     tick(g, 1.0)
     g.states.publish(state(g.cell, 1.0, HOME, nan=True))
     assert g.spin_until(lambda: g.monitor.stopped)
-    assert 'unusable joint state' in g.monitor.reason
-    # a fresh, valid, separated state: clear succeeds (idempotent afterwards)
-    g.states.publish(state(g.cell, 1.01, HOME))
-    assert g.spin_until(lambda: g.monitor.last is not None)
-    res = g.call(Trigger, '/collision_monitor/clear', Trigger.Request())
-    assert res.success and not g.monitor.stopped
+    assert g.monitor.kind == 'protective' and 'unusable joint state' in g.monitor.reason
+    # fresh, valid, separated states at rest: the stop ends by itself after resume_after
+    for k in range(1, 40):
+        t = round(1.0 + 0.01 * k, 3)
+        tick(g, t)
+        g.states.publish(state(g.cell, t, HOME))
+        assert g.spin_until(lambda: g.monitor.last_time is not None
+                            and abs(g.monitor.last_time - t) < 1e-9)
+        if not g.monitor.stopped:
+            break
+    assert not g.monitor.stopped
+    assert g.spin_until(lambda: len(stops) >= 2)
+    begin, end = (StopEvent.from_msg(m) for m in stops[:2])
+    assert (begin.kind, begin.state, end.state) == ('protective', 'begin', 'end')
+    assert end.since == begin.time and end.time - begin.time >= 0.3 - 1e-9
     assert g.call(Trigger, '/collision_monitor/clear', Trigger.Request()).success
     # sim time runs on without states: the watch fails closed
-    for t in (1.1, 1.2, 1.3, 1.4, 1.5):
+    for t in (1.5, 1.6, 1.7, 1.8, 1.9):
         tick(g, t)
     assert g.spin_until(lambda: g.monitor.stopped, timeout=5.0)
-    assert 'no valid joint state' in g.monitor.reason
+    assert g.monitor.kind == 'protective' and 'no valid joint state' in g.monitor.reason
     st = g.monitor.status()
     assert st.stopped and st.minimum is not None and st.minimum > 0.1
-    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    assert (st.protective, st.emergency) == (2, 0)
+    from diagnostic_msgs.msg import DiagnosticArray
     arrays = g.collect(DiagnosticArray, '/diagnostics')
     tick(g, 2.05)  # the 1 Hz status: also on /diagnostics, where ROS tools look
     assert g.spin_until(lambda: arrays)
     assert [(d.name, d.level) for d in arrays[-1].status] == [
-        ('collision_monitor', DiagnosticStatus.ERROR)]
+        ('collision_monitor', DiagnosticStatus.WARN)]
+
+
+def test_an_outside_emergency_stop_holds_until_cleared(graph):
+    """Anyone's ``/emergency_stop`` true is an emergency stop: only a clear releases it."""
+    from std_msgs.msg import Bool
+    g = graph
+    tick(g, 1.0)
+    g.states.publish(state(g.cell, 1.0, HOME))
+    assert g.spin_until(lambda: g.monitor.last is not None)
+    pub = g.probe.create_publisher(Bool, '/emergency_stop', LATCHED)
+    pub.publish(Bool(data=True))
+    assert g.spin_until(lambda: g.monitor.kind == 'emergency')
+    for k in range(1, 60):  # calm states do not release it
+        t = round(1.0 + 0.01 * k, 3)
+        tick(g, t)
+        g.states.publish(state(g.cell, t, HOME))
+        assert g.spin_until(lambda: abs(g.monitor.last_time - t) < 1e-9)
+    assert g.monitor.kind == 'emergency'
+    res = g.call(Trigger, '/collision_monitor/clear', Trigger.Request())
+    assert res.success and not g.monitor.stopped, res.message
 
 
 def test_an_accepted_heard_before_its_trajectory_still_times_the_prediction(graph):
@@ -97,7 +132,6 @@ def test_an_accepted_heard_before_its_trajectory_still_times_the_prediction(grap
     Now the early ``accepted`` is kept and times the trajectory when it comes: the stop is
     predicted before the margin, with the states following the bridge's timing.
     """
-    from diagnostic_msgs.msg import DiagnosticStatus
     from trajectory_msgs.msg import JointTrajectory
 
     from scara_collab.core.kinematics import ik
@@ -119,11 +153,12 @@ def test_an_accepted_heard_before_its_trajectory_still_times_the_prediction(grap
     assert g.spin_until(lambda: g.monitor.last is not None)
     status.publish(ExecutionStatus(right.name, 'accepted', 'raw/crossing', t0, start=start,
                                    end=start + move.t[-1], stamp=0.0).to_msg())
-    assert g.spin_until(lambda: right.name in g.monitor._early)
+    assert g.spin_until(lambda: 'raw/crossing' in g.monitor.heard[right.name]._early)
     traj.publish(conv.trajectory_msg(right.joint_names, move.t, move.q, move.qd, move.qdd,
                                      frame_id='raw/crossing'))
-    assert g.spin_until(lambda: g.monitor._running[right.name] is not None)
-    assert g.monitor._running[right.name][2] == pytest.approx(start)
+    heard = g.monitor.heard[right.name].arm
+    assert g.spin_until(lambda: (heard.waiting or heard.running) is not None)
+    assert (heard.waiting or heard.running).start == pytest.approx(start)
     for k, t in enumerate(start + move.t):  # the arm as the bridge runs it
         tick(g, round(t, 6))
         g.states.publish(state(g.cell, round(t, 6), q_left, move.q[k]))
@@ -131,6 +166,7 @@ def test_an_accepted_heard_before_its_trajectory_still_times_the_prediction(grap
         if g.monitor.stopped:
             break
     assert g.monitor.stopped and g.monitor.reason.startswith('predicted'), g.monitor.reason
+    assert g.monitor.kind == 'protective'
     assert g.monitor.minimum > 0.1  # stopped before the margin, not at it
 
 

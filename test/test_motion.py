@@ -39,6 +39,7 @@ def _pose(cell, robot, xyz):
 
 # --- the start rule ---------------------------------------------------------------------------
 def test_stamp_zero_starts_now_a_future_stamp_waits_a_past_one_starts_late():
+    """The start rule: now, at the stamp, or now (late); refused once it would have ended."""
     assert motion.start_time(0.0, 1.0, 5.0, DT) == 5.0
     assert motion.start_time(5.5, 1.0, 5.0, DT) == 5.5
     assert motion.start_time(5.0 - DT / 2, 1.0, 5.0, DT) == 5.0 - DT / 2  # within a step
@@ -48,6 +49,7 @@ def test_stamp_zero_starts_now_a_future_stamp_waits_a_past_one_starts_late():
 
 
 def test_a_first_point_after_the_start_is_reached_from_where_the_arm_is():
+    """A first point after t = 0 is reached from the measured pose; lateness is counted."""
     m = motion.resolve('a/1', 0.0, [0.5, 1.0], [[1.0, 1.0, 0.1], [2.0, 1.0, 0.1]], now=3.0,
                        dt=DT, q_now=[0.0, 1.0, 0.1])
     npt.assert_allclose(m.timeline.t, [3.0, 3.5, 4.0])
@@ -56,8 +58,31 @@ def test_a_first_point_after_the_start_is_reached_from_where_the_arm_is():
     assert motion.resolve('a/2', 2.0, [0.0, 1.0], np.zeros((2, 3)), 2.5, DT).late == 0.5
 
 
+def test_what_is_committed_is_the_running_move_from_now_or_a_hold_where_the_arm_is():
+    """A move not yet ended counts from now on; an ended move or none is a hold at its pose."""
+    tl = Timeline(np.array([1.0, 2.0, 3.0]), np.array([[0.0, 0, 0], [1, 1, 1], [2, 2, 2]]))
+    measured = np.array([0.4, 0.5, 0.6])
+    arm = ArmMotion(LEFT, np.zeros(3))
+    arm.take(Move('a', tl), 1.0)
+    now = arm.current(1.5, measured)
+    npt.assert_allclose(now.t, [1.5, 2.0, 3.0])
+    npt.assert_allclose(now.q[0], [0.5, 0.5, 0.5])  # the move's pose now, not the measured one
+    idle = ArmMotion(LEFT, np.zeros(3))
+    for motion_of, at in ((arm, 3.0), (arm, 4.0), (idle, 1.5)):
+        held = motion_of.current(at, measured)
+        assert held.start == held.end == at
+        npt.assert_allclose(held.q, [measured])
+
+
+def test_a_trajectory_without_a_measured_pose_is_taken_as_sent():
+    """Without a measured pose the trajectory is taken as sent."""
+    t, q = np.array([0.5, 1.0]), np.array([[1.0, 1, 1], [2, 2, 2]])
+    npt.assert_allclose(motion.resolve('a', 0.0, t, q, now=2.0, dt=DT).timeline.t, [2.5, 3.0])
+
+
 # --- one arm --------------------------------------------------------------------------------
 def test_a_new_move_takes_over_at_its_start_and_replaces_a_waiting_one():
+    """A waiting move is replaced at once; the running one runs until the new one's start."""
     arm = ArmMotion(LEFT, np.zeros(3))
     a = _move('a', 0.0, np.zeros(3), np.ones(3))
     assert arm.take(a, 0.0) is None and arm.running is a
@@ -75,6 +100,7 @@ def test_a_new_move_takes_over_at_its_start_and_replaces_a_waiting_one():
 
 
 def test_hold_drops_both_moves_and_a_brake_runs_at_once(cell):
+    """A hold drops the running and the waiting move; a brake runs from now at the limits."""
     cell_arm = cell.leader
     arm = ArmMotion(LEFT, np.zeros(3))
     arm.take(_move('a', 0.0, np.zeros(3), np.ones(3)), 0.0)
@@ -106,6 +132,7 @@ def _q(cm):
 
 
 def test_two_moves_into_the_same_place_at_the_same_time_the_second_is_refused(cell, poses):
+    """The second of two moves into one place at one time is refused, with the reason."""
     cm = _cell_motion(cell, poses)
     cm.take(LEFT, _move('L', 0.0, poses['left_out'], poses['left_in'], 2.0), 0.0, _q(cm))
     with pytest.raises(Refused, match=r'within 0.1 m of scara_left \(its running move L\)'):
@@ -117,8 +144,8 @@ def test_two_moves_into_the_same_place_at_the_same_time_the_second_is_refused(ce
     cm.take(RIGHT, _move('R', 3.5, poses['right_out'], poses['right_in'], 2.0), 0.0, _q(cm))
 
 
-def test_the_leader_does_not_wait_for_a_later_follower_move_which_is_judged_at_its_start(
-        cell, poses):
+def test_the_leader_does_not_wait_for_a_later_follower_move_judged_at_its_start(cell, poses):
+    """The leader ignores a follower move starting later; that one is dropped at its start."""
     cm = _cell_motion(cell, poses)
     follower = _move('R', 1.0, poses['right_out'], poses['right_in'], 2.0)
     cm.take(RIGHT, follower, 0.0, _q(cm))
@@ -129,13 +156,14 @@ def test_the_leader_does_not_wait_for_a_later_follower_move_which_is_judged_at_i
         now = round(k * DT, 9)
         q = {r: a.current(now).at(now) for r, a in cm.arms.items()}
         events += cm.advance(now, q)
-    assert [(r, e, m.id) for r, e, m, _ in events] == [(LEFT, 'started', 'L'),
-                                                      (RIGHT, 'dropped', 'R')]
+    assert [(r, e, m.id) for r, e, m, _ in events] == [
+        (LEFT, 'started', 'L'), (RIGHT, 'dropped', 'R')]
     assert 'judged again at its start' in events[1][3]
     assert cm[RIGHT].running is None and cm[RIGHT].waiting is None
 
 
 def test_a_follower_move_starting_first_binds_the_leader(cell, poses):
+    """A follower move that starts before the leader's binds the leader (it started first)."""
     cm = _cell_motion(cell, poses)
     cm.take(RIGHT, _move('R', 0.2, poses['right_out'], poses['right_in'], 2.0), 0.0, _q(cm))
     with pytest.raises(Refused, match='its next move'):
@@ -143,6 +171,7 @@ def test_a_follower_move_starting_first_binds_the_leader(cell, poses):
 
 
 def test_arms_stopped_too_close_may_only_be_parted(cell, poses):
+    """Arms already within the margin: only a move parting them from a still arm is run."""
     near = _pose(cell, LEFT, [2.0, 0.25, 0.4])
     close = _pose(cell, RIGHT, [2.0, 0.38, 0.4])
     cm = CellMotion(cell.arms, [near, close], cell.safety_margin, DT)
@@ -155,6 +184,7 @@ def test_arms_stopped_too_close_may_only_be_parted(cell, poses):
 
 # --- what a node hears --------------------------------------------------------------------------
 def test_heard_follows_the_bridges_word():
+    """A node's view: taken as the bridge takes it, corrected by accepted/refused/held."""
     heard = Heard(LEFT, np.zeros(3))
     t, q = np.array([0.0, 1.0]), np.array([np.zeros(3), np.ones(3)])
     m = heard.trajectory('L/1', 2.0, t, q, now=1.0)
@@ -174,6 +204,7 @@ def test_heard_follows_the_bridges_word():
 
 # --- the simulator executes what the model says ------------------------------------------------
 def test_the_simulator_starts_and_ends_each_move_when_the_model_says(cell, poses):
+    """The PyBullet cell runs each move from the model's start to its end, to a servo tick."""
     sim = _sim(cell)
     sim.reset_arm(LEFT, poses['left_out'])
     sim.reset_arm(RIGHT, poses['right_out'])
@@ -211,6 +242,7 @@ def test_the_simulator_starts_and_ends_each_move_when_the_model_says(cell, poses
 
 
 def test_the_simulator_refuses_at_the_door_and_drops_at_the_start(cell, poses):
+    """The simulator drops a follower move that a leader move made unsafe; refuses it anew."""
     sim = _sim(cell)
     sim.reset_arm(LEFT, poses['left_out'])
     sim.reset_arm(RIGHT, poses['right_out'])
@@ -225,6 +257,7 @@ def test_the_simulator_refuses_at_the_door_and_drops_at_the_start(cell, poses):
 
 
 def test_a_waiting_move_dropped_at_its_start_is_reported_once(cell, poses):
+    """A move dropped at its start is reported once (for the bridge's ``refused`` status)."""
     sim = _sim(cell)
     sim.reset_arm(LEFT, poses['left_out'])
     sim.reset_arm(RIGHT, poses['right_out'])
@@ -240,9 +273,12 @@ def test_a_waiting_move_dropped_at_its_start_is_reported_once(cell, poses):
 
 # --- 200 raw commands through the other arm's workspace ----------------------------------------
 def test_random_raw_commands_never_bring_the_arms_within_the_margin(cell):
-    """200 joint moves to random targets over the belt, sent to either arm at random moments
-    (often mid-motion, often into the other arm's path), executed in physics: the capsule
-    distance measured at every millisecond never falls below the safety margin."""
+    """200 raw commands through the other arm's path never break the margin in physics.
+
+    Joint moves to random targets over the belt, sent to either arm at random moments (often
+    mid-motion, often into the other arm's path), executed in PyBullet: the capsule distance
+    measured every 5 ms never falls below the safety margin.
+    """
     rng = np.random.default_rng(7)
     sim = _sim(cell)
     sim.reset_arm(LEFT, _pose(cell, LEFT, [2.8, -1.2, 0.4]))

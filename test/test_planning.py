@@ -1,4 +1,4 @@
-"""Planning decisions without ROS: committed timelines and the priority rule's schedule."""
+"""Planning decisions without ROS: timelines and the priority rule's schedule."""
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
@@ -6,7 +6,7 @@ import pytest
 from scara_collab.core.collision import arm_distance
 from scara_collab.core.kinematics import ik
 from scara_collab.core.model import load_cell
-from scara_collab.core.planning import committed, plan_path, schedule, Timeline
+from scara_collab.core.planning import plan_path, schedule, Timeline
 from scara_collab.core.sorting import drop_point
 
 
@@ -52,32 +52,6 @@ def test_past_motion_of_the_other_arm_does_not_block_a_start(cell):
     assert schedule(left, home, now + 0.05, right, theirs, margin, leader=True) is None
     plan = schedule(left, home, now + 0.05, right, theirs.since(now), margin, leader=True)
     assert plan is not None and plan.start == pytest.approx(now + 0.05)
-
-
-def test_committed_is_the_other_arms_move_from_now_or_a_hold_where_it_is():
-    """A move not yet ended counts from now on; an ended move or none is a hold at its pose."""
-    tl = Timeline(np.array([1.0, 2.0, 3.0]), np.array([[0.0, 0, 0], [1, 1, 1], [2, 2, 2]]))
-    measured = np.array([0.4, 0.5, 0.6])
-    now = committed(tl, 1.5, measured)
-    assert_allclose(now.t, [1.5, 2.0, 3.0])
-    assert_allclose(now.q[0], [0.5, 0.5, 0.5])  # the move's pose now, not the measured one
-    for other, at in ((tl, 3.0), (tl, 4.0), (None, 1.5)):
-        held = committed(other, at, measured)
-        assert held.start == held.end == at
-        assert_allclose(held.q, [measured])
-
-
-def test_a_commanded_trajectory_starts_at_its_stamp_or_now_from_where_the_arm_is():
-    """Stamp 0 starts now; a first point after the start is reached from the measured pose."""
-    t, q = np.array([0.5, 1.0]), np.array([[1.0, 1, 1], [2, 2, 2]])
-    here = np.zeros(3)
-    tl = Timeline.commanded(3.0, t, q, now=2.0, q_now=here)
-    assert_allclose(tl.t, [3.0, 3.5, 4.0])
-    assert_allclose(tl.q, [here, q[0], q[1]])
-    tl = Timeline.commanded(0.0, t, q, now=2.0)  # no measured pose: as sent
-    assert_allclose(tl.t, [2.5, 3.0])
-    tl = Timeline.commanded(0.0, np.array([0.0, 1.0]), q, now=2.0, q_now=here)
-    assert_allclose(tl.t, [2.0, 3.0])  # it starts at its first point
 
 
 def test_an_offered_move_is_checked_and_taken_only_from_where_the_arm_is(cell):

@@ -129,7 +129,7 @@ class ArmMotion:
     """
 
     def __init__(self, name: str, q: ArrayLike):
-        """The arm holds ``q``."""
+        """Start with nothing committed: the arm holds ``q``."""
         self.name = name
         self.running: Optional[Move] = None
         self.waiting: Optional[Move] = None

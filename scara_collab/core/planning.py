@@ -44,19 +44,6 @@ class Timeline:
         """Return a trajectory started at absolute time ``start``."""
         return Timeline(start + traj.t, traj.q)
 
-    @staticmethod
-    def commanded(stamp: float, t, q, now: float, q_now=None) -> 'Timeline':
-        """Return a trajectory as an arm runs it: from ``stamp`` (0: ``now``), s.
-
-        :param t: ``(N,)`` times from the start, s; :param q: ``(N, 3)`` joint positions.
-        :param q_now: ``(3,)`` the arm's measured state: where it starts from when the first
-            point is later than the start (the arm moves from there to it); None if unknown.
-        """
-        t, q = np.asarray(t, dtype=float), np.asarray(q, dtype=float)
-        if t[0] > 0 and q_now is not None:
-            t, q = np.concatenate(([0.0], t)), np.vstack([q_now, q])
-        return Timeline((stamp if stamp > 0 else now) + t, q)
-
     @property
     def start(self) -> float:
         """First time stamp, s."""
@@ -201,26 +188,6 @@ def other_view(other: Timeline, my_start: float, leader: bool) -> Timeline:
     if not leader or other.start < my_start:
         return other
     return Timeline.hold(other.start, other.q[0])
-
-
-def committed(other: Optional[Timeline], now: float, q_other) -> Timeline:
-    """Return the other arm's motion from ``now`` on, as far as it is committed.
-
-    While its committed move ``other`` has not ended at ``now``, that move (a timeline holds
-    its last pose after its end, which is where the arm will be); otherwise a hold at its
-    measured pose ``q_other``. Judging "ended" at the planned start instead would hold the
-    other arm at its measured pose in the middle of its move: a stale pose (the margin breach
-    at saturation of issue 14 came from that). Only the part from ``now`` on counts: its past
-    motion may have passed close to where the planning arm stands, and checking that against
-    its start pose would block every start (both arms then wait for each other).
-
-    :param other: the other arm's last committed move, or None.
-    :param now: the current time, s.
-    :param q_other: ``(3,)`` the other arm's measured joint state.
-    """
-    if other is not None and other.end > now:
-        return other.since(now)
-    return Timeline.hold(now, q_other)
 
 
 def schedule(me: ArmModel, traj: Trajectory, start: float, other_arm: ArmModel,

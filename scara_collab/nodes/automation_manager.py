@@ -9,7 +9,8 @@ retries, :mod:`scara_collab.nodes.protocol` for the statuses):
 * in: ``/conveyor/items`` (items resting on the belt), ``/joint_states``,
   ``/<robot>/planner_status`` and ``/<robot>/execution_status`` (about its moves, by request
   id), ``/<robot>/joint_trajectory`` (the planners' moves: the other arm's booked motion),
-  ``/conveyor/events`` (counts; confirms grasps and releases), ``/emergency_stop``;
+  ``/conveyor/events`` (counts; confirms grasps and releases), ``/emergency_stop`` and
+  ``/protective_stop`` (the job pauses while either stands);
 * out: a move as the job planned it on ``/<robot>/target_trajectory`` (JointTrajectory: the
   planner takes it instead of planning the move again), or as a point on ``/<robot>/target``
   (PointStamped) when the job has no plan of it; in mirrored mode on
@@ -117,7 +118,10 @@ class AutomationManager(Node):
                                      guarded(self, self._on_event), 100),
             self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
                                      DEFAULT))
-        self.create_subscription(Bool, '/emergency_stop', guarded(self, self._on_estop), LATCHED)
+        self._stops = {'emergency': False, 'protective': False}  # the job pauses under either
+        for kind in self._stops:
+            self.create_subscription(Bool, f'/{kind}_stop', guarded(
+                self, lambda msg, k=kind: self._on_estop(k, msg)), LATCHED)
         self.create_service(Trigger, '~/start', guarded(self, self._on_start, service=True))
         self.create_service(Trigger, '~/stop', guarded(self, self._on_stop, service=True))
         # on the sim clock, before joining the lockstep: each answer follows the tick's work
@@ -180,10 +184,15 @@ class AutomationManager(Node):
         stamp, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
         self.job.on_trajectory(robot, request, stamp + t, q)
 
-    def _on_estop(self, msg: Bool) -> None:
-        self.job.on_estop(bool(msg.data))
-        if msg.data:
-            self.get_logger().error('emergency stop: the job pauses')
+    def _on_estop(self, kind: str, msg: Bool) -> None:
+        was = any(self._stops.values())
+        self._stops[kind] = bool(msg.data)
+        self.job.on_estop(any(self._stops.values()))
+        if msg.data and not was:
+            self.get_logger().warning(f'{kind} stop: the job pauses')
+        elif was and not any(self._stops.values()):
+            self.get_logger().info(f'{kind} stop released: the job plans again from where the '
+                                   'arms are')
 
     def missing_links(self) -> List[str]:
         """Return the topics and services the job needs that are not matched yet.

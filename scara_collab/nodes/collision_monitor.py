@@ -1,22 +1,31 @@
-"""Collision monitor: the runtime safety net behind the planners, and the separation's source.
+"""Collision monitor: the safety net behind the bridge's admission, the separation's source.
 
-On every ``/joint_states`` message it computes the arm-to-arm capsule surface distance,
-publishes it on ``/collision_monitor/min_distance``, and latches ``/emergency_stop`` true
-(transient local; the bridge brakes both arms at their acceleration limits and holds them)
-when it falls below the safety margin, or *before* that: it follows the trajectories the
-bridge runs (each ``/<robot>/joint_trajectory`` the bridge reports ``accepted``) and stops as
-soon as their predicted first breach of the margin is nearer than the arms' braking time plus
-``stop_latency`` (:mod:`scara_collab.core.safety`), so a command the bridge accepted cannot
-carry the arms into the margin. It fails closed: a joint state it cannot use (non-finite,
-missing joints) or no valid state for ``stale_after`` sim seconds (seen at two looks in a row,
-``stale_after / 2`` apart) also latches the stop.
-``/collision_monitor/clear`` (std_srvs/Trigger, idempotent) releases the stop once the arms
-are apart again and the state is fresh. ``~/status``
-(:class:`~scara_collab.nodes.protocol.MonitorStatus`, 1 Hz and on every change) carries the
-smallest distance seen and when: the run's one source of the minimum separation. Capsule
-markers coloured by distance go to ``~/capsules`` while something subscribes to it.
-Its own parameters (:data:`PARAMETERS`) are checked at start and on every change; only
-``marker_rate`` and ``stop_latency`` may change while it runs.
+On every ``/joint_states`` message it computes the arm-to-arm capsule surface distance and
+publishes it on ``/collision_monitor/min_distance``. It stops both arms, in ISO 10218's two
+ways (:data:`scara_collab.nodes.protocol.STOP_KINDS`):
+
+- a **protective stop** (``/protective_stop`` true, transient local; the bridge brakes both
+  arms at their acceleration limits and holds them, dropping their moves) when the arms'
+  committed motion is predicted to break the margin sooner than they can brake (it follows
+  what the bridge runs by the committed-motion model's rules,
+  :class:`scara_collab.core.motion.Heard`, and stops once the predicted first breach is
+  nearer than the braking time plus ``stop_latency``: :mod:`scara_collab.core.safety`), when a
+  joint state is unusable (non-finite, missing joints), or when no valid state has come for
+  ``stale_after`` sim seconds (seen at two looks in a row, ``stale_after / 2`` apart). It is
+  released by the monitor itself once the cause is gone: valid states for ``resume_after``
+  sim seconds, the arms at rest and at least the margin apart (the job then plans again from
+  where the arms are);
+- an **emergency stop** (``/emergency_stop`` true, transient local) when the measured distance
+  falls below the margin, or when anyone else publishes ``/emergency_stop`` true. It holds until
+  ``/collision_monitor/clear`` (std_srvs/Trigger, idempotent) releases it, once the arms are
+  apart again and the state is fresh.
+
+Every stop's begin and end goes to ``~/stops`` (:class:`~scara_collab.nodes.protocol.StopEvent`)
+for the run's summary. ``~/status`` (:class:`~scara_collab.nodes.protocol.MonitorStatus`, 1 Hz
+and on every change) carries the smallest distance seen and when: the run's one source of the
+minimum separation. Capsule markers coloured by distance go to ``~/capsules`` while something
+subscribes to it. Its own parameters (:data:`PARAMETERS`) are checked at start and on every
+change; only ``marker_rate``, ``stop_latency`` and ``resume_after`` may change while it runs.
 """
 from typing import Optional
 
@@ -31,14 +40,14 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
 from scara_collab.core import collision, safety
-from scara_collab.core.config import Rule
+from scara_collab.core.config import load_config, Rule
 from scara_collab.core.model import load_cell
-from scara_collab.core.planning import Timeline
+from scara_collab.core.motion import Heard
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.params import declare_checked
-from scara_collab.nodes.qos import DEFAULT, LATCHED
+from scara_collab.nodes.qos import DEFAULT, EVENTS, LATCHED
 from scara_collab.nodes.runner import guarded, run_node
 from scara_collab.nodes.sim_timer import every
 
@@ -52,13 +61,16 @@ PARAMETERS = {
     # s from a state to the bridge braking on the stop it causes: a state period (20 ms at
     # simulation.yaml's 50 Hz), the lockstep window (20 ms) and the monitor's own turn
     'stop_latency': 0.05,
+    'resume_after': 0.3,    # sim s of valid states, arms at rest and apart: a protective stop ends
 }
 RULES = (Rule('profile', 'text'), Rule('safety_margin', 'number'),
          Rule('marker_rate', 'positive'), Rule('stale_after', 'positive'),
-         Rule('stop_latency', 'nonneg'))
+         Rule('stop_latency', 'nonneg'), Rule('resume_after', 'positive'))
 #: the parameters that may change while the monitor runs (the margin and the watch's period
 #: may not)
-DYNAMIC = ('marker_rate', 'stop_latency')
+DYNAMIC = ('marker_rate', 'stop_latency', 'resume_after')
+#: rad/s or m/s: an arm this slow on every joint is at rest (a protective stop may end)
+AT_REST = 0.02
 #: rad or m: a prediction is used only while both arms are this close to it
 TRACKING = 0.02
 
@@ -81,19 +93,19 @@ class CollisionMonitor(Node):
         self.margin = self.cell.safety_margin if margin < 0 else margin
         self.stale_after = float(params['stale_after'])
         self._set_params(params)
-        # what the bridge runs, per arm: (move id, Timeline, start) or None (it holds); the one
-        # before (a refused trajectory leaves it running)
-        self._running = {arm.name: None for arm in self.cell.arms}
-        self._before = dict(self._running)
-        # an 'accepted' heard before its trajectory (two topics: no order between them):
-        # robot -> (move id, start), applied when the trajectory comes
-        self._early: dict = {}
+        # what the bridge runs, per arm, as heard (the committed-motion model's rules)
+        dt = 1.0 / float(load_config('simulation')['physics_rate'])
+        self.heard = {arm.name: Heard(arm.name, dt=dt) for arm in self.cell.arms}
+        self._q = {arm.name: None for arm in self.cell.arms}  # the last valid state
         self._breach: Optional[float] = None
         self._predict_again = True
         self._started = ()
         self._lines: list = []  # (move id, Timeline) per arm the breach was predicted from
-        self.stopped = False
+        self.kind = ''          # the standing stop's kind, '' if none
         self.reason = ''
+        self.stop_since: Optional[float] = None
+        self.counts = {'protective': 0, 'emergency': 0}
+        self._calm_since: Optional[float] = None  # valid, at rest, apart since (sim s)
         self.last: Optional[float] = None
         self.last_time: Optional[float] = None  # sim time of the last valid state
         self._stale_since: Optional[float] = None  # the watch's first stale look
@@ -103,6 +115,8 @@ class CollisionMonitor(Node):
         self._published_min: Optional[float] = None
         self.dist_pub = self.create_publisher(Float64, '~/min_distance', 10)
         self.estop_pub = self.create_publisher(Bool, '/emergency_stop', LATCHED)
+        self.protective_pub = self.create_publisher(Bool, '/protective_stop', LATCHED)
+        self.stops_pub = self.create_publisher(DiagnosticStatus, '~/stops', EVENTS)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
         self.diagnostics = Diagnostics(self, self.status_pub)  # and on /diagnostics
         self.marker_pub = self.create_publisher(MarkerArray, '~/capsules', 10)
@@ -110,6 +124,8 @@ class CollisionMonitor(Node):
         self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
                                  DEFAULT)
         self.create_service(Trigger, '~/clear', guarded(self, self._on_clear, True))
+        # anyone may ask for an emergency stop (the monitor's own true comes back here too)
+        self.create_subscription(Bool, '/emergency_stop', guarded(self, self._on_estop), LATCHED)
         for arm in self.cell.arms:
             self.create_subscription(
                 JointTrajectory, f'/{arm.name}/joint_trajectory',
@@ -120,6 +136,7 @@ class CollisionMonitor(Node):
         every(self, self.stale_after / 2, self._watch)  # on the sim clock
         every(self, 1.0, self._publish_status)
         self.estop_pub.publish(Bool(data=False))
+        self.protective_pub.publish(Bool(data=False))
         lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'watching {self.cell.leader.name} vs '
                                f'{self.cell.follower.name}, margin {self.margin} m')
@@ -128,63 +145,93 @@ class CollisionMonitor(Node):
         """Take the values of the dynamic parameters (at start and on a change)."""
         self.marker_period = 1.0 / float(params['marker_rate'])
         self.latency = float(params['stop_latency'])
+        self.resume_after = float(params['resume_after'])
 
-    def _stop(self, text: str) -> None:
-        if self.stopped:
+    @property
+    def stopped(self) -> bool:
+        """True while a stop (either kind) stands."""
+        return bool(self.kind)
+
+    def _stop(self, kind: str, text: str) -> None:
+        """Stop both arms: ``kind`` protective or emergency (an emergency overrides the other)."""
+        if self.kind == 'emergency' or self.kind == kind:
             return
-        self.stopped, self.reason = True, text
-        self.estop_pub.publish(Bool(data=True))
-        self.get_logger().error(text + '; emergency stop')
+        now = conv.now(self)
+        if self.kind == 'protective':  # becomes an emergency: the protective one ends here
+            self._end_stop('overridden by an emergency stop')
+        self.kind, self.reason, self.stop_since = kind, text, now
+        self._calm_since = None
+        self.counts[kind] += 1
+        (self.estop_pub if kind == 'emergency' else self.protective_pub).publish(Bool(data=True))
+        self.stops_pub.publish(proto.StopEvent(kind, 'begin', round(now, 6), text).to_msg())
+        log = self.get_logger().error if kind == 'emergency' else self.get_logger().warning
+        log(f'{text}; {kind} stop')
         self._publish_status()
+
+    def _end_stop(self, why: str) -> None:
+        """Release the standing stop (its end goes to ``~/stops``)."""
+        kind, since = self.kind, self.stop_since
+        self.kind, self.reason, self.stop_since = '', '', None
+        self._predict_again = True
+        (self.estop_pub if kind == 'emergency' else self.protective_pub).publish(Bool(data=False))
+        now = conv.now(self)
+        self.stops_pub.publish(proto.StopEvent(kind, 'end', round(now, 6), why,
+                                               since).to_msg())
+        self.get_logger().info(f'{kind} stop released: {why}')
+        self._publish_status()
+
+    def _on_estop(self, msg: Bool) -> None:
+        """Take an emergency stop asked for by anyone (an outside request)."""
+        if msg.data and self.kind != 'emergency':
+            self._stop('emergency', 'emergency stop requested on /emergency_stop')
+
+    def _resume_if_calm(self, now: float, d: float, qd) -> None:
+        """End a protective stop once the states are valid and the arms at rest and apart, a while.
+
+        The bridge dropped the arms' moves when it held them, so nothing committed carries the
+        arms back into the conflict; the job plans again from where they stand.
+        """
+        calm = d >= self.margin and all(np.max(np.abs(v)) < AT_REST for v in qd)
+        if not calm:
+            self._calm_since = None
+        elif self._calm_since is None:
+            self._calm_since = now
+        elif now - self._calm_since >= self.resume_after:
+            self._end_stop(f'valid states, arms at rest {d:.3f} m apart for '
+                           f'{now - self._calm_since:.2f} s')
 
     # --- what the bridge runs --------------------------------------------------------------
     def _on_trajectory(self, robot: str, msg: JointTrajectory) -> None:
         try:
-            _, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
+            stamp, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
         except conv.MessageError:
             return  # the bridge refuses it too
-        # as the bridge does it: a new trajectory replaces the running one, stamp 0 or a
-        # past stamp = start now; its execution status corrects this when it comes
-        stamp = conv.to_sec(msg.header.stamp)
-        start = max(stamp, conv.now(self)) if stamp > 0 else conv.now(self)
-        early = self._early.pop(robot, None)
-        if early is not None and early[0] == msg.header.frame_id:
-            start = early[1]  # the bridge's own start, heard first
-        self._before[robot] = self._running[robot]
-        self._running[robot] = (msg.header.frame_id, Timeline(start + t, q), start)
+        # taken as the bridge takes it; its execution status corrects this when it comes
+        self.heard[robot].trajectory(msg.header.frame_id, stamp, t, q, conv.now(self),
+                                     self._q[robot])
         self._predict_again = True
 
     def _on_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
-        running = self._running.get(st.robot)
-        mine = running is not None and running[0] == st.move
-        if st.state == 'accepted' and mine and st.start is not None:  # its real start
-            self._running[st.robot] = (st.move, running[1].shifted(st.start - running[2]),
-                                       st.start)
-        elif st.state == 'accepted' and st.start is not None:  # before its trajectory
-            self._early[st.robot] = (st.move, st.start)
-            return
-        elif st.state == 'refused' and mine:
-            self._running[st.robot] = self._before[st.robot]
-        elif st.state == 'held' or (st.state == 'finished' and mine):
-            self._running[st.robot] = None
-        else:
-            return
-        self._predict_again = True
+        heard = self.heard.get(st.robot)
+        if heard is not None and heard.status(st.state, st.move, conv.now(self), st.start,
+                                              self._q[st.robot]):
+            self._predict_again = True
 
     def _predicted_stop(self, stamp: float, q, qd) -> Optional[str]:
         """Return why the arms must stop now to stay out of the margin, or None."""
         a, b = self.cell.arms
         # a move counts from its start: until then a follower may still re-time it for a new
         # leader move (the priority rule); from then on the bridge runs it
-        started = tuple(r is not None and r[1].start <= stamp for r in self._running.values())
+        for arm in (a, b):
+            self.heard[arm.name].arm.advance(stamp)
+        running = [self.heard[arm.name].arm.running for arm in (a, b)]
+        started = tuple(None if m is None else (m.id, m.start) for m in running)
         if self._predict_again or started != self._started:
             self._predict_again, self._started = False, started
-            lines = [self._running[arm.name][:2] if started[k]
-                     else ('', Timeline.hold(stamp, q[k])) for k, arm in enumerate((a, b))]
-            self._breach = safety.first_breach(a, lines[0][1], b, lines[1][1], self.margin,
-                                               stamp)
-            self._lines = lines
+            lines = [self.heard[arm.name].current(stamp, q[k]) for k, arm in enumerate((a, b))]
+            self._breach = safety.first_breach(a, lines[0], b, lines[1], self.margin, stamp)
+            self._lines = [('' if m is None else m.id, tl) for m, tl in zip(running, lines)]
         # predict only from what the arms do: a lost or late status must not fake a stop (the
         # measured distance against the margin still stands behind this)
         if any(np.max(np.abs(tl.at(stamp) - q[k])) > TRACKING for k, (_, tl)
@@ -209,12 +256,14 @@ class CollisionMonitor(Node):
             qa, va = conv.joint_state_arrays(msg, a.joint_names)
             qb, vb = conv.joint_state_arrays(msg, b.joint_names)
         except conv.MessageError as exc:  # fail closed: a state we cannot check stops the arms
-            self._stop(f'unusable joint state: {exc}')
+            self._stop('protective', f'unusable joint state: {exc}')
+            self._calm_since = None
             return
         pairs = collision.arm_pair_distances(a, qa, b, qb)
         d = float(pairs.min())
         stamp = conv.to_sec(msg.header.stamp)
         now = conv.now(self)
+        self._q[a.name], self._q[b.name] = qa, qb
         # the watchdog runs on sim time: a state heard before the first /clock has no time
         self.last, self.last_time = d, (now if now > 0 else None)
         if self.minimum is None or d < self.minimum:
@@ -225,12 +274,14 @@ class CollisionMonitor(Node):
         self.dist_pub.publish(Float64(data=d))
         if d < self.margin:
             i, j = np.unravel_index(np.argmin(pairs), pairs.shape)
-            self._stop(f'margin broken: {a.name} {PARTS[i]} to {b.name} {PARTS[j]} {d:.4f} m '
-                       f'< {self.margin} m at t={stamp:.3f} s')
+            self._stop('emergency', f'margin broken: {a.name} {PARTS[i]} to {b.name} '
+                       f'{PARTS[j]} {d:.4f} m < {self.margin} m at t={stamp:.3f} s')
         elif not self.stopped:
             why = self._predicted_stop(stamp, (qa, qb), (va, vb))
             if why is not None:
-                self._stop(why)
+                self._stop('protective', why)
+        elif self.kind == 'protective':
+            self._resume_if_calm(stamp, d, (va, vb))
         if stamp >= self._next_marker:
             self._next_marker = stamp + self.marker_period
             if self.marker_pub.get_subscription_count():  # markers only for a listener
@@ -250,22 +301,23 @@ class CollisionMonitor(Node):
         elif self._stale_since is None:
             self._stale_since = now  # look again at the next tick, after the queued states
         elif now > self._stale_since:
-            self._stop(f'no valid joint state for {now - self.last_time:.3f} s (sim)')
+            self._stop('protective', f'no valid joint state for {now - self.last_time:.3f} s '
+                       '(sim)')
+            self._calm_since = None
 
     def _on_clear(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
         fresh = self.last_time is not None and conv.now(self) - self.last_time <= self.stale_after
         if not self.stopped:
-            res.success, res.message = True, 'no emergency stop to clear'
+            res.success, res.message = True, 'no stop to clear'
         elif self.last is None or not fresh or self.last < self.margin:
             res.success = False
             res.message = ('no fresh joint state; not cleared' if not fresh or self.last is None
                            else f'arms still {self.last:.3f} m apart (< {self.margin} m); '
                            'not cleared')
         else:
-            self.stopped, self.reason = False, ''
-            self._predict_again = True
-            self.estop_pub.publish(Bool(data=False))
-            res.success, res.message = True, 'emergency stop cleared'
+            kind = self.kind
+            self._end_stop('cleared on request (/collision_monitor/clear)')
+            res.success, res.message = True, f'{kind} stop cleared'
             self.get_logger().info(res.message)
             self._publish_status()
         return res
@@ -273,7 +325,9 @@ class CollisionMonitor(Node):
     def status(self) -> proto.MonitorStatus:
         """Return the monitor's figures so far."""
         return proto.MonitorStatus(round(conv.now(self), 6), self.last, self.minimum,
-                                   self.minimum_time, self.margin, self.stopped, self.reason)
+                                   self.minimum_time, self.margin, self.stopped, self.reason,
+                                   self.kind, self.counts['protective'],
+                                   self.counts['emergency'])
 
     def _publish_status(self) -> None:
         self.diagnostics.publish(self.status().to_msg())
