@@ -9,9 +9,11 @@ invalid value stops the node, or is refused, with the reason.
 Keeps its arm's state from ``/joint_states``; on ``/<robot>/target`` (PointStamped, frame
 ``world`` or ``<robot>_base``; a non-zero stamp is the requested start time) it plans the
 straight Cartesian move (or a joint move, parameter ``mode``) from the current state, schedules
-it against the other arm's committed motion (heard on ``/<other>/joint_trajectory``) by the
-priority rule of :mod:`scara_collab.core.planning`, and publishes ``/<robot>/joint_trajectory``
-stamped with its start, ``/<robot>/planned_path`` and ``/<robot>/planner_status`` (OK, WARN
+it against the other arm's committed motion (heard on ``/<other>/joint_trajectory`` and
+``/<other>/execution_status``, kept by the committed-motion model's rules:
+:class:`scara_collab.core.motion.Heard`) by the priority rule of
+:mod:`scara_collab.core.planning`, and publishes ``/<robot>/joint_trajectory`` stamped with its
+start, ``/<robot>/planned_path`` and ``/<robot>/planner_status`` (OK, WARN
 when delayed, ERROR with the reason when refused; the arm then stays where it is).
 
 A move may come as a plan instead, on ``/<robot>/target_trajectory`` (JointTrajectory: the
@@ -50,8 +52,9 @@ from trajectory_msgs.msg import JointTrajectory
 from scara_collab.core.config import load_config, Rule
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.model import load_cell
-from scara_collab.core.planning import (committed, MODES, offered_move, path_options, Plan,
-                                        plan_path, schedule, starts_at, Timeline)
+from scara_collab.core.motion import Heard
+from scara_collab.core.planning import (MODES, offered_move, path_options, Plan, plan_path,
+                                        schedule, starts_at)
 from scara_collab.core.trajectory import path_metrics, Trajectory
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
@@ -165,8 +168,9 @@ class Planner(Node):
         self.mine: Optional[Plan] = None            # my committed move
         self.mine_id = ''                           # ... its move id
         self.pending_target: Optional[Asked] = None  # my committed move's
-        self.theirs: Optional[Timeline] = None      # the other arm's committed move
-        self.theirs_before: Optional[Timeline] = None  # ... and the one it replaced
+        # the other arm's committed motion, as heard
+        self.theirs = Heard(self.other.name, dt=1.0 / float(
+            load_config('simulation')['physics_rate']))
         self.queued: Optional[Asked] = None         # one to plan after mine
         self.waiting: Optional[Asked] = None        # one blocked by the other arm
 
@@ -307,7 +311,9 @@ class Planner(Node):
                 return
         now = self._now()
         start = max(start, now + self.lead)  # planning took (sim) time too
-        other = committed(self.theirs, now, self.q_other)  # from now on: the past is past
+        # from now on (the past is past); the leader leaves out a follower move that waits to
+        # start at or after its own start (the priority rule: that one yields)
+        other = self.theirs.motion(now, self.q_other, before=start if self.leader else None)
         plan = schedule(self.arm, traj, start, self.other, other, self.margin, self.leader,
                         self.max_delay)
         if plan is None:
@@ -326,10 +332,7 @@ class Planner(Node):
         late is shifted to its actual start.
         """
         st = proto.ExecutionStatus.from_msg(msg)
-        if st.state == 'refused':
-            self.theirs = self.theirs_before
-        elif st.late > 0 and self.theirs is not None:
-            self.theirs = self.theirs.shifted(st.late)
+        self.theirs.status(st.state, st.move, self._now(), st.start, self.q_other)
 
     def _on_own_execution(self, msg: DiagnosticStatus) -> None:
         """Re-base my move if the bridge started it late, and announce its real end."""
@@ -365,8 +368,8 @@ class Planner(Node):
         except conv.MessageError:
             return  # the bridge refuses and reports it; nothing committed
         now = self._now()
-        self.theirs_before, self.theirs = self.theirs, Timeline.commanded(stamp, t, q, now,
-                                                                          self.q_other)
+        if self.theirs.trajectory(msg.header.frame_id, stamp, t, q, now, self.q_other) is None:
+            return  # it would have ended: the bridge refuses it
         if self.waiting is not None:  # the other arm moves: maybe it clears the way
             xyz, frame, asked, offer, request = self.waiting
             self._plan(xyz, frame, 0.0, offer, request, asked)
@@ -375,7 +378,7 @@ class Planner(Node):
             return
         # follower: my committed move has not started; does the new leader move hit it?
         replan = schedule(self.arm, self.mine.traj, self.mine.start, self.other,
-                          self.theirs.since(now), self.margin, leader=False,
+                          self.theirs.motion(now, self.q_other), self.margin, leader=False,
                           max_delay=self.max_delay)
         asked, request = self.pending_target.time, self.pending_target.request
         if replan is None:
