@@ -17,6 +17,8 @@ from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 
 SIM = {'use_sim_time': 'true'}
+#: rad/s or m/s: braked and held
+AT_REST_CHECK = 2e-2
 LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
 
@@ -186,57 +188,108 @@ def test_base_frame_targets_and_mirroring_off(cell):
     assert cell.spin_until(lambda: cell.replicator.error is not None)
 
 
-def test_a_raw_crossing_trajectory_is_stopped_before_the_margin_and_can_be_undone(cell):
-    """A right-arm trajectory straight through the left arm, bypassing the planners.
-
-    The monitor follows what the bridge runs and stops the arms while they are still apart
-    (the bridge brakes at the acceleration limits): the margin is never broken. Under the
-    latched stop only a move that parts the arms is run; then the stop clears.
-    """
-    from std_srvs.srv import Trigger
+def _raw_crossing(g):
+    """Park the left arm on the belt; return the right arm's raw move straight through it."""
     from scara_collab.core.kinematics import ik
     from scara_collab.core.trajectory import joint_move
 
-    margin = cell.bridge.cell.safety_margin
-    left, right = cell.bridge.cell.arms
-    publish(cell, '/scara_left/target', [1.8, -0.2, 0.4])  # the left arm waits on the belt
-    assert cell.spin_until(lambda: cell.status['scara_left'])
-    run_until(cell, last_end(cell, 'scara_left') + 0.2)
+    right = g.bridge.cell.follower
+    publish(g, '/scara_left/target', [1.8, -0.2, 0.4])  # the left arm waits on the belt
+    assert g.spin_until(lambda: g.status['scara_left'])
+    run_until(g, last_end(g, 'scara_left') + 0.2)
+    q0 = g.right.q.copy()
+    return q0, joint_move(right, q0, ik(right, [1.8, -0.2, 0.4], q_current=q0).unwrap())
+
+
+def _execution(g, executions, move):
+    assert g.spin_until(lambda: any(proto.ExecutionStatus.from_msg(m).move == move
+                                    for m in executions))
+    return next(st for st in map(proto.ExecutionStatus.from_msg, executions) if st.move == move)
+
+
+def test_a_raw_crossing_trajectory_is_refused_at_the_door(cell):
+    """A right-arm trajectory straight through the left arm, bypassing the planners.
+
+    The bridge judges it against the left arm's committed motion and refuses it with the
+    reason: the right arm does not move, no stop is needed, the margin is never approached.
+    """
+    right = cell.bridge.cell.follower
+    q0, through = _raw_crossing(cell)
     executions = cell.collect(DiagnosticStatus, '/scara_right/execution_status')
     raw = cell.probe.create_publisher(JointTrajectory, '/scara_right/joint_trajectory', 10)
-    q0 = cell.right.q.copy()
-    through = joint_move(right, q0, ik(right, [1.8, -0.2, 0.4], q_current=q0).unwrap())
     raw.publish(conv.trajectory_msg(right.joint_names, through.t, through.q, through.qd,
                                     through.qdd, frame_id='raw/1'))
-    assert cell.spin_until(lambda: cell.monitor.stopped, timeout=60)
-    assert cell.monitor.reason.startswith('predicted'), cell.monitor.reason
-    stop_time = cell.bridge.sim.time
-    run_until(cell, stop_time + 1.0)  # braked and held
-    low = min(m.data for m in cell.distance)
-    print(f'\nraw crossing move: {cell.monitor.reason}; min separation {low:.3f} m')
-    assert low >= margin
-    assert cell.monitor.status().minimum >= margin
-    assert np.abs(cell.bridge.sim.arm_state('scara_right')[1]).max() < 1e-2  # at rest
+    st = _execution(cell, executions, 'raw/1')
+    assert st.state == 'refused' and 'within 0.11 m of scara_left' in st.reason, st.reason
+    run_until(cell, cell.bridge.sim.time + 1.0)
+    np.testing.assert_allclose(cell.bridge.sim.arm_state('scara_right')[0], q0, atol=2e-3)
+    assert not cell.monitor.stopped and cell.monitor.counts == {'protective': 0,
+                                                                'emergency': 0}
 
-    def execution(move):
-        assert cell.spin_until(lambda: any(proto.ExecutionStatus.from_msg(m).move == move
-                                           for m in executions))
-        return next(st for st in map(proto.ExecutionStatus.from_msg, executions)
-                    if st.move == move)
 
-    q = cell.right.q.copy()
+@pytest.fixture
+def open_door():
+    """Yield the motion graph with the bridge's admission check off: the monitor alone."""
+    g = Graph()
+    g.bridge = g.add_node_of('pybullet_bridge', real_time_factor=0.0, feed_interval=0.0,
+                             admission_allowance=-1.0, **SIM)
+    names = ('left_planner', 'right_planner', 'replication_manager', 'collision_monitor')
+    g.left, g.right, g.replicator, g.monitor = (g.add_node_of(n, **SIM) for n in names)
+    g.status = {n: g.collect(DiagnosticStatus, f'/{n}/planner_status')
+                for n in ('scara_left', 'scara_right')}
+    g.trajs = {n: g.collect(JointTrajectory, f'/{n}/joint_trajectory')
+               for n in ('scara_left', 'scara_right')}
+    g.distance = g.collect(Float64, '/collision_monitor/min_distance')
+    assert g.spin_until(lambda: g.left.q is not None and g.right.q is not None
+                        and g.left._now() > 0.1 and g.right._now() > 0.1)
+    yield g
+    g.close()
+
+
+def test_the_monitor_stops_a_crossing_the_door_let_through_and_resumes(open_door):
+    """With the admission check off, the monitor is the second line, and it holds alone.
+
+    It follows what the bridge runs and stops the arms protectively while they are still
+    apart (the bridge brakes at the acceleration limits): the margin is never broken. Braked,
+    at rest and apart, the stop ends by itself. Under an emergency stop only a move that
+    parts the arms is run; then a clear releases it.
+    """
+    from std_srvs.srv import Trigger
+
+    g = open_door
+    margin = g.bridge.cell.safety_margin
+    right = g.bridge.cell.follower
+    q0, through = _raw_crossing(g)
+    executions = g.collect(DiagnosticStatus, '/scara_right/execution_status')
+    raw = g.probe.create_publisher(JointTrajectory, '/scara_right/joint_trajectory', 10)
+    raw.publish(conv.trajectory_msg(right.joint_names, through.t, through.q, through.qd,
+                                    through.qdd, frame_id='raw/1'))
+    assert g.spin_until(lambda: g.monitor.stopped, timeout=60)
+    assert g.monitor.kind == 'protective' and g.monitor.reason.startswith('predicted')
+    assert g.spin_until(lambda: not g.monitor.stopped, timeout=60)  # released by itself
+    low = min(m.data for m in g.distance)
+    print(f'\nraw crossing move, door open: min separation {low:.3f} m')
+    assert low >= margin and g.monitor.status().minimum >= margin
+    assert np.abs(g.bridge.sim.arm_state('scara_right')[1]).max() < AT_REST_CHECK
+    assert g.monitor.counts == {'protective': 1, 'emergency': 0}
+
+    estop = g.probe.create_publisher(Bool, '/emergency_stop', LATCHED)
+    estop.publish(Bool(data=True))
+    assert g.spin_until(lambda: g.bridge.sim.estop and g.monitor.kind == 'emergency')
+    q = g.right.q.copy()
+    from scara_collab.core.trajectory import joint_move
     closer = joint_move(right, q, q + 0.3 * (through.q[-1] - q))  # towards the left arm
     raw.publish(conv.trajectory_msg(right.joint_names, closer.t, closer.q, frame_id='raw/2'))
-    refused = execution('raw/2')
+    refused = _execution(g, executions, 'raw/2')
     assert refused.state == 'refused' and 'away from the other' in refused.reason
     back = joint_move(right, q, q0)  # where it came from: away from the left arm
     raw.publish(conv.trajectory_msg(right.joint_names, back.t, back.q, frame_id='raw/3'))
-    assert execution('raw/3').state == 'accepted'
-    run_until(cell, cell.bridge.sim.time + back.duration + 0.3)
-    res = cell.call(Trigger, '/collision_monitor/clear', Trigger.Request())
+    assert _execution(g, executions, 'raw/3').state == 'accepted'
+    run_until(g, g.bridge.sim.time + back.duration + 0.3)
+    res = g.call(Trigger, '/collision_monitor/clear', Trigger.Request())
     assert res.success, res.message
-    assert cell.spin_until(lambda: not cell.bridge.sim.estop)
-    assert min(m.data for m in cell.distance) >= margin
+    assert g.spin_until(lambda: not g.bridge.sim.estop)
+    assert min(m.data for m in g.distance) >= margin
 
 
 def test_a_nan_state_then_a_target_leaves_the_planner_planning(cell):

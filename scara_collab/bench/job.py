@@ -19,7 +19,7 @@ import signal
 import subprocess
 import sys
 import time
-from typing import Dict, Optional, Sequence
+from typing import Callable, Dict, Optional, Sequence
 
 from scara_collab import graph
 from scara_collab.bench.util import Log
@@ -39,7 +39,9 @@ def default_feed() -> float:
 
 def run_job(mode: str, duration: float, feed: Optional[float] = None,
             seed: Optional[int] = None, log: Optional[Log] = None,
-            report_every: float = 10.0, faults: Sequence[str] = ()) -> Dict[str, object]:
+            report_every: float = 10.0, faults: Sequence[str] = (),
+            during: Optional[Callable[[InProcess, Dict[str, object], float], None]] = None
+            ) -> Dict[str, object]:
     """Run one mode for ``duration`` sim seconds in one process; return the job's stats.
 
     :param mode: ``'single'``, ``'collaborative'`` or ``'mirrored'``.
@@ -48,6 +50,9 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
     :param seed: item feed seed (the bridge's ``item_seed``; default ``simulation.yaml``).
     :param report_every: sim seconds between progress lines.
     :param faults: fault injection entries for every node (:mod:`scara_collab.nodes.faults`).
+    :param during: called as ``during(g, nodes, sim_time)`` after every turn of the executor
+        (fault-injection tests: ``g`` the :class:`~scara_collab.nodes.runner.InProcess` graph,
+        whose ``probe(name)`` adds a node of the caller's, ``nodes`` the graph's by name).
     :return: :func:`job_result` of the graph plus ``wall_seconds``, ``sim_seconds``,
         ``real_time_factor``, ``feed_interval``, ``seed``.
     """
@@ -73,6 +78,8 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
     try:
         while bridge.sim.time < duration:
             g.spin_once(timeout_sec=0.01)
+            if during is not None:
+                during(g, built, bridge.sim.time)
             if log and bridge.sim.time >= next_report:
                 c = job.job.counts
                 log(f'{mode} (seed {seed}): {bridge.sim.time:.0f}/{duration:.0f} sim s, sorted '
@@ -106,7 +113,8 @@ def job_result(job: AutomationManager, monitor: CollisionMonitor,
             'give_ups': stats.give_ups, 'retries': stats.retries,
             'last_give_up': stats.last_give_up,
             'min_separation_m': guard.minimum, 'min_separation_time': guard.minimum_time,
-            'estop': guard.stopped, 'estop_reason': guard.reason,
+            'estop': guard.stopped, 'estop_reason': guard.reason, 'stop_kind': guard.kind,
+            'protective_stops': guard.protective, 'emergency_stops': guard.emergency,
             'mirror_error_max_m': mirror.error_max if stats.mode == 'mirrored' else None,
             'mirror_error_max_time': mirror.error_max_time,
             'mirror_in_step_moves': mirror.in_step_moves,

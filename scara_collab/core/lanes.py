@@ -35,7 +35,8 @@ MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
 FAILED_MOVE = ('refused', 'superseded', 'held')
 #: the state a planner's status puts a move in (a state not listed changes nothing)
 PLANNER_STATUS = {s: s for s in ('planned', 'queued', 'waiting', 'refused', 'superseded')}
-#: the same for the bridge's; ``preempted``: the planner took it back and says what comes next
+#: the same for the bridge's; ``preempted`` by the arm's own planner (its new move, its hold): the
+#: planner took it back and says what comes next (a take-over by anyone else comes as refused)
 BRIDGE_STATUS = {'accepted': 'accepted', 'finished': 'finished', 'preempted': 'waiting',
                  'refused': 'refused', 'held': 'held'}
 

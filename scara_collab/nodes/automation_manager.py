@@ -169,15 +169,21 @@ class AutomationManager(Node):
 
     def _on_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
-        if not st.move:
-            return
-        robot, request = proto.parse_move_id(st.move)
-        self.job.on_execution(robot, request, st.state, st.start, st.end, st.reason)
+        try:
+            robot, request = proto.parse_move_id(st.move)
+        except proto.ProtocolError:
+            return  # not a move of the job's (a raw command, a planner's hold)
+        state, reason = st.state, st.reason
+        if state == 'preempted' and not proto.planners_move(robot, st.by):
+            # someone else's trajectory took the arm over: the move failed, plan again
+            state, reason = 'refused', f'taken over by move {st.by or "(no id)"}'
+        self.job.on_execution(robot, request, state, st.start, st.end, reason)
 
     def _on_trajectory(self, msg: JointTrajectory) -> None:
-        if not msg.header.frame_id:
-            return  # not a planner's move (a raw command): nothing to book
-        robot, request = proto.parse_move_id(msg.header.frame_id)
+        try:
+            robot, request = proto.parse_move_id(msg.header.frame_id)
+        except proto.ProtocolError:
+            return  # not a planner's move of a request (a raw command, a hold): nothing to book
         if robot not in self.job.sorted_by:  # the cell's arms
             raise proto.ProtocolError(f'trajectory for move {msg.header.frame_id!r}: '
                                       'no such arm in the cell')

@@ -81,7 +81,8 @@ class Execution:
             return self._refuse(robot, move, f'{exc}; {KEEPS}')
         old = self.running.get(robot)
         if old is not None and old[0] != move:
-            self.report(robot, 'preempted', old[0], f'replaced by move {move or "(no id)"}')
+            self.report(robot, 'preempted', old[0], f'replaced by move {move or "(no id)"}',
+                        by=move)
         self.running[robot] = (move, start + t[-1])
         self.report(robot, 'accepted', move, start=start, end=start + t[-1],
                     stamp=stamp if stamp > 0 else None)

@@ -384,7 +384,8 @@ class Planner(Node):
         if replan is None:
             self.mine = None
             self.traj_pub.publish(conv.trajectory_msg(
-                self.arm.joint_names, np.array([0.0]), self.q.reshape(1, 3)))
+                self.arm.joint_names, np.array([0.0]), self.q.reshape(1, 3),
+                frame_id=proto.hold_id(self.arm.name)))
             self._wait(self.pending_target)
         elif replan.delay > 0:
             self._publish(Plan(replan.traj, replan.start, replan.start - asked), request,

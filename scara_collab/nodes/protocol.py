@@ -64,6 +64,31 @@ def move_id(robot: str, request: int) -> str:
     return f'{robot}/{int(request)}'
 
 
+def hold_id(robot: str) -> str:
+    """Return the id of the hold a planner sends to keep ``robot`` where it is.
+
+    >>> hold_id('scara_right')
+    'scara_right/hold'
+    """
+    return f'{robot}/hold'
+
+
+def planners_move(robot: str, move: str) -> bool:
+    """Return True if ``move`` is one of ``robot``'s planner's (a move of a request, its hold).
+
+    >>> planners_move('scara_left', 'scara_left/15'), planners_move('scara_left', 'raw/1')
+    (True, False)
+    >>> planners_move('scara_left', 'scara_left/hold'), planners_move('scara_left', '')
+    (True, False)
+    """
+    if move == hold_id(robot):
+        return True
+    try:
+        return parse_move_id(move)[0] == robot
+    except ProtocolError:
+        return False
+
+
 def parse_move_id(move: str) -> Tuple[str, int]:
     """Inverse of :func:`move_id`: ``'scara_left/15'`` -> ``('scara_left', 15)``.
 
@@ -255,13 +280,14 @@ class ExecutionStatus(_MoveStatus):
     ``accepted``: it runs from ``start`` to ``end`` (sim s; ``stamp`` is the start it asked
     for, ``start`` later means it came late); ``refused``: not executed (``reason``), the arm
     keeps its command; ``finished``: it ran to its end; ``preempted``: a newer trajectory
-    replaced it; ``held``: the emergency stop, or a silent lockstep guard (the collision
+    (the move ``by``) replaced it; ``held``: the emergency stop, or a silent lockstep guard (the collision
     monitor, :mod:`scara_collab.nodes.lockstep`), holds the arm (the move is aborted);
     ``cleared``: the emergency stop was released, or the guard answers again.
     """
 
     time: float
     stamp: Optional[float] = None
+    by: str = ''
 
     KIND: ClassVar[str] = 'execution'
     CHOICES: ClassVar[Tuple[str, tuple]] = ('state', EXECUTION_STATES)
