@@ -280,9 +280,9 @@ class ExecutionStatus(_MoveStatus):
     ``accepted``: it runs from ``start`` to ``end`` (sim s; ``stamp`` is the start it asked
     for, ``start`` later means it came late); ``refused``: not executed (``reason``), the arm
     keeps its command; ``finished``: it ran to its end; ``preempted``: a newer trajectory
-    (the move ``by``) replaced it; ``held``: the emergency stop, or a silent lockstep guard (the collision
-    monitor, :mod:`scara_collab.nodes.lockstep`), holds the arm (the move is aborted);
-    ``cleared``: the emergency stop was released, or the guard answers again.
+    (the move ``by``) replaced it; ``held``: a protective or emergency stop, or a silent
+    lockstep guard (the collision monitor, :mod:`scara_collab.nodes.lockstep`), holds the arm
+    (the move is aborted); ``cleared``: the stop was released, or the guard answers again.
     """
 
     time: float
