@@ -322,6 +322,39 @@ class CellMotion:
         return out
 
 
+class Lateness:
+    """How late things have come lately: the largest of the last ``window`` samples, s.
+
+    A node that must act ahead of time (a planner's lead before a move's start, the monitor's
+    latency before a stop takes hold) adds what it measures instead of assuming lockstep's
+    timing; on-time samples (0) let it fall back as the late ones leave the window.
+
+    >>> late = Lateness(window=3)
+    >>> for s in (0.0, 0.25, 0.0, 0.0):
+    ...     late.add(s)
+    >>> late.worst, (late.add(0.0), late.worst)[1]
+    (0.25, 0.0)
+
+    :param window: samples kept; :param cap: s, the most it ever says (a stall is not latency).
+    """
+
+    def __init__(self, window: int = 20, cap: float = 1.0):
+        """Nothing measured yet: 0 s."""
+        self.window, self.cap = int(window), float(cap)
+        self._samples: List[float] = []
+
+    def add(self, seconds: float) -> None:
+        """Take one measured delay, s (negative counts as 0)."""
+        self._samples.append(min(max(float(seconds), 0.0), self.cap))
+        if len(self._samples) > self.window:
+            del self._samples[0]
+
+    @property
+    def worst(self) -> float:
+        """The largest delay in the window, s."""
+        return max(self._samples, default=0.0)
+
+
 class Heard:
     """One arm's commitments as a node hears them: its trajectories, then the bridge's word.
 

@@ -9,7 +9,8 @@ ways (:data:`scara_collab.nodes.protocol.STOP_KINDS`):
   committed motion is predicted to break the margin sooner than they can brake (it follows
   what the bridge runs by the committed-motion model's rules,
   :class:`scara_collab.core.motion.Heard`, and stops once the predicted first breach is
-  nearer than the braking time plus ``stop_latency``: :mod:`scara_collab.core.safety`), when a
+  nearer than the braking time plus ``stop_latency`` plus how old the states have lately been
+  when they came: :mod:`scara_collab.core.safety`), when a
   joint state is unusable (non-finite, missing joints), or when no valid state has come for
   ``stale_after`` sim seconds (seen at two looks in a row, ``stale_after / 2`` apart). It is
   released by the monitor itself once the cause is gone: valid states for ``resume_after``
@@ -42,7 +43,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from scara_collab.core import collision, safety
 from scara_collab.core.config import load_config, Rule
 from scara_collab.core.model import load_cell
-from scara_collab.core.motion import Heard
+from scara_collab.core.motion import Heard, Lateness
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
@@ -106,6 +107,8 @@ class CollisionMonitor(Node):
         self.stop_since: Optional[float] = None
         self.counts = {'protective': 0, 'emergency': 0}
         self._calm_since: Optional[float] = None  # valid, at rest, apart since (sim s)
+        # how old the states are when they come (sim s): added to stop_latency
+        self.state_age = Lateness(window=50)
         self.last: Optional[float] = None
         self.last_time: Optional[float] = None  # sim time of the last valid state
         self._stale_since: Optional[float] = None  # the watch's first stale look
@@ -239,13 +242,14 @@ class CollisionMonitor(Node):
             self._predict_again = True
             return None
         stopping = max(safety.stopping_time(a, qd[0]), safety.stopping_time(b, qd[1]))
-        if not safety.stop_due(stamp, self._breach, stopping, self.latency):
+        latency = self.latency + self.state_age.worst  # as configured, plus what is measured
+        if not safety.stop_due(stamp, self._breach, stopping, latency):
             return None
         moves = ', '.join(f'{arm.name} {m or "holding"} t={tl.start:.3f}..{tl.end:.3f} s'
                           for arm, (m, tl) in zip((a, b), self._lines))
         return (f'predicted: the commanded moves ({moves}) bring {a.name} and {b.name} within '
                 f'{self.margin} m at t={self._breach:.3f} s, and braking takes '
-                f'{stopping:.3f} s (+{self.latency} s latency) from t={stamp:.3f} s')
+                f'{stopping:.3f} s (+{latency:.3f} s latency) from t={stamp:.3f} s')
 
     # --- the watch ---------------------------------------------------------------------------
     def _on_state(self, msg: JointState) -> None:
@@ -263,6 +267,8 @@ class CollisionMonitor(Node):
         d = float(pairs.min())
         stamp = conv.to_sec(msg.header.stamp)
         now = conv.now(self)
+        if now > 0:
+            self.state_age.add(now - stamp)
         self._q[a.name], self._q[b.name] = qa, qb
         # the watchdog runs on sim time: a state heard before the first /clock has no time
         self.last, self.last_time = d, (now if now > 0 else None)

@@ -52,7 +52,7 @@ from trajectory_msgs.msg import JointTrajectory
 from scara_collab.core.config import load_config, Rule
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.model import load_cell
-from scara_collab.core.motion import Heard
+from scara_collab.core.motion import Heard, Lateness
 from scara_collab.core.planning import (MODES, offered_move, path_options, Plan, plan_path,
                                         schedule, starts_at)
 from scara_collab.core.trajectory import path_metrics, Trajectory
@@ -65,8 +65,10 @@ from scara_collab.nodes.runner import guarded, run_node
 
 HISTORY = 64  # requests whose last status is kept, to answer a re-sent one
 #: the planner's own time parameters and their defaults, s: a move starts at least
-#: ``planning_lead`` after it is planned, waits at most ``max_delay`` for the other arm's
-#: committed motion, and is refused after ``max_wait`` blocked by its resting pose
+#: ``planning_lead`` after it is planned (plus the most the bridge started one of this
+#: planner's moves late among its last 20: the latency measured, not assumed), waits at most
+#: ``max_delay`` for the other arm's committed motion, and is refused after ``max_wait``
+#: blocked by its resting pose
 TIMES = {'planning_lead': 0.05, 'max_delay': 30.0, 'max_wait': 60.0}
 
 
@@ -168,6 +170,8 @@ class Planner(Node):
         self.mine: Optional[Plan] = None            # my committed move
         self.mine_id = ''                           # ... its move id
         self.pending_target: Optional[Asked] = None  # my committed move's
+        # how late the bridge has started my moves lately: added to the planning lead
+        self.lateness = Lateness()
         # the other arm's committed motion, as heard
         self.theirs = Heard(self.other.name, dt=1.0 / float(
             load_config('simulation')['physics_rate']))
@@ -297,7 +301,8 @@ class Planner(Node):
     def _plan(self, xyz: np.ndarray, frame: str, stamp: float, offer: Optional[Trajectory],
               request: int, asked: Optional[float] = None) -> None:
         now = self._now()
-        start = max(stamp, now + self.lead) if stamp > 0 else now + self.lead
+        lead = self.lead + self.lateness.worst  # what the bridge's starts have measured
+        start = max(stamp, now + lead) if stamp > 0 else now + lead
         asked = start if asked is None else asked  # when the move was first wanted
         if (offer is not None and self.mode == 'line_or_joint'
                 and starts_at(offer, self.q, self.traj_cfg['offer_tolerance'])):
@@ -310,7 +315,7 @@ class Planner(Node):
                 self._status('refused', request, str(exc))
                 return
         now = self._now()
-        start = max(start, now + self.lead)  # planning took (sim) time too
+        start = max(start, now + lead)  # planning took (sim) time too
         # from now on (the past is past); the leader leaves out a follower move that waits to
         # start at or after its own start (the priority rule: that one yields)
         other = self.theirs.motion(now, self.q_other, before=start if self.leader else None)
@@ -339,6 +344,8 @@ class Planner(Node):
         st = proto.ExecutionStatus.from_msg(msg)
         if self.mine is None or st.move != self.mine_id:
             return  # not my current move
+        if st.state == 'accepted' and st.stamp:
+            self.lateness.add(st.late)
         if st.state == 'accepted' and st.late > 0:
             self.mine = Plan(self.mine.traj, st.start, self.mine.delay + st.late)
             _, request = proto.parse_move_id(st.move)
