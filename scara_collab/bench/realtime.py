@@ -1,0 +1,129 @@
+"""The cell in real time, without lockstep, as against hardware: figures beside lockstep's.
+
+Every run goes through the launcher (one process per node) at ``--rtf 1``, where the nodes
+run against a clock that does not wait for them (``--lockstep off``), on the same seeds as a
+lockstep reference run:
+
+- ``lockstep``: the reference, ``--lockstep on`` (at ``--rtf 1`` too);
+- ``quiet``: ``--lockstep off`` on a quiet machine;
+- ``hog``: the same beside one CPU hog (a busy-looping process);
+- ``latency``: the same with 20 +- 10 ms on ``/joint_states`` and on the planners' and the
+  bridge's statuses (``--fault latency:...``);
+- ``two_hogs``: beside two CPU hogs (the machine loaded beyond its cores): any stop must be
+  protective and the job sorts to the end.
+
+A run's row says what its ``summary.json`` says: sorted, missed, dropped, the minimum
+separation, the stops (protective ones caused by the job's own moves are the predicted ones:
+``predicted`` in their cause), the exit code. :func:`capacity` measures items per minute at
+an item every 0.9 s (the feed faster than the arms) with and without lockstep.
+"""
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+from scara_collab.bench.job import run_launcher
+from scara_collab.bench.protocol import _env_domain, cpu_hogs, row
+from scara_collab.bench.util import Log
+
+ROBOTS = ('scara_left', 'scara_right')
+#: 20 +- 10 ms on the joint states and on every status the job's timing hangs on
+LATENCY = (['latency:/joint_states:0.02:0.01']
+           + [f'latency:/{r}/planner_status:0.02:0.01' for r in ROBOTS]
+           + [f'latency:/{r}/execution_status:0.02:0.01' for r in ROBOTS])
+#: condition -> (lockstep on?, CPU hogs, faults)
+CONDITIONS = {
+    'lockstep': (True, 0, ()),
+    'quiet': (False, 0, ()),
+    'hog': (False, 1, ()),
+    'latency': (False, 0, tuple(LATENCY)),
+    'two_hogs': (False, 2, ()),
+}
+
+
+def _stops(summary: Dict[str, object], key: str) -> List[Dict[str, object]]:
+    value = summary.get(key)
+    return list(value) if isinstance(value, list) else []
+
+
+def realtime_row(summary: Dict[str, object]) -> Dict[str, object]:
+    """Return one run's figures (:func:`scara_collab.bench.protocol.row`) and its stops."""
+    out = row(summary)
+    protective = _stops(summary, 'protective_stops')
+    emergency = _stops(summary, 'emergency_stops')
+    out.update(
+        protective=len(protective), emergency=len(emergency),
+        own_moves=sum('predicted' in str(s.get('cause', '')) for s in protective + emergency),
+        lost_s=round(sum(float(s.get('lost') or 0.0) for s in protective + emergency), 3),
+        causes='; '.join(sorted({str(s.get('cause', ''))[:60] for s in protective
+                                 + emergency})))
+    return out
+
+
+def run(condition: str, out: Path, duration: float, seed: int, feed: Optional[float] = None,
+        log: Optional[Log] = None) -> Dict[str, object]:
+    """Run the collaborative job in one of :data:`CONDITIONS`; return its row."""
+    lockstep, hogs, faults = CONDITIONS[condition]
+    extra = ['--lockstep', 'on' if lockstep else 'off']
+    for f in faults:
+        extra += ['--fault', f]
+    if feed is not None:
+        extra += ['--feed-interval', f'{feed:g}']
+    _env_domain(seed * 7 + len(condition))
+    with cpu_hogs(hogs, duration * 3 + 300):
+        r = realtime_row(run_launcher('collaborative', duration, out / f'{condition}_{seed}',
+                                      rtf=1.0, seed=seed, timeout=duration * 3 + 300,
+                                      extra=extra))
+    r.update(condition=condition, seed=seed)
+    if log:
+        log(f'{condition} seed {seed}: exit {r["exit_code"]}, sorted {r["sorted"]}, missed '
+            f'{r["missed"]}, dropped {r["dropped"]}, min sep {r["min_separation_m"]}, '
+            f'stops {r["protective"]} protective / {r["emergency"]} emergency '
+            f'({r["own_moves"]} by the job\'s own moves)')
+    return r
+
+
+def matrix(out: Path, conditions: Sequence[str], seeds: Sequence[int], duration: float,
+           log: Optional[Log] = None) -> List[Dict[str, object]]:
+    """Run every condition on every seed; return the rows."""
+    return [run(c, out, duration, s, log=log) for s in seeds for c in conditions]
+
+
+def capacity(out: Path, seeds: Sequence[int], duration: float, feed: float = 0.9,
+             log: Optional[Log] = None) -> Dict[str, object]:
+    """Items per minute at a saturating feed, lockstep on and off (quiet); and their ratio."""
+    rows = {c: [run(c, out / 'capacity', duration, s, feed=feed, log=log) for s in seeds]
+            for c in ('lockstep', 'quiet')}
+    mean = {c: sum(float(r['items_per_minute'] or 0.0) for r in rs) / len(rs)
+            for c, rs in rows.items()}
+    return {'feed_interval': feed, 'duration': duration, 'seeds': list(seeds),
+            'lockstep_items_per_minute': round(mean['lockstep'], 2),
+            'realtime_items_per_minute': round(mean['quiet'], 2),
+            'ratio': round(mean['quiet'] / mean['lockstep'], 3) if mean['lockstep'] else None,
+            'rows': rows}
+
+
+COLUMNS = ('condition', 'seed', 'exit_code', 'sorted', 'missed', 'dropped', 'give_ups',
+           'min_separation_m', 'protective', 'emergency', 'own_moves', 'lost_s')
+
+
+def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]],
+             command: str, duration: float) -> str:
+    """Return the runs and the capacity as a Markdown page."""
+    def cell(v):
+        return f'{v:.3f}' if isinstance(v, float) else ('' if v is None else str(v))
+    lines = ['# Real time, without lockstep', '',
+             f'Measured with `{command}`: the collaborative job through the launcher at '
+             f'`--rtf 1`, {duration:g} sim s a run, the rated feed (conditions: '
+             "`scara_collab/bench/realtime.py`). `own_moves`: stops caused by the job's own "
+             'moves (a predicted conflict); `lost_s`: sim seconds the stops cost.', '',
+             '| ' + ' | '.join(COLUMNS) + ' |', '|' + '---|' * len(COLUMNS)]
+    lines += ['| ' + ' | '.join(cell(r.get(k)) for k in COLUMNS) + ' |' for r in rows]
+    causes = [f'- {r["condition"]} seed {r["seed"]}: {r["causes"]}' for r in rows
+              if r.get('causes')]
+    if causes:
+        lines += ['', 'Stop causes:', ''] + causes
+    if cap:
+        lines += ['', f'Capacity at an item every {cap["feed_interval"]:g} s '
+                  f'({cap["duration"]:g} sim s, seeds {cap["seeds"]}): lockstep '
+                  f'{cap["lockstep_items_per_minute"]} items/min, real time '
+                  f'{cap["realtime_items_per_minute"]} items/min, ratio {cap["ratio"]}.']
+    return '\n'.join(lines) + '\n'

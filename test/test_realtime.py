@@ -1,0 +1,54 @@
+"""The real-time benchmark's bookkeeping: its rows, its faults, its page (no launcher run)."""
+from scara_collab.bench import realtime
+from scara_collab.nodes.faults import parse_faults
+
+
+def _summary(**over):
+    s = {'exit_code': 0, 'sorted': 60, 'missed': 0, 'dropped': 0, 'min_separation_m': 0.131,
+         'items_per_minute': 30.0, 'job': {'give_ups': 1},
+         'protective_stops': [
+             {'time': 40.0, 'cause': 'predicted: the commanded moves (...) bring ...',
+              'lost': 0.6, 'standing': False},
+             {'time': 70.0, 'cause': 'no valid joint state for 0.21 s (sim)', 'lost': 0.5,
+              'standing': False}],
+         'emergency_stops': []}
+    s.update(over)
+    return s
+
+
+def test_a_row_counts_the_stops_and_those_the_jobs_own_moves_caused():
+    """Stops are counted by kind; the predicted ones are the job's own moves'."""
+    r = realtime.realtime_row(_summary())
+    assert (r['protective'], r['emergency'], r['own_moves']) == (2, 0, 1)
+    assert r['lost_s'] == 1.1 and r['give_ups'] == 1
+    assert 'no valid joint state' in r['causes']
+    bare = realtime.realtime_row(_summary(protective_stops=None, emergency_stops=3))
+    assert (bare['protective'], bare['emergency'], bare['own_moves']) == (0, 0, 0)
+
+
+def test_every_condition_is_a_launcher_setting_that_parses():
+    """Each condition is a valid launcher setting; lockstep is on only for the reference.
+
+    The latency condition's faults are valid ``--fault`` entries for the joint states and
+    every status the job's timing hangs on.
+    """
+    lockstep, hogs, faults = realtime.CONDITIONS['latency']
+    assert not lockstep and hogs == 0
+    parsed = parse_faults(faults)
+    assert set(parsed) == {'/joint_states', '/scara_left/planner_status',
+                           '/scara_right/planner_status', '/scara_left/execution_status',
+                           '/scara_right/execution_status'}
+    assert [c for c, (on, _, _) in realtime.CONDITIONS.items() if on] == ['lockstep']
+    assert realtime.CONDITIONS['two_hogs'][1] == 2
+
+
+def test_the_page_has_a_row_per_run_and_the_capacity_ratio():
+    """The Markdown page: one table row per run, the causes, the capacity line."""
+    rows = [dict(realtime.realtime_row(_summary()), condition=c, seed=1)
+            for c in ('lockstep', 'quiet')]
+    cap = {'feed_interval': 0.9, 'duration': 240.0, 'seeds': [1],
+           'lockstep_items_per_minute': 41.0, 'realtime_items_per_minute': 40.0,
+           'ratio': 0.976}
+    text = realtime.markdown(rows, cap, 'scripts/bench_realtime.py --seeds 1', 600.0)
+    assert text.count('| lockstep | 1 | 0 | 60 |') == 1 and '| quiet | 1 |' in text
+    assert 'ratio 0.976' in text and 'Stop causes' in text
