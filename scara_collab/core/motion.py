@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike
 
 from scara_collab.core import collision, safety
 from scara_collab.core.model import ArmModel
-from scara_collab.core.planning import Timeline
+from scara_collab.core.planning import other_view, Timeline
 
 
 class Refused(ValueError):
@@ -199,14 +199,17 @@ class ArmMotion:
                before: Optional[float] = None) -> Timeline:
         """Return everything the arm is committed to from ``now``: the running, then the waiting.
 
-        :param before: count the waiting move only if it starts before this time (the
-            priority rule's view of a follower), default always.
+        :param before: the start of a leader's move that this arm (a follower) must make way
+            for: a waiting move starting at or after it is left out, the arm holding where it
+            would start it (the priority rule, :func:`scara_collab.core.planning.other_view`);
+            None: everything counts.
         """
         now_on = self.current(now, q)
         w = self.waiting
-        if w is None or (before is not None and w.start >= before):
+        if w is None:
             return now_on
-        return splice(now_on, w.timeline.since(now))
+        waiting = w.timeline if before is None else other_view(w.timeline, before, leader=True)
+        return splice(now_on, waiting.since(now))
 
 
 @dataclass(frozen=True)
