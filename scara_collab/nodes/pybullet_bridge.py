@@ -184,7 +184,8 @@ class PyBulletBridge(Node):
         self.execution = Execution(self.cell, self.sim, self._report, self.get_logger().warning,
                                    blocked=self._unguarded)
         self.clock_pub = self.create_publisher(ClockMsg, '/clock', STATE_QOS)
-        self.state_pub = self.create_publisher(JointState, 'joint_states', STATE_QOS)
+        self.state_pub = FaultyPublisher(self, self.faults, self.create_publisher(
+            JointState, 'joint_states', STATE_QOS))  # direct when no fault names it
         self.items_pub = self.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
         self.events_pub = self.create_publisher(DiagnosticStatus, 'conveyor/events', EVENTS)
         self.diagnostics = Diagnostics(self)

@@ -152,7 +152,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument('--fault', action='append', default=[], metavar='SPEC',
                    help='inject a fault, e.g. drop:/scara_left/gripper:2 (lose the first 2 '
                    'gripper responses), delay:/scara_right/planner_status:3:0.5, '
-                   'drop:/automation_manager/start:1; repeatable (scara_collab.nodes.faults)')
+                   'drop:/automation_manager/start:1, latency:/joint_states:0.02:0.01 (every '
+                   'message 20 +- 10 ms late, in order); repeatable (scara_collab.nodes.faults)')
     p.add_argument('--quiet', action='store_true',
                    help='no stage or progress lines; errors and the report only')
     p.add_argument('--ready-timeout', type=float, default=60.0, metavar='S',
