@@ -293,6 +293,68 @@ def test_expected_participants_hold_sim_time_from_the_start(bare):
     assert gate.limit(0.02) == pytest.approx(0.04) and set(gate.dropped) == {'/monitor'}
 
 
+def test_without_a_window_a_guard_far_behind_sim_time_holds_the_arms(bare):
+    """Lockstep off (window 0): nobody is waited for, but a guard is still watched.
+
+    A guard more than its timeout behind sim time (sim s: the time the arms moved unwatched)
+    holds the arms; wall time alone (a paused bridge) does not; an answer that brings it back
+    within its timeout clears them, an old one does not. The others' answers are not kept.
+    """
+    wall = Wall()
+    events = []
+    gate = lockstep.LockstepGate(bare.node, 0.0, 1.0, guards=['collision_monitor'],
+                                 on_guard=lambda *e: events.append(e), wall_clock=wall,
+                                 expect=['collision_monitor', 'planner'])
+    assert not gate.enabled and gate.reached == {'/collision_monitor': 0.0}
+    assert gate.limit(0.5) == float('inf')
+    answer(gate, '/planner', 0.5)
+    answer(gate, '/collision_monitor', 0.5)
+    assert gate.reached == {'/collision_monitor': 0.5}
+    assert gate.limit(1.45) == float('inf') and not events      # 0.95 s behind
+    wall.now = 100.0                                            # paused: no sim s passed
+    assert gate.limit(1.45) == float('inf') and not events
+    assert gate.limit(1.55) == float('inf')                     # 1.05 s behind: hold
+    assert [e[:2] for e in events] == [('/collision_monitor', False)]
+    assert events[0][2].startswith('silent for 1.1 s (sim)')
+    assert '/collision_monitor' in gate.absent
+    gate.limit(3.0)                                             # held once, not again
+    answer(gate, '/collision_monitor', 1.9)                     # still 1.1 s behind
+    assert len(events) == 1 and gate.absent
+    answer(gate, '/collision_monitor', 2.99)
+    assert events[-1] == ('/collision_monitor', True, 'answers again') and not gate.absent
+    gate.receive(Header(stamp=lockstep.END_OF_TIME, frame_id='/collision_monitor'))
+    assert events[-1][:3] == ('/collision_monitor', False, 'left the lockstep')
+    silent = lockstep.LockstepGate(bare.node, 0.0, 1.0, guards=['/collision_monitor'],
+                                   on_guard=lambda *e: events.append(e),
+                                   expect=['/collision_monitor'])
+    silent.limit(1.01)                                          # expected, never answered
+    assert '/collision_monitor' in silent.absent
+
+
+def test_without_a_window_the_bridge_holds_the_arms_for_a_guard_left_behind():
+    """The bridge with ``lockstep_window`` 0 steps on, and holds the arms for a lagging guard.
+
+    The guard computes for 1.5 s wall while the unthrottled clock runs on: more than its
+    0.3 s timeout behind, the arms are held and moves refused; once it answers, cleared.
+    """
+    g = Graph()
+    g.bridge = g.add(PyBulletBridge(context=g.context, cli_args=params_args(
+        'simulation', 'controllers', overrides={
+            'real_time_factor': 0.0, 'feed_interval': 0.0, 'lockstep_window': 0.0,
+            'lockstep_timeouts': ['/busy:0.3'], 'lockstep_guards': ['/busy']})))
+    busy = Busy(g, after=0.2, seconds=1.5)
+    try:
+        assert g.spin_until(lambda: '/busy' in g.bridge.gate.absent, 20.0)
+        assert 'no move until it answers again' in g.bridge._unguarded()
+        assert busy.window is None, 'held while the guard was still busy'
+        assert g.spin_until(lambda: not g.bridge.gate.absent, 20.0), 'cleared'
+        assert busy.window is not None and busy.window[1] - busy.window[0] > 0.3
+        assert not g.bridge.gate.waited, 'the bridge never waited'
+    finally:
+        busy.close()
+        g.close()
+
+
 def test_unthrottled_the_answer_steps_the_bridge_in_its_own_callback():
     """Unthrottled, the answer that completes a round steps the bridge, in its callback.
 

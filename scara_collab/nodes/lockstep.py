@@ -36,7 +36,12 @@ The protocol, on one topic ``/sim/lockstep`` (``std_msgs/Header``):
 * a *guard* (the collision monitor) is a participant without which the arms must not move:
   before the gate drops a guard, or when a guard leaves, it tells the bridge (``on_guard``),
   which holds both arms and refuses trajectories until the guard answers again
-  (:attr:`LockstepGate.absent`).
+  (:attr:`LockstepGate.absent`). Without a window (``lockstep_window`` 0: real time, the
+  clock waits for nobody) the gate still hears the guards: a guard whose newest answer is
+  more than its timeout behind sim time (sim s: the time the arms moved unwatched; a paused
+  bridge does not count) holds the arms the same way, until an answer brings it back within
+  its timeout. The other participants still answer (the launcher's liveness watch reads
+  them); the bridge just does not wait for them.
 
 Nodes join with :func:`join` (parameter ``lockstep``, default true; only on sim time). The
 bridge's parameters ``lockstep_window`` (sim s, 0 = off), ``lockstep_timeout`` (wall s),
@@ -201,6 +206,9 @@ class LockstepGate:
     :param wall_clock: wall time source, s (tests pass a fake one).
     :param expect: full names of participants waited for from the start, as if they had
         answered sim time 0 (dropped after their timeout like any other).
+
+    With ``window`` 0 the gate waits for nobody (:meth:`limit` is ``inf``) but still watches
+    the ``guards`` (see the module docstring): their timeouts then count sim seconds behind.
     """
 
     def __init__(self, node: Node, window: float, timeout: float,
@@ -209,7 +217,7 @@ class LockstepGate:
                  on_guard: Optional[Callable[[str, bool, str], None]] = None,
                  wall_clock: Callable[[], float] = time.monotonic,
                  expect: Iterable[str] = ()):
-        """Store the settings; with a window, subscribe ``/sim/lockstep``."""
+        """Store the settings; with a window or guards, subscribe ``/sim/lockstep``."""
         self.node = node
         self.window = float(window)
         self.timeout = float(timeout)
@@ -223,11 +231,18 @@ class LockstepGate:
         self.waited: Dict[str, float] = {}      # participant -> wall s the bridge waited
         self.since: Dict[str, float] = {}       # participant holding sim time -> wall since
         self.absent: Dict[str, str] = {}        # guard -> why it is missing (arms held)
+        self.sim_now = 0.0                      # the sim time of the last look (limit)
         if self.window > 0:
             self.reached.update({full_name(n): 0.0 for n in expect})
             if self.reached:
                 node.get_logger().info(f'lockstep: waiting from the start for '
                                        f'{", ".join(sorted(self.reached))}')
+        elif self.guards:  # real time: wait for nobody, but never move the arms unwatched
+            self.reached.update({n: 0.0 for n in map(full_name, expect) if n in self.guards})
+            node.get_logger().info(
+                f'lockstep off: waiting for nobody; watching {", ".join(sorted(self.guards))} '
+                '(the arms hold when one is more than its timeout, sim s, behind)')
+        if self.window > 0 or self.guards:
             from scara_collab.nodes.runner import guarded  # runner imports this module
             node.create_subscription(Header, TOPIC, guarded(node, self.receive), QOS)
 
@@ -243,6 +258,9 @@ class LockstepGate:
     def receive(self, msg: Header) -> None:
         """Take one answer from ``/sim/lockstep`` (the subscription's callback)."""
         name, t = msg.frame_id, _sec(msg.stamp)
+        if not self.enabled:
+            self._watch_answer(name, msg)
+            return
         log = self.node.get_logger()
         self._stop_waiting(name)
         if msg.stamp.sec == END_OF_TIME.sec:
@@ -267,7 +285,11 @@ class LockstepGate:
         Also drops each participant that has held sim time back for its timeout (wall s,
         counted from when it began to hold it back); a guard's ``on_guard`` comes first.
         """
-        if not self.enabled or not self.reached:
+        self.sim_now = sim_now
+        if not self.enabled:
+            self._watch_guards(sim_now)
+            return float('inf')
+        if not self.reached:
             self._stop_waiting()
             return float('inf')
         wall = self._wall()
@@ -281,6 +303,30 @@ class LockstepGate:
         if not self.reached:
             return float('inf')
         return min(self.reached.values()) + self.window
+
+    def _watch_answer(self, name: str, msg: Header) -> None:
+        """Without a window: take a guard's answer (the others are not waited for)."""
+        if name not in self.guards:
+            return
+        if msg.stamp.sec == END_OF_TIME.sec:
+            if self.reached.pop(name, None) is not None:
+                self.node.get_logger().info(f'lockstep: {name} left')
+                self._guard_missing(name, 'left the lockstep')
+            return
+        t = max(_sec(msg.stamp), self.reached.get(name, 0.0))
+        self.reached[name] = t
+        if name in self.absent and self.sim_now - t <= self.timeout_of(name):
+            del self.absent[name]
+            if self.on_guard is not None:
+                self.on_guard(name, True, 'answers again')
+
+    def _watch_guards(self, sim_now: float) -> None:
+        """Without a window: hold the arms for a guard too far behind sim time."""
+        for name, t in self.reached.items():
+            behind = sim_now - t
+            if name not in self.absent and behind > self.timeout_of(name):
+                self._guard_missing(name, f'silent for {behind:.1f} s (sim) while sim time '
+                                    'went on without it (lockstep off)')
 
     def _drop(self, name: str, sim_now: float, waited: float) -> None:
         why = f'silent for {waited:.1f} s (wall) while sim time waited for it'
