@@ -8,7 +8,9 @@ launcher script's (``scripts/launch_cell.py``), not this file's.
 Arguments: ``mode`` (``collaborative``, ``single``, ``mirrored`` or ``idle``), ``tf``
 (``true``: ``state_publisher`` for ``/robot_description``, ``/tf`` and ``/tf_static``),
 ``viewer`` (``true``: the live 3D view), ``rviz`` (``true``: RViz with ``config/cell.rviz``;
-implies ``tf``), ``auto_start`` (``true``: the job starts once the graph is connected).
+implies ``tf``), ``auto_start`` (``true``: the job starts once the graph is connected),
+``lockstep`` (``true``: sim time waits for every node; ``false``: real time, the clock waits
+for nobody, as on hardware or in Gazebo: the bridge's ``lockstep_window`` 0).
 """
 import os
 
@@ -22,7 +24,7 @@ from scara_collab import graph
 
 PACKAGE = 'scara_collab'
 ARGUMENTS = {'mode': 'collaborative', 'tf': 'false', 'viewer': 'false', 'rviz': 'false',
-             'auto_start': 'true'}
+             'auto_start': 'true', 'lockstep': 'true'}
 
 
 def _typed(value: str):
@@ -38,6 +40,10 @@ def nodes(context):
     params = graph.job_params(arg['mode'])
     if arg['mode'] != 'idle':
         params['automation_manager']['auto_start'] = arg['auto_start']
+    if arg['lockstep'].lower() not in ('true', 'false'):
+        raise ValueError(f"lockstep must be true or false, got {arg['lockstep']!r}")
+    if arg['lockstep'].lower() == 'false':  # real time: the clock waits for nobody
+        params['pybullet_bridge']['lockstep_window'] = 0.0
     out = []
     for spec in graph.job_nodes(automation=arg['mode'] != 'idle',
                                 viewer=arg['viewer'].lower() == 'true',

@@ -104,3 +104,20 @@ def test_an_unknown_mode_is_refused(monkeypatch):
     opaque = module.generate_launch_description().args[0][-1]
     with pytest.raises(ValueError, match='mode must be one of'):
         opaque.kwargs['function'](dict(module.ARGUMENTS, mode='fast'))
+
+
+def test_lockstep_false_runs_the_bridge_without_a_window(monkeypatch):
+    """``lockstep:=false``: the bridge's ``lockstep_window`` 0 (real time); true keeps it."""
+    module = load(monkeypatch)
+    opaque = module.generate_launch_description().args[0][-1]
+
+    def bridge(lockstep):
+        nodes = opaque.kwargs['function'](dict(module.ARGUMENTS, lockstep=lockstep))
+        return next(n for n in nodes if n.kwargs['name'] == 'pybullet_bridge').kwargs[
+            'parameters'][-1]
+    assert module.ARGUMENTS['lockstep'] == 'true'
+    assert 'lockstep_window' not in bridge('true')
+    assert bridge('false')['lockstep_window'] == 0.0
+    assert bridge('False')['lockstep_window'] == 0.0
+    with pytest.raises(ValueError, match='lockstep must be true or false'):
+        bridge('off')

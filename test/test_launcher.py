@@ -423,6 +423,50 @@ def test_a_wall_clock_stamped_state_neither_ends_nor_enters_the_run(launch, tmp_
         assert 'ignoring joint_states: stamp t=1790000000.000 s' in log, name
 
 
+def test_the_lockstep_flag_sets_the_bridges_window():
+    """``--lockstep on`` (default) keeps the bridge's window; ``off`` sets it to 0 (real time)."""
+    from scara_collab.run import launcher
+    from scara_collab.run.stages import stages
+
+    def bridge(argv):
+        return next(s for s in stages(launcher.parse_args(argv), True)
+                    if s.name == 'pybullet_bridge').params
+    assert launcher.parse_args([]).lockstep == 'on'
+    assert 'lockstep_window' not in bridge([]) and 'lockstep_window' not in bridge(
+        ['--lockstep', 'on'])
+    assert launcher.parse_args(['--lockstep', 'off']).lockstep == 'off'
+    assert bridge(['--lockstep', 'off'])['lockstep_window'] == '0.0'
+    assert bridge(['--lockstep', 'off'])['lockstep_expect']  # the guards are still expected
+    with pytest.raises(SystemExit) as exc:
+        launcher.parse_args(['--lockstep', 'maybe'])
+    assert exc.value.code == 2
+
+
+@pytest.mark.skipif(not HAVE_AUTOMATION, reason='needs the automation manager')
+def test_a_real_time_run_with_late_joint_states_ends_cleanly(launch, tmp_path):
+    """``--lockstep off --rtf 1`` with every joint state 20 +- 10 ms late: a clean run.
+
+    The bridge waits for nobody but watches the collision monitor, applies the latency to
+    its ``/joint_states``, and the run ends at its duration (the states in flight when the
+    bridge pauses there arrive), exit 0, ``lockstep off`` in the summary and the report.
+    """
+    out = tmp_path / 'realtime'
+    la = launch('--mode', 'collaborative', '--duration', '8', '--rtf', '1', '--lockstep',
+                'off', '--fault', 'latency:/joint_states:0.02:0.01', '--no-plots',
+                '--output', str(out))
+    assert la.wait() == 0, la.output
+    assert re.search(r'real-time factor \d+\.\dx +lockstep off', la.output), la.output
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['lockstep'] == 'off' and summary['exit_code'] == 0
+    assert summary['exit_reason'] == 'duration reached' and summary['margin_ok'] is True
+    assert summary['sim_seconds'] == pytest.approx(8.0, abs=0.05)
+    bridge = (out / 'logs' / 'pybullet_bridge.log').read_text()
+    assert 'lockstep off: waiting for nobody; watching /collision_monitor' in bridge
+    assert 'fault injection: latency /joint_states by 0.02 +- 0.01 s' in bridge
+    assert 'lockstep: waited' not in bridge and 'holding both arms' not in bridge
+    assert_children_gone(out)
+
+
 def test_viewer_flag_adds_the_viewer_stage_last(monkeypatch):
     """``--viewer`` adds the viewer stage last; a busy or zero port is refused."""
     import socket

@@ -277,7 +277,8 @@ def format_report(s: Dict) -> str:
         f'{"interrupted" if s.get("interrupted") else "finished"} ({s.get("exit_reason")})',
         f'  sim time       {_num(s.get("sim_seconds"), ".1f")} s    wall '
         f'{_num(s.get("wall_seconds"), ".1f")} s    real-time factor '
-        f'{format_rtf(s.get("real_time_factor"))}',
+        f'{format_rtf(s.get("real_time_factor"))}'
+        + (f'    lockstep {s["lockstep"]}' if s.get('lockstep') else ''),
         f'  items          sorted {s.get("sorted")}   missed {s.get("missed")}   wrong bin '
         f'{s.get("wrong_bin")}   dropped {s.get("dropped")}   (spawned {s.get("spawned")}; '
         f'counts from {s.get("counts_source")})',

@@ -20,8 +20,13 @@ feeds items from then on; ``feed_interval`` is 0 until then) and ``--rtf`` (its 
 parameter ``real_time_factor``) and calls ``/sim/resume``. So every run starts at sim time 0
 with every node there, however long the start-up took. The nodes run in lockstep with the
 bridge (:mod:`scara_collab.nodes.lockstep`), so the job does not depend on how fast the
-machine is. At the end the bridge is slowed to ``--launch-rtf`` (default 1.0) while the job
-is stopped. The bridge
+machine is. ``--lockstep off`` runs them against a clock that waits for nobody, as on
+ros2_control hardware or in Gazebo (the bridge's ``lockstep_window`` 0): a node that computes
+or is descheduled falls behind sim time, and its messages and moves come late. The nodes
+still answer each ``/clock`` (the liveness watch below reads the answers) and the bridge
+still holds both arms when the collision monitor falls more than its lockstep timeout (sim s)
+behind. ``lockstep`` (on | off) is in ``summary.json`` and the report. At the end the
+bridge is slowed to ``--launch-rtf`` (default 1.0) while the job is stopped. The bridge
 picks its tick at start-up (2 ms when throttled) and steps ``step_chunk`` per tick, so when it
 will be released to more than 4x (or unthrottled) the launcher also passes ``step_chunk``
 0.02 s, which allows up to 10x real time (``--step-chunk`` to change it; ``--launch-rtf 0``
@@ -130,6 +135,12 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    'bounds the real-time factor at step_chunk / 0.002 (default: '
                    f'{FAST_CHUNK} when the bridge is released to more than 4x, else the '
                    'bridge default)')
+    p.add_argument('--lockstep', choices=('on', 'off'), default='on',
+                   help='on: sim time waits for every node (lockstep_window, a repeatable '
+                   'run); off: real time, the clock waits for nobody, as on hardware or in '
+                   'Gazebo (bridge lockstep_window 0; the nodes still answer for the '
+                   'liveness watch and the arms still hold without the collision monitor) '
+                   '(default: %(default)s)')
     p.add_argument('--one-process', action='store_true',
                    help='run every node in one process on one executor (a component '
                    'container, scara_collab.run.container) instead of one process per node')
@@ -249,6 +260,7 @@ class Launcher:
                    signal_handler_options=SignalHandlerOptions.NO)
         self.recorder = RunRecorder(output, args.mode, profile=args.profile,
                                     context=self.context)
+        self.recorder.extra['lockstep'] = getattr(args, 'lockstep', 'on')
         if getattr(args, 'record', False):  # raw subscriptions on the recorder; finish() closes
             from scara_collab.nodes.mcap_recorder import McapLog
             from scara_collab.records.mcap_log import MCAP_FILE
@@ -314,7 +326,8 @@ class Launcher:
         """Start every stage in order, each once the previous one is ready."""
         domain = os.environ.get('ROS_DOMAIN_ID', '0 (default)')
         self.console.say(f'[launch] mode {self.args.mode}, {self.args.duration:g} sim s, '
-                         f'rtf {format_factor(self.rtf)}, output {self.output}')
+                         f'rtf {format_factor(self.rtf)}, lockstep '
+                         f'{getattr(self.args, "lockstep", "on")}, output {self.output}')
         self.console.say(f'[launch] ROS_DOMAIN_ID {domain}, discovery '
                          f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}')
         if not self.with_automation:

@@ -52,6 +52,8 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
         bridge['gui'] = 'true'
     if args.seed is not None:
         bridge['item_seed'] = str(args.seed)
+    if getattr(args, 'lockstep', 'on') == 'off':  # real time: the clock waits for nobody
+        bridge['lockstep_window'] = '0.0'
     if port is not None:
         own['cell_viewer'] = {'port': str(port)}
     faults = getattr(args, 'fault', [])
