@@ -9,7 +9,9 @@ import pytest
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.time import Time as RclpyTime
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
 
 from scara_collab.core.collision import arm_distance
 from scara_collab.core.kinematics import fk
@@ -325,3 +327,129 @@ def test_states_not_on_the_sim_clock_are_refused(make_recorder, cell):
     assert summary['joint_states_refused'] == 3
     assert summary['sim_time_end'] == pytest.approx(1.04)
     assert summary['joint_states_missing'] == 0
+
+
+def stop_msg(kind, state, t, cause, since=None):
+    """Return a stop event as the collision monitor publishes it."""
+    return proto.StopEvent(kind, state, t, cause, since).to_msg()
+
+
+def test_stop_events_become_the_summarys_stops(make_recorder, cell):
+    """Stop events give each stop its time, cause, cost and whether it stands at the end.
+
+    A stop standing at the end fails the run (exit 4), named on the report's first line; the
+    latched /emergency_stop of the same stop does not count it twice.
+    """
+    rec = make_recorder('collaborative')
+    q = np.array([0.0, 1.5708, 0.0])
+    far = mirror_joints(q)
+    feed(rec, state_msg(cell, 0.0, q, far))
+    rec.start_job(0.0)
+    rec.on_stop(stop_msg('protective', 'begin', 5.0, 'predicted breach in 0.21 s'))
+    rec.on_stop(stop_msg('protective', 'end', 5.4, 'arms at rest 0.150 m apart', since=5.0))
+    rec.on_stop(stop_msg('emergency', 'begin', 12.0, 'margin broken: ...'))
+    bad = stop_msg('protective', 'begin', 13.0, 'x')
+    bad.values = [kv for kv in bad.values if kv.key != 'time']
+    rec.on_stop(bad)  # breaks the protocol: ignored with a warning
+    feed(rec, state_msg(cell, 12.0, q, far))
+    rec.on_estop(Bool(data=True))  # the same stop, latched for the bridge
+    rec.on_monitor(proto.MonitorStatus(12.5, 0.2, 0.15, 3.0, 0.1, True, 'margin broken: ...',
+                                       'emergency', 1, 1).to_msg())
+    feed(rec, state_msg(cell, 20.0, q, far))
+    summary = rec.finish('duration reached', False, plots=False)
+    assert summary['protective_stops'] == [
+        {'time': 5.0, 'cause': 'predicted breach in 0.21 s', 'lost': pytest.approx(0.4),
+         'standing': False, 'end': 5.4, 'released': 'arms at rest 0.150 m apart',
+         'source': 'stop event'}]
+    (emergency,) = summary['emergency_stops']
+    assert (emergency['time'], emergency['lost'], emergency['standing']) == (12.0, 8.0, True)
+    assert summary['exit_code'] == 4 and summary['end_reason'] == 'duration reached'
+    assert summary['exit_reason'] == ('emergency stop standing at the end of the run, since '
+                                      'sim t=12.00 s: margin broken: ...')
+    on_disk = json.loads((rec.directory / 'summary.json').read_text())
+    assert on_disk['problems'] == [{'code': 4, 'text': summary['exit_reason']}]
+    text = report.format_report(on_disk)
+    assert text.splitlines()[0].startswith('scara_collab run: mode collaborative, FAILED, '
+                                           'exit 4: emergency stop standing')
+    assert 'stops          protective 1 (0.40 s lost), emergency 1 (8.00 s lost, STANDING' \
+        in text
+
+
+def test_an_emergency_stop_on_the_topic_alone_is_listed(make_recorder, cell):
+    """Without stop events (a monitor that sends none), /emergency_stop's holds are the stops."""
+    rec = make_recorder('idle')
+    q = np.array([0.0, 1.5708, 0.0])
+    for t, on in ((1.0, False), (3.0, True), (3.5, True), (4.25, False), (6.0, None)):
+        feed(rec, state_msg(cell, t, q, mirror_joints(q)))
+        if on is not None:
+            rec.on_estop(Bool(data=on))
+    summary = rec.finish('duration reached', False, plots=False)
+    assert [(s['time'], s['lost'], s['standing'], s['source'])
+            for s in summary['emergency_stops']] == [(3.0, 1.25, False, '/emergency_stop')]
+    assert rec.estops == [3.0] and summary['protective_stops'] == []
+    assert summary['exit_code'] == 0 and summary['problems'] == []
+
+
+def spin_until(executor, predicate, timeout=15.0):
+    """Spin ``executor`` until ``predicate()`` (wall ``timeout``); return it."""
+    import time
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and not predicate():
+        executor.spin_once(timeout_sec=0.05)
+    return predicate()
+
+
+def test_a_second_clock_publisher_and_a_backward_clock_are_named(make_recorder, context):
+    """A second /clock publisher is named (when, how many, who); a clock going back is counted.
+
+    Either fails the run (exit 6), whatever else it did.
+    """
+    rec = make_recorder('idle')
+    nodes = [Node(name, context=context) for name in ('clock_a', 'clock_b')]
+    executor = SingleThreadedExecutor(context=context)
+    for node in [rec] + nodes:
+        executor.add_node(node)
+    try:
+        pubs = [n.create_publisher(Clock, '/clock', 10) for n in nodes]
+        assert spin_until(executor, lambda: rec.graph_watch.foreign_clocks)
+        (seen,) = rec.graph_watch.foreign_clocks
+        assert seen['publishers'] == 2 and seen['nodes'] == ['/clock_a', '/clock_b']
+        for t in (5.0, 2.0):
+            pubs[0].publish(Clock(clock=conv.to_time(t)))
+            assert spin_until(executor, lambda: rec.sim_time == t)
+        assert rec.graph_watch.jumps == [{'time': 5.0, 'to': 2.0}]
+        summary = rec.finish('duration reached', False, plots=False)
+    finally:
+        executor.shutdown()
+        for node in nodes:
+            node.destroy_node()
+    assert summary['exit_code'] == 6, summary['problems']
+    assert summary['exit_reason'].startswith('a second /clock publisher at sim t=')
+    assert summary['exit_reason'].endswith('2 publishers (/clock_a, /clock_b)')
+    assert [p['code'] for p in summary['problems']] == [6, 6]
+    assert summary['clock_jumps_back_count'] == 1 and summary['graph_looks'] >= 1
+
+
+def test_a_second_graph_on_the_domain_is_named(make_recorder, context):
+    """Nodes of the run's names seen twice (another launcher's) are a second graph: exit 6."""
+    import rclpy
+    rec = make_recorder('idle')
+    other = rclpy.Context()
+    rclpy.init(context=other)
+    twins = [Node('pybullet_bridge', context=context),
+             Node('pybullet_bridge', context=other), Node('run_recorder', context=other)]
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(rec)
+    try:
+        both = {'/pybullet_bridge', '/run_recorder'}
+        assert spin_until(executor, lambda: rec.graph_watch.second_graphs and set(
+            rec.graph_watch.second_graphs[-1]['nodes']) == both)
+        summary = rec.finish('duration reached', False, plots=False)
+    finally:
+        executor.shutdown()
+        for node in twins:
+            node.destroy_node()
+        rclpy.try_shutdown(context=other)
+    assert summary['second_graphs'][-1]['nodes'] == {'/pybullet_bridge': 2, '/run_recorder': 2}
+    assert summary['exit_code'] == 6
+    assert summary['exit_reason'].startswith('a second graph on the domain at sim t=0.00 s: ')

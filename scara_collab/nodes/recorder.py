@@ -1,12 +1,17 @@
 """``run_recorder``: the node inside the launcher that records a run (sim time).
 
 Subscribes ``/joint_states`` (every message becomes a row of ``timeseries.csv``),
-``/conveyor/events`` (``events.csv``), the latched ``/emergency_stop``, and the statuses that
-own the run's figures (:mod:`scara_collab.nodes.protocol`); names, types and QoS are the
-graph's (:func:`scara_collab.graph.topic`, :func:`scara_collab.nodes.qos.recording`). The
-node is the subscriptions and the message conversions; what it hears is kept by the record it
-also is (:class:`scara_collab.records.record.RunRecord`: the files, the job window, the summary,
-the plots). The handlers ``on_*`` are public so a test can feed them messages directly.
+``/conveyor/events`` (``events.csv``), the latched ``/emergency_stop``, the collision
+monitor's stops (``/collision_monitor/stops``) and the statuses that own the run's figures
+(:mod:`scara_collab.nodes.protocol`); names, types and QoS are the graph's
+(:func:`scara_collab.graph.topic`, :func:`scara_collab.nodes.qos.recording`). While it
+records it also looks at the graph once a wall second (``/clock``'s publishers, the node
+names: :meth:`RunRecorder.look`) and notes each backward jump of its sim clock, for the
+summary's foreign clocks and second graphs. The node is the subscriptions, the looks and the
+message conversions; what it hears is kept by the record it also is
+(:class:`scara_collab.records.record.RunRecord`: the files, the job window, the summary, the
+plots, the verdict). The handlers ``on_*`` are public so a test can feed them messages
+directly.
 """
 import math
 from pathlib import Path
@@ -14,6 +19,8 @@ from typing import Dict, Optional, Union
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
+from rclpy.clock import Clock, ClockType, JumpThreshold
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
@@ -25,7 +32,11 @@ from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes import qos
 from scara_collab.nodes.runner import guarded
+from scara_collab.records.graph_watch import full_name
 from scara_collab.records.record import RunRecord
+
+#: wall s between two looks at the graph
+LOOK_PERIOD = 1.0
 
 
 class RunRecorder(Node, RunRecord):
@@ -56,10 +67,18 @@ class RunRecorder(Node, RunRecord):
                                ('/automation_manager/stats', self.on_stats),
                                ('/collision_monitor/status', self.on_monitor),
                                ('/replication_manager/status', self.on_mirror),
+                               ('/collision_monitor/stops', self.on_stop),
                                ('/emergency_stop', self.on_estop)):
             topic = graph.topic(name)
             self.create_subscription(graph.message_class(topic.type), name,
                                      guarded(self, callback), qos.recording(topic))
+        # who else is on the domain: looks on wall time (sim time may stand still or be
+        # foreign), and the clock's backward jumps (the time source takes each /clock anyway)
+        self.create_timer(LOOK_PERIOD, guarded(self, self.look),
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._jump = self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
+                          on_clock_change=False), post_callback=guarded(self, self.on_jump))
 
     @property
     def sim_time(self) -> float:
@@ -126,10 +145,22 @@ class RunRecorder(Node, RunRecord):
                             'running': st.running, 'time': st.time})
 
     def on_monitor(self, msg: DiagnosticStatus) -> None:
-        """Keep the collision monitor's figures (the minimum separation's source)."""
+        """Keep the collision monitor's figures (the minimum separation's source, its stop)."""
         status = self._read(proto.MonitorStatus, msg, 'monitor status')
         if status is not None:
-            self.monitor = status
+            self.take_monitor(status)
+
+    def on_stop(self, msg: DiagnosticStatus) -> None:
+        """Take a stop's begin or end (:class:`~scara_collab.nodes.protocol.StopEvent`)."""
+        ev = self._read(proto.StopEvent, msg, 'a stop event')
+        if ev is None:
+            return
+        if ev.state not in ('begin', 'end') or not math.isfinite(ev.time):
+            self.get_logger().warning(f'ignoring a stop event: state {ev.state!r}, time '
+                                      f'{ev.time}', throttle_duration_sec=5.0)
+            return
+        since = ev.since if ev.since is not None and math.isfinite(ev.since) else None
+        self.add_stop(ev.kind, ev.state, ev.time, ev.cause, since)
 
     def on_mirror(self, msg: DiagnosticStatus) -> None:
         """Keep the replication manager's figures (the mirror error's source)."""
@@ -138,8 +169,22 @@ class RunRecorder(Node, RunRecord):
             self.mirror = status
 
     def on_estop(self, msg: Bool) -> None:
-        """Count emergency stops (rising edges of ``/emergency_stop``)."""
+        """Take the latched ``/emergency_stop`` (its holds, its rising edges)."""
         self.add_estop(bool(msg.data))
+
+    def on_jump(self, jump) -> None:
+        """Note a backward jump of the sim clock (a ``/clock`` older than the last one)."""
+        after = self.sim_time
+        self.clock_back(after - jump.delta.nanoseconds * 1e-9, after)
+
+    def look(self) -> None:
+        """Look at the graph (wall timer, while recording): ``/clock``'s publishers, the nodes."""
+        if not self.recording:
+            return
+        clocks = [full_name(i.node_namespace, i.node_name)
+                  for i in self.get_publishers_info_by_topic('/clock')]
+        nodes = [full_name(ns, n) for n, ns in self.get_node_names_and_namespaces()]
+        self.look_at_graph(clocks, nodes)
 
     def destroy_node(self) -> bool:
         """Close the recording with the node."""

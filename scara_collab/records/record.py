@@ -13,6 +13,13 @@ items_per_minute                  those counts over the window
 min_separation_m                  ``/collision_monitor/status`` (its minimum)
 mirror_error_max_m                ``/replication_manager/status`` (in-step moves)
 job (give-ups, retries, phases)   ``/automation_manager/stats``
+protective_stops, emergency_stops ``/collision_monitor/stops``, its status and the latched
+                                  ``/emergency_stop`` (:mod:`scara_collab.records.stops`)
+foreign_clocks, second_graphs     the graph itself, looked at once a wall second
+                                  (:mod:`scara_collab.records.graph_watch`)
+silences                          the launcher's lockstep watch
+                                  (:meth:`scara_collab.run.liveness.Liveness.summary`)
+exit_code, exit_reason, problems  all of the above (:mod:`scara_collab.records.verdict`)
 ================================  =====================================================
 
 The joint states and events go to the CSV files and their numbers
@@ -22,7 +29,9 @@ The joint states and events go to the CSV files and their numbers
 
 The launcher tells the record when the job window starts (:meth:`RunRecord.start_job`) and
 ends (:meth:`RunRecord.freeze`); ``sim_seconds``, ``wall_seconds``, the real-time factor and
-the item counts of the summary refer to that window.
+the item counts of the summary refer to that window, and a stop that begins after it is not
+the run's. The summary's verdict (:func:`scara_collab.records.verdict.apply`) takes the
+launcher's ``exit_code`` from :attr:`RunRecord.extra` and keeps it unless it is 0.
 
 Other recordings of the run (the launcher's ``--record``:
 :class:`scara_collab.nodes.mcap_recorder.McapLog`) go into :attr:`RunRecord.sinks`; they
@@ -37,6 +46,8 @@ first.
 >>> summary = record.finish('duration reached', False, plots=False)
 >>> summary['joint_state_rows'], round(summary['min_separation_m'], 3)
 (1, 1.9)
+>>> summary['exit_code'], summary['exit_reason'], summary['problems']
+(0, 'duration reached', [])
 >>> folder.cleanup()
 """
 import logging
@@ -47,11 +58,15 @@ from typing import Dict, List, Optional, Sequence, Union
 from scara_collab.core.config import load_config
 from scara_collab.core.job import items_per_minute
 from scara_collab.core.model import CellModel, load_cell
-from scara_collab.graph import LAUNCH_MODES
-from scara_collab.records import report
+from scara_collab.graph import BY_NAME, LAUNCH_MODES
+from scara_collab.records import report, verdict
+from scara_collab.records.graph_watch import GraphWatch
+from scara_collab.records.stops import StopLog
 from scara_collab.records.telemetry import COUNTED, RunLog
 
 MODES = LAUNCH_MODES
+#: the nodes a run has one of each: the cell's and the launcher's own (two: a second graph)
+ONE_PER_RUN = tuple(BY_NAME) + ('run_recorder', 'launch_cell_watch')
 
 
 class RunRecord:
@@ -80,8 +95,11 @@ class RunRecord:
         self.stats_time: Optional[float] = None
         self.monitor = None   # the newest MonitorStatus (scara_collab.nodes.protocol)
         self.mirror = None    # the newest MirrorStatus
-        self.estops: List[float] = []
+        self.estops: List[float] = []  # rising edges of /emergency_stop, sim s
         self.estop_active = False
+        self.stop_log = StopLog()      # protective and emergency stops
+        self.graph_watch = GraphWatch(ONE_PER_RUN)  # foreign clocks, second graphs
+        self.created_wall = time.monotonic()
         self.refused = 0      # joint states refused at the door (stamps, non-finite values)
         self.extra: Dict[str, object] = {}
         self.job_start: Optional[float] = None      # sim s
@@ -123,10 +141,35 @@ class RunRecord:
         self.stats_time = self.sim_time
 
     def add_estop(self, on: bool) -> None:
-        """Take the emergency stop's state now; a rising edge counts as a stop."""
+        """Take the latched ``/emergency_stop`` now (the bridge obeys it, whoever sends it).
+
+        A rising edge is kept in :attr:`estops`; a hold no emergency stop event covers is
+        listed in the summary's ``emergency_stops`` (:class:`StopLog`).
+        """
         if on and not self.estop_active:
             self.estops.append(self.sim_time)
         self.estop_active = on
+        self.stop_log.request(on, self.sim_time)
+
+    def add_stop(self, kind: str, state: str, t: float, cause: str,
+                 since: Optional[float] = None) -> None:
+        """Take a stop event: a ``kind`` stop's ``state`` (begin, end) at sim time ``t``."""
+        self.stop_log.event(kind, state, t, cause, since)
+
+    def take_monitor(self, status) -> None:
+        """Keep the collision monitor's newest status (a ``MonitorStatus``)."""
+        self.monitor = status
+        self.stop_log.monitor(status.time, status.stopped, getattr(status, 'kind', ''),
+                              status.reason)
+
+    def look_at_graph(self, clock_publishers: Sequence[str], nodes: Sequence[str]) -> None:
+        """Take one look at the graph: ``/clock``'s publishers and every node (full names)."""
+        self.graph_watch.look(self.sim_time, time.monotonic() - self.created_wall,
+                              clock_publishers, nodes)
+
+    def clock_back(self, before: float, after: float) -> None:
+        """Take a backward jump of the run's clock (sim s): a foreign clock."""
+        self.graph_watch.clock_back(before, after)
 
     # --- the run window --------------------------------------------------------------------
     def start_job(self, t: Optional[float] = None) -> float:
@@ -214,10 +257,12 @@ class RunRecord:
             'mirror_not_in_step_reason': None if mirror is None else mirror.last_reason,
             'mirror_error_whole_run_max_m': log.max_mirror_error if mirrored else None,
             'mirror_error_whole_run_time': log.max_mirror_error_time if mirrored else None,
-            'emergency_stops': len(self.estops),
-            'emergency_stop_times': list(self.estops),
+            **self.stop_log.summary(t_end),
             'emergency_stop_reason': None if self.monitor is None or not self.monitor.stopped
             else self.monitor.reason,
+            **self.graph_watch.summary(),
+            'silences': [],           # the launcher's lockstep watch gives them (extra)
+            'silence_limits': None,
             'interrupted': bool(interrupted),
             'exit_reason': exit_reason,
             'job_start_sim_time': self.job_start,
@@ -237,12 +282,17 @@ class RunRecord:
     def checkpoint(self) -> None:
         """Flush the CSV files and write a provisional summary (``exit_reason: running``)."""
         if self.summary is None and not self.log.closed:
-            report.write_summary(self.directory, self.build_summary('running', True))
+            summary = self.build_summary('running', True)
+            summary['problems'] = verdict.verdict(  # so far, the run going on
+                dict(summary, exit_code=0, interrupted=False)).problems
+            report.write_summary(self.directory, summary)
 
     def finish(self, exit_reason: str, interrupted: bool, plots: bool = True) -> Dict:
         """End the recording: close the CSV files, write ``summary.json`` and the plots.
 
-        Idempotent: a second call returns the first summary.
+        Idempotent: a second call returns the first summary. The summary's ``exit_code``,
+        ``exit_reason`` and ``problems`` are the run's verdict
+        (:func:`scara_collab.records.verdict.apply`); ``end_reason`` keeps ``exit_reason``.
 
         :param exit_reason: why the run ended, e.g. ``'duration reached'``, ``'SIGINT'``.
         :param interrupted: False only for a run that reached its end normally.
@@ -259,6 +309,7 @@ class RunRecord:
                 self.extra.setdefault('sink_errors', []).append(f'{type(exc).__name__}: {exc}')
                 self.report_error(f'recording not closed cleanly: {exc}')
         summary = self.build_summary(exit_reason, interrupted)
+        verdict.apply(summary)
         self.log.close()
         report.write_summary(self.directory, summary)  # first, so it exists whatever happens
         if plots:

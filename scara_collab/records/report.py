@@ -265,16 +265,105 @@ def _mirror_note(s: Dict) -> str:
             f'(t={_num(s.get("mirror_error_whole_run_time"), ".1f")} s, arms not in step)')
 
 
+#: stops, silences and problems listed one a line in the report; then a count
+REPORT_ITEMS = 3
+
+
+def format_outcome(s: Dict) -> str:
+    """Return the report's first line: the mode, how the run ended, its exit code and reason.
+
+    A clean run: ``finished (duration reached)``; one that ended early: ``interrupted
+    (SIGINT), exit 130``; one that ran to its end but failed its verdict
+    (:mod:`scara_collab.records.verdict`): ``FAILED, exit 3: margin broken: ...; finished
+    (duration reached)``.
+    """
+    head = f'scara_collab run: mode {s.get("mode")}, '
+    code = s.get('exit_code') or 0
+    ended = s.get('end_reason') or s.get('exit_reason')
+    if s.get('interrupted'):
+        return head + f'interrupted ({s.get("exit_reason")})' + (f', exit {code}' if code
+                                                                 else '')
+    if code:
+        return head + f'FAILED, exit {code}: {s.get("exit_reason")}; finished ({ended})'
+    return head + f'finished ({s.get("exit_reason")})'
+
+
+def _more(lines: List[str], total: int, what: str) -> List[str]:
+    """Return the first :data:`REPORT_ITEMS` of ``lines``, then a count of the rest."""
+    out = lines[:REPORT_ITEMS]
+    if total > len(out):
+        out.append(f'... and {total - len(out)} more {what} (summary.json)')
+    return out
+
+
+def _block(title: str, lines: List[str]) -> List[str]:
+    """Return ``lines`` under a 15-column ``title`` (the report's layout)."""
+    return [f'  {title if k == 0 else "":<15}{line}' for k, line in enumerate(lines)]
+
+
+def _stop_lines(s: Dict) -> List[str]:
+    """Return the report's stops: count and time lost per kind, then the stops one a line."""
+    kinds = [(k, s.get(f'{k}_stops')) for k in ('protective', 'emergency')]
+    kinds = [(k, v) for k, v in kinds if isinstance(v, list) and v]
+    if not kinds:
+        return []
+    head = ', '.join(f'{k} {len(v)} ({sum(x.get("lost") or 0.0 for x in v):.2f} s lost'
+                     + (', STANDING at the end' if any(x.get('standing') for x in v) else '')
+                     + ')' for k, v in kinds)
+    each = sorted(((x.get('time') or 0.0, k, x) for k, v in kinds for x in v),
+                  key=lambda e: (not e[2].get('standing'), e[0]))  # standing ones first
+    items = [f'{k:<10} t={t:.2f} s, ' + ('standing' if x.get('standing')
+                                         else f'{x.get("lost") or 0.0:.2f} s')
+             + f': {x.get("cause")}' for t, k, x in each]
+    return _block('stops', [head] + _more(items, len(items), 'stops'))
+
+
+def _silence_lines(s: Dict) -> List[str]:
+    """Return the report's silences: node, length (wall s, sim s behind), from when."""
+    silences = s.get('silences') or []
+    items = [f'{x.get("node")} {x.get("wall_s", 0.0):.1f} s wall / {x.get("lag_s", 0.0):.1f} s '
+             f'sim behind from sim t={_num(x.get("sim_time"), ".2f")} s'
+             + (', dropped by the bridge' if x.get('dropped') else '')
+             + ('' if x.get('ended') else ', until the end') for x in silences]
+    return _block('silences', _more(items, len(items), 'silences'))
+
+
+def _intruder_lines(s: Dict) -> List[str]:
+    """Return the report's foreign clocks and second graphs."""
+    clocks = [f'sim t={_num(c.get("time"), ".2f")} s: {c.get("publishers")} /clock '
+              f'publishers ({", ".join(c.get("nodes") or [])})'
+              for c in s.get('foreign_clocks') or []]
+    if s.get('clock_jumps_back'):
+        first = s['clock_jumps_back'][0]
+        clocks.append(f'/clock went backwards {s.get("clock_jumps_back_count")} time(s), first '
+                      f'at sim t={first.get("time"):.3f} s (to {first.get("to"):.3f} s)')
+    graphs = [f'sim t={_num(g.get("time"), ".2f")} s: ' + ', '.join(
+        f'{n} x {name}' for name, n in (g.get('nodes') or {}).items())
+        for g in s.get('second_graphs') or []]
+    return (_block('foreign clock', _more(clocks, len(clocks), 'foreign clocks'))
+            + _block('second graph', _more(graphs, len(graphs), 'second graphs')))
+
+
+def _problem_lines(s: Dict) -> List[str]:
+    """Return the report's problems (each reason the exit code is not 0), if more than one."""
+    problems = [f'exit {p.get("code")}: {p.get("text")}' for p in s.get('problems') or []]
+    return _block('problems', _more(problems, len(problems), 'problems')) \
+        if len(problems) > 1 else []
+
+
 def format_report(s: Dict) -> str:
-    """Return the final report of a run (several lines) from its summary."""
+    """Return the final report of a run (several lines) from its summary.
+
+    The first line says how the run ended and, if it is not 0, its exit code and the reason
+    (:func:`format_outcome`).
+    """
     margin = s.get('safety_margin_m') or 0.0
     sep = s.get('min_separation_m')
     verdict = ('' if sep is None else
                f'  ({"OK" if sep >= margin else "BROKEN"}: margin {margin:g} m)')
     mirror = s.get('mirror_error_max_m')
     lines = [
-        f'scara_collab run: mode {s.get("mode")}, '
-        f'{"interrupted" if s.get("interrupted") else "finished"} ({s.get("exit_reason")})',
+        format_outcome(s),
         f'  sim time       {_num(s.get("sim_seconds"), ".1f")} s    wall '
         f'{_num(s.get("wall_seconds"), ".1f")} s    real-time factor '
         f'{format_rtf(s.get("real_time_factor"))}'
@@ -300,8 +389,7 @@ def format_report(s: Dict) -> str:
         parts = [f'{k.replace("_", " ")} {v:.3f}' for k, v in cost.items() if k != 'total']
         lines.append(f'  CPU per sim s  {cost.get("total", 0.0):.3f} s   (' + ', '.join(parts)
                      + ')')
-    if s.get('emergency_stops'):
-        lines.append(f'  emergency stop {s["emergency_stops"]} time(s)')
+    lines += _stop_lines(s) + _silence_lines(s) + _intruder_lines(s) + _problem_lines(s)
     lines.append(f'  run folder     {s.get("output")}')
     return '\n'.join(lines)
 
