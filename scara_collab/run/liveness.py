@@ -10,8 +10,13 @@ hangs stops that process's one thread, the bridge with it, so no node is ever be
 others (sim time stands still instead: the launcher's stall check). The watch is then off and
 subscribes nothing, which saves the container a delivery to another process for each of its
 hundreds of answers a second (about 6 % of its CPU).
+
+Each look also keeps the run's silences, whatever their length
+(:meth:`~scara_collab.nodes.lockstep_watch.LockstepWatch.look`); :meth:`Liveness.summary`
+hands them to the run's summary, where a silence the bridge did not wait for fails the run
+(:mod:`scara_collab.records.verdict`).
 """
-from typing import Iterable, Optional, Tuple
+from typing import Dict, Iterable, Optional, Tuple
 
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -62,12 +67,26 @@ class Liveness:
         :param wall: now, s (``time.monotonic()``).
         """
         self.take_answers()
+        self.watch.look(sim_now, wall)
         silent = self.watch.silent(sim_now, wall)
         if silent is None:
             return None
         name, seconds, t = silent
         self.silent_node = name.lstrip('/')
         return self.silent_node, seconds, t
+
+    def summary(self) -> Dict[str, object]:
+        """Return the silences for the run's summary: ``silences``, ``silence_limits``.
+
+        ``silences``: every one seen, oldest first (node, sim time it reached, wall s, sim s
+        behind, ended, dropped); ``silence_limits``: ``notice_s`` and the bridge's
+        ``lockstep_timeout_s``, or None when the watch is off (``--one-process``).
+        """
+        if self._node is None:
+            return {'silences': [], 'silence_limits': None}
+        return {'silences': [s.values() for s in self.watch.silences],
+                'silence_limits': {'notice_s': self.watch.notice,
+                                   'lockstep_timeout_s': self.watch.drop_after}}
 
     def close(self) -> None:
         """Shut down the executor and destroy the watch node."""
