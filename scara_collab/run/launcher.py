@@ -47,8 +47,13 @@ is stopped (``/automation_manager/stop``, short timeouts; skipped if the automat
 the node that stopped answering), the children get SIGINT in reverse order (SIGTERM if still
 starting) and SIGCONT (so a stopped one can exit), what remains after a grace period is
 killed, and the run files are written (:mod:`scara_collab.records.record`; the reason is
-``exit_reason`` in ``summary.json``). Exit status: 0 clean run, 1 a node died / stopped
-answering / was not ready / refused to start, 2 bad arguments, 130 SIGINT, 143 SIGTERM.
+``exit_reason`` in ``summary.json``). Exit status (:mod:`scara_collab.records.verdict`, the
+reason on the report's first line and as ``exit_reason`` with every ``problems`` in
+``summary.json``): 0 clean run, 1 a node died / stopped answering / was not ready / refused to
+start, 2 bad arguments, 3 margin broken, 4 a stop (protective or emergency) left standing at
+the end, 5 a node silent longer than the bridge's ``lockstep_timeout`` (every silence is
+named, whatever its length), 6 a foreign ``/clock`` publisher or a second graph on the domain
+(seen at any time of the run), 130 SIGINT, 143 SIGTERM.
 
 ``--record`` also writes the run's topics to ``run.mcap`` from the launcher's own process
 (:mod:`scara_collab.nodes.mcap_recorder`, closed with the other run files); ``--animation``
@@ -508,7 +513,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             launcher.stop_job()
             launcher.stop_children(grace=0.5 if len(launcher.signals) > 1 else 5.0)
             launcher.recorder.extra['exit_code'] = code
+            launcher.recorder.extra.update(launcher.liveness.summary())  # named silences
             summary = launcher.recorder.finish(reason, interrupted, plots=not args.no_plots)
+            code = summary['exit_code']  # the run's verdict: this code unless it was 0
             text = format_report(summary)
             (output / 'report.txt').write_text(text + '\n', encoding='utf-8')
             console.say(text, error=True)

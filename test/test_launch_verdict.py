@@ -1,0 +1,60 @@
+"""The launcher's exit status tells the truth: a foreign /clock mid-run fails a finished run.
+
+A real launch (separate processes, the session's ROS_DOMAIN_ID: conftest.py), as in
+``test_launcher.py``; the verdict itself is tested on summaries in ``test_verdict.py``.
+"""
+import json
+import time
+
+import pytest
+
+from test_launcher import Launch
+
+
+@pytest.fixture
+def launch():
+    """Yield ``start(*args)``, which launches; launchers still running are killed after."""
+    made = []
+
+    def start(*args):
+        made.append(Launch(*args))
+        return made[-1]
+
+    yield start
+    for la in made:
+        la.kill()
+
+
+def test_a_second_clock_publisher_mid_run_fails_the_run(launch, tmp_path):
+    """A /clock publisher that appears mid-run is named; the run ends at its duration, exit 6.
+
+    The reason is the report's first line and ``exit_reason`` in ``summary.json``.
+    """
+    import rclpy
+    from rosgraph_msgs.msg import Clock
+    out = tmp_path / 'foreign'
+    la = launch('--mode', 'idle', '--duration', '6', '--rtf', '1', '--output', str(out),
+                '--no-plots', '--one-process')  # every node at once: the quickest start
+    la.wait_for_line(r'\[launch\] graph idle at sim t=')
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node('rogue_clock', context=ctx)
+    try:
+        node.create_publisher(Clock, '/clock', 10)  # there, publishing nothing yet
+        time.sleep(4.0)  # a few of the recorder's looks (one a wall second)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    assert la.wait() == 6, la.output
+    assert 'scara_collab run: mode idle, FAILED, exit 6: a second /clock publisher at sim t=' \
+        in la.output
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['exit_code'] == 6 and summary['end_reason'] == 'duration reached'
+    assert summary['exit_reason'].startswith('a second /clock publisher at sim t=')
+    assert summary['interrupted'] is False
+    (seen,) = summary['foreign_clocks']
+    assert seen['publishers'] == 2 and seen['nodes'] == ['/pybullet_bridge', '/rogue_clock']
+    assert 0.0 < seen['time'] < 6.0
+    assert summary['problems'] == [{'code': 6, 'text': summary['exit_reason']}]
+    report = (out / 'report.txt').read_text().splitlines()
+    assert report[0].startswith('scara_collab run: mode idle, FAILED, exit 6: ')
