@@ -11,12 +11,13 @@ the run's counts) and ``/<robot>/execution_status``
 (:class:`~scara_collab.nodes.protocol.ExecutionStatus` for the move named in the trajectory's
 ``header.frame_id``: accepted, refused, finished, preempted, held). Subscribes
 ``/<robot>/joint_trajectory`` (executed like ros2_control's joint trajectory controller: stamp
-zero = start now, else at the stamp; a new trajectory replaces the running one; a bad one is
-refused with the reason and the arm keeps its current command:
-:mod:`scara_collab.nodes.execution`) and ``/emergency_stop``
-(transient local; true = both arms hold). Serves ``/<robot>/gripper`` (std_srvs/SetBool:
-true = grasp, false = release), idempotent: a grasp while holding an item and a release with
-an empty gripper succeed and say so, so a client may repeat a request whose answer was lost.
+zero = start now, else at the stamp; a new trajectory replaces the running one; a bad one, or
+one that would bring the arms within the margin, is refused with the reason and the arm keeps
+its current command: :mod:`scara_collab.nodes.execution`), ``/emergency_stop`` and
+``/protective_stop`` (transient local; true = both arms brake and hold). Serves
+``/<robot>/gripper`` (std_srvs/SetBool: true = grasp, false = release), idempotent: a grasp
+while holding an item and a release with an empty gripper succeed and say so, so a client may
+repeat a request whose answer was lost.
 Parameter ``faults`` (:mod:`scara_collab.nodes.faults`) can lose or delay its statuses.
 ``/sim/pause``, ``/sim/resume``, ``/sim/step`` and ``/sim/reset`` (std_srvs/Trigger) control
 the simulation (:mod:`scara_collab.nodes.sim_control`).
@@ -200,7 +201,11 @@ class PyBulletBridge(Node):
             self.create_service(
                 SetBool, f'{name}/gripper',
                 guarded(self, lambda req, res, n=name: self._on_gripper(n, req, res), True))
-        self.create_subscription(Bool, 'emergency_stop', guarded(self, self._on_estop), LATCHED)
+        self._stops = {'emergency': False, 'protective': False}
+        self.create_subscription(Bool, 'emergency_stop', guarded(
+            self, lambda msg: self._on_stop('emergency', msg)), LATCHED)
+        self.create_subscription(Bool, 'protective_stop', guarded(
+            self, lambda msg: self._on_stop('protective', msg)), LATCHED)
         window = float(params['lockstep_window'])
         if 0 < window < self._periods['clock'] - 1e-9:
             raise ValueError(f'lockstep_window {window} s is shorter than the clock period '
@@ -394,16 +399,23 @@ class PyBulletBridge(Node):
             self.get_logger().warning(f'{robot} gripper: {res.message}')
         return res
 
-    def _on_estop(self, msg: Bool) -> None:
-        on = bool(msg.data)
+    def _on_stop(self, kind: str, msg: Bool) -> None:
+        """Hold both arms while an emergency or a protective stop stands; say when it is over.
+
+        Either kind brakes both arms at their acceleration limits and drops their moves
+        (status ``held``); while one stands only a move that parts the arms is run.
+        """
+        self._stops[kind] = bool(msg.data)
+        on = any(self._stops.values())
         if on == self.sim.estop:
             return
         self.sim.set_estop(on)
+        standing = ' and '.join(k for k, v in self._stops.items() if v)
         for arm in self.cell.arms:
             if on:
-                self.execution.drop(arm.name, 'emergency stop: holding')
+                self.execution.drop(arm.name, f'{standing} stop: holding')
             else:
-                self._report(arm.name, 'cleared', '', 'emergency stop cleared')
+                self._report(arm.name, 'cleared', '', f'{kind} stop released')
 
     def destroy_node(self) -> bool:
         """Close the simulator with the node (also after a refused start)."""
