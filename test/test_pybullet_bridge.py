@@ -299,3 +299,28 @@ def test_a_bad_sim_step_count_is_refused_at_start():
         assert 'pybullet_bridge' not in {n for n, _ in g.probe.get_node_names_and_namespaces()}
     finally:
         g.close()
+
+
+def test_a_participant_that_hears_the_clock_late_still_hears_the_time_it_is_waited_for():
+    """The bridge waits for an expected participant; the time is said again while it waits.
+
+    A participant whose ``/clock`` subscription matches after the clock was published (DDS
+    discovery on a busy machine) would wait for a clock that never comes and be dropped as
+    silent: the bridge publishes the same time again every 0.25 s wall while it waits.
+    """
+    g = Graph()
+    g.bridge = g.add(PyBulletBridge(context=g.context, cli_args=params_args(
+        'simulation', 'controllers', overrides={
+            'real_time_factor': 0.0, 'feed_interval': 0.0, 'lockstep_timeout': 30.0,
+            'lockstep_expect': "['/late']"})))
+    try:
+        assert g.spin_until(lambda: g.bridge._parked, timeout=10)  # waits for /late
+        waited_at = sim_time(g)
+        late = g.collect(Clock, '/clock')  # subscribes only now
+        assert g.spin_until(lambda: late, timeout=5), 'the time is said again'
+        assert conv.to_sec(late[-1].clock) == pytest.approx(waited_at)
+        answers = g.probe.create_publisher(Header, lockstep.TOPIC, lockstep.QOS)
+        answers.publish(Header(stamp=late[-1].clock, frame_id='/late'))
+        assert g.spin_until(lambda: sim_time(g) > waited_at), 'its answer steps sim time on'
+    finally:
+        g.close()

@@ -227,7 +227,7 @@ class PyBulletBridge(Node):
         self.actions = (TrajectoryActions(self, self.cell, self.sim, self.execution)
                         if FollowJointTrajectory is not None else None)
         if self.gate.enabled:  # re-arm now and then, so a silent participant times out
-            self.create_timer(0.25, self._wake, clock=self._steady)
+            self.create_timer(0.25, self._look, clock=self._steady)
         self._publish_all()
         self.get_logger().info(
             f'cell ready: {len(self.sim.joint_state()[0])} joints, physics '
@@ -246,6 +246,17 @@ class PyBulletBridge(Node):
                     self._timer.cancel()
             if float(tree['feed_interval']) != self.sim.conveyor.feed_interval:
                 self.sim.conveyor.set_feed(float(tree['feed_interval']))
+
+    def _look(self) -> None:
+        """Every 0.25 s wall: say the time again while waiting, then step on if allowed.
+
+        A participant whose ``/clock`` subscription matched after the clock was published
+        (DDS discovery on a busy machine) would otherwise wait for a clock that never comes,
+        and be dropped from the lockstep as silent. The same time again changes nothing else.
+        """
+        if self._parked and not self.control.paused:
+            self._publish_clock()
+        self._wake()
 
     def _wake(self) -> None:
         """Step on, if the bridge was waiting: an answer came (or the 0.25 s watch looks)."""
