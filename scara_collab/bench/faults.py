@@ -238,28 +238,39 @@ def _sep(s: Summary) -> float:
     return float('nan') if v is None else float(v)
 
 
+def _stops(s: Summary, kind: str) -> List[Dict]:
+    value = s.get(f'{kind}_stops')
+    return list(value) if isinstance(value, list) else []
+
+
 def judge_nan(s: Summary, out: Path) -> Tuple[bool, str]:
-    """Pass if a NaN state e-stopped the graph, the run exited 0 and no node died."""
-    reason = str(s.get('emergency_stop_reason') or '')
-    ok = s.get('exit_code') == 0 and 'unusable joint state' in reason and not _died(s)
-    return ok, (f'exit {s.get("exit_code")}, e-stop: {reason[:60] or "none"}, died: '
-                f'{_died(s) or "none"}')
+    """Pass if a NaN state made a protective stop that ended by itself, exit 0, none died."""
+    stops = [st for st in _stops(s, 'protective')
+             if 'unusable joint state' in str(st.get('cause'))]
+    ok = (s.get('exit_code') == 0 and bool(stops) and not any(st.get('standing') for st in stops)
+          and not _stops(s, 'emergency') and not _died(s))
+    return ok, (f'exit {s.get("exit_code")}, protective stops on it: {len(stops)} ('
+                + ', '.join(f'{float(st.get("lost") or 0):.2f} s' for st in stops)
+                + f'), died: {_died(s) or "none"}')
 
 
 def judge_wall_clock(s: Summary, out: Path) -> Tuple[bool, str]:
     """Pass if the run went its full length, states were refused and no e-stop was raised."""
     ok = s.get('exit_code') == 0 and s.get('exit_reason') == 'duration reached' \
-        and (s.get('joint_states_refused') or 0) > 0 and not s.get('emergency_stops')
+        and (s.get('joint_states_refused') or 0) > 0 and not _stops(s, 'emergency')
     return ok, (f'exit {s.get("exit_code")} ({s.get("exit_reason")}), sim '
                 f'{s.get("sim_seconds")} s, {s.get("joint_states_refused")} states refused, '
-                f'{s.get("emergency_stops")} e-stops')
+                f'{len(_stops(s, "emergency"))} e-stops')
 
 
 def judge_crossing(s: Summary, out: Path) -> Tuple[bool, str]:
-    """Pass if the run exited 0 on a predicted e-stop with the arms at least 0.1 m apart."""
-    reason = str(s.get('emergency_stop_reason') or '')
-    ok = s.get('exit_code') == 0 and reason.startswith('predicted') and _sep(s) >= 0.1
-    return ok, f'e-stop: {reason[:40] or "none"}..., min separation {_sep(s):.3f} m'
+    """Pass if the bridge refused the crossing at the door: exit 0, no stop, arms 0.1 m apart."""
+    refused = 'would bring scara_right within' in _log(out, 'pybullet_bridge')
+    ok = (s.get('exit_code') == 0 and refused and _sep(s) >= 0.1
+          and not _stops(s, 'emergency') and not _stops(s, 'protective'))
+    return ok, (f'exit {s.get("exit_code")}, refused at the door: {refused}, stops: '
+                f'{len(_stops(s, "protective"))} protective / {len(_stops(s, "emergency"))} '
+                f'emergency, min separation {_sep(s):.3f} m')
 
 
 def judge_rogue(s: Summary, out: Path) -> Tuple[bool, str]:
@@ -279,10 +290,10 @@ def judge_lost(s: Summary, out: Path) -> Tuple[bool, str]:
 
 def judge_saturated(s: Summary, out: Path) -> Tuple[bool, str]:
     """Pass if the overfed run kept the arms 0.1 m apart without an e-stop."""
-    ok = s.get('exit_code') == 0 and _sep(s) >= 0.1 and not s.get('emergency_stops')
+    ok = s.get('exit_code') == 0 and _sep(s) >= 0.1 and not _stops(s, 'emergency')
     return ok, (f'exit {s.get("exit_code")}, sorted {s.get("sorted")} ({s.get("missed")} '
                 f'missed: feed beyond capacity), min separation {_sep(s):.3f} m, '
-                f'{s.get("emergency_stops")} e-stops')
+                f'{len(_stops(s, "emergency"))} e-stops')
 
 
 def judge_sigstop(s: Summary, out: Path) -> Tuple[bool, str]:
@@ -302,12 +313,12 @@ def judge_sigkill(s: Summary, out: Path) -> Tuple[bool, str]:
 
 
 CASES = (
-    Case('NaN joint state, then a target', 'e-stop (fails closed), no node dies, the planner '
-         'answers the target', 20.0, judge_nan, nan_state_then_target),
+    Case('NaN joint state, then a target', 'protective stop (fails closed) that ends by '
+         'itself, no node dies, exit 0', 20.0, judge_nan, nan_state_then_target),
     Case('wall-clock stamped joint states', 'refused by every consumer; the run goes its '
          'length, exit 0', 20.0, judge_wall_clock, wall_clock_states),
-    Case('raw trajectory through the other arm (no job)', 'predicted e-stop; the margin is '
-         'kept', 20.0, judge_crossing, raw_crossing, mode='idle'),
+    Case('raw trajectory through the other arm (no job)', 'refused at the door; no stop, the '
+         'margin kept', 20.0, judge_crossing, raw_crossing, mode='idle'),
     Case('rogue publisher: 200 bad targets, malformed and 100,001-point trajectories',
          'all refused with reasons, no node dies, margin kept', 60.0, judge_rogue,
          rogue_input),

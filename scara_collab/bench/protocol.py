@@ -45,9 +45,10 @@ def row(summary: Dict[str, object]) -> Dict[str, object]:
         'error': summary.get('error'),
         **{k: summary.get(k) for k in ('sorted', 'missed', 'dropped', 'wrong_bin', 'spawned',
                                        'in_progress', 'items_per_minute', 'min_separation_m',
-                                       'emergency_stops', 'mirror_error_max_m',
+                                       'mirror_error_max_m',
                                        'mirror_in_step_moves', 'mirror_not_in_step',
                                        'real_time_factor', 'sim_seconds')},
+        **{k: len(summary.get(k) or []) for k in ('emergency_stops', 'protective_stops')},
         'give_ups': job.get('give_ups'), 'retries': job.get('retries'),
         'last_give_up': job.get('last_give_up'),
     }
