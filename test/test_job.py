@@ -141,11 +141,11 @@ def test_lost_gripper_answers_are_asked_again_then_fail(cell):
     first = out[0].token
     out = grips(job.tick(t + job.s.grip_timeout + 0.01))  # no answer: ask again, new token
     assert len(out) == 1 and out[0].token != first and out[0].grasp
-    job.on_grip(first, True, 'late answer to the first call')  # stale token: ignored
-    assert job.phases()[pick.robot] == 'grasping'
     job.on_grip(out[0].token, True, 'already holds item 1')  # idempotent server: success
     nxt = moves(job.tick(t + 0.5))
     assert nxt[0].purpose == 'to_bin'  # nothing else on the belt: straight to the bin
+    job.on_grip(first, True, 'late answer to the first call')  # that grip is over: ignored
+    assert job.phases()[pick.robot] == 'to_bin'
 
     # no answer at all: bounded retries, then the grasp failed and the arm is free again
     job, pick, t = at_the_item(cell)
@@ -154,6 +154,45 @@ def test_lost_gripper_answers_are_asked_again_then_fail(cell):
         t += job.s.grip_timeout + 0.01
         job.tick(t)
     assert job.phases()[pick.robot] == 'idle' and job.lanes[0].failures == {1: 1}
+
+
+def test_a_slow_gripper_answer_counts_and_the_timeout_grows_with_what_is_measured(cell):
+    """The answer to an earlier attempt is the answer (the gripper is idempotent).
+
+    Answers that take longer than ``grip_timeout`` (real time, a busy machine) make the next
+    grips wait that much longer before asking again: the latency is measured, not assumed.
+    """
+    job, pick, t = at_the_item(cell)
+    first = grips(job.tick(t))[0].token
+    slow = job.s.grip_timeout + 0.1
+    again = grips(job.tick(t + job.s.grip_timeout + 0.02))  # asked again meanwhile
+    assert again and again[0].token != first
+    job.tick(t + slow)
+    job.on_grip(first, True, 'grasped (slow)')  # the first call's answer, late
+    nxt = moves(job.tick(t + slow + 0.02))
+    assert nxt and nxt[0].purpose == 'to_bin'
+    assert job.grip_lag.worst == pytest.approx(slow)
+    # the next grip waits grip_timeout plus what was measured before asking again
+    job2, pick2, t2 = at_the_item(cell)
+    job2.grip_lag.add(slow)
+    grips(job2.tick(t2))
+    assert not grips(job2.tick(t2 + job2.s.grip_timeout + 0.05))
+    assert grips(job2.tick(t2 + job2.s.grip_timeout + slow + 0.02))
+
+
+def test_a_slow_planner_answer_lengthens_the_wait_before_asking_again(cell):
+    """The time a planner took to answer is added to ``answer_timeout`` for what follows."""
+    job = make_job(cell)
+    pick = first_pick(cell, job)
+    late = 0.4 * job.s.answer_timeout
+    job.tick(late)
+    job.on_planner(pick.robot, pick.request, 'planned', pick.start + late, pick.start + 1.0)
+    assert job.answer_lag.worst == pytest.approx(late)
+    job2 = make_job(cell)
+    job2.answer_lag.add(late)
+    pick2 = first_pick(cell, job2)
+    assert not moves(job2.tick(job2.s.answer_timeout + 0.02))  # not yet: it measured late
+    assert moves(job2.tick(job2.s.answer_timeout + late + 0.02))[0].request == pick2.request
 
 
 def test_a_grasped_event_confirms_a_grasp_whose_answer_was_lost(cell):

@@ -23,6 +23,7 @@ from scara_collab.core import planning, sorting
 from scara_collab.core.kinematics import fk
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import CellModel
+from scara_collab.core.motion import Lateness
 from scara_collab.core.trajectory import Trajectory
 
 if TYPE_CHECKING:  # the job's settings (JobSettings lives with the job)
@@ -94,13 +95,18 @@ class MoveTrack:
 
 @dataclass
 class GripTrack:
-    """One gripper request: its token, when it was sent, how often, its outcome."""
+    """One gripper request: its token, when it was sent, how often, its outcome.
+
+    ``calls``: every attempt's token and when it was sent. The gripper is idempotent, so the
+    answer to any attempt is the answer (a slow one is not lost by asking again).
+    """
 
     token: int
     sent: float
     attempts: int = 1
     ok: Optional[bool] = None
     message: str = ''
+    calls: Dict[int, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -196,6 +202,10 @@ class LaneProtocol:
         self._token = 0
         self._out: List[object] = []
         self._now = 0.0
+        # how long answers have lately taken (sim s): added to the timeouts, so a slow graph
+        # (real time, a busy machine) is waited for as it measures, not as lockstep would be
+        self.answer_lag = Lateness()
+        self.grip_lag = Lateness()
 
     # --- the decisions, taken by the subclass ----------------------------------------------
     def _arrived(self, lane: Lane, now: float) -> None:
@@ -224,6 +234,10 @@ class LaneProtocol:
     def on_planner(self, robot: str, request: int, state: str, start: Optional[float],
                    end: Optional[float], reason: str = '') -> None:
         """Take a planner status about ``robot``'s move for ``request`` (others are ignored)."""
+        for lane in self.lanes:  # the first answer to a request: how long answers take
+            track = lane.moves.get(robot) if lane.request == request else None
+            if track is not None and track.state == 'asked' and lane.phase in MOVING:
+                self.answer_lag.add(self._now - lane.sent)
         self._on_status(robot, request, PLANNER_STATUS.get(state), start, end, reason)
 
     def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
@@ -252,11 +266,12 @@ class LaneProtocol:
             track.state, track.reason = new, reason or new
 
     def on_grip(self, token: int, ok: bool, message: str = '') -> None:
-        """Take a gripper response for request ``token`` (late or unknown tokens: ignored)."""
+        """Take a gripper response for request ``token``: any attempt of a grip still open."""
         for lane in self.lanes:
             for track in lane.grips.values():
-                if track.token == token and track.ok is None:
+                if track.ok is None and (token == track.token or token in track.calls):
                     track.ok, track.message = bool(ok), message
+                    self.grip_lag.add(self._now - track.calls.get(token, track.sent))
 
     def _confirm_grip(self, kind: str, robot: str) -> None:
         """Take a bridge ``grasped`` or ``released`` event: the response may be lost."""
@@ -342,7 +357,8 @@ class LaneProtocol:
             if track.state == 'finished':
                 track.arrived = True
                 continue
-            if track.state == 'asked' and now - lane.sent > self.s.answer_timeout:
+            if (track.state == 'asked'
+                    and now - lane.sent > self.s.answer_timeout + self.answer_lag.worst):
                 if lane.sends > self.s.answer_retries:
                     return self._give_up(lane, now, f'no answer from the {robot} planner '
                                          f'after {lane.sends} requests')
@@ -376,18 +392,19 @@ class LaneProtocol:
         lane.grips = {}
         for robot in lane.robots:
             self._token += 1
-            lane.grips[robot] = GripTrack(self._token, now)
+            lane.grips[robot] = GripTrack(self._token, now, calls={self._token: now})
             self._out.append(GripCommand(robot, grasp, self._token))
 
     def _tick_grip(self, lane: Lane, now: float) -> None:
         grasp = lane.phase == 'grasping'
         for robot, track in lane.grips.items():
-            if track.ok is None and now - track.sent > self.s.grip_timeout:
+            if track.ok is None and now - track.sent > self.s.grip_timeout + self.grip_lag.worst:
                 if track.attempts > self.s.grip_retries:
                     track.ok, track.message = False, f'no answer after {track.attempts} calls'
                     continue
                 self._token += 1
                 track.token, track.sent = self._token, now
+                track.calls[self._token] = now
                 track.attempts += 1
                 self.retries += 1
                 self.log('info', f'{robot}: no gripper answer in {self.s.grip_timeout:g} s; '
