@@ -160,8 +160,10 @@ def test_a_slow_gripper_answer_counts_and_the_timeout_grows_with_what_is_measure
     """The answer to an earlier attempt is the answer (the gripper is idempotent).
 
     Answers that take longer than ``grip_timeout`` (real time, a busy machine) make the next
-    grips wait that much longer before asking again: the latency is measured, not assumed.
+    grips wait that much longer before asking again, and aim the tool where the item will be
+    when the grasp takes hold: the latency is measured, not assumed.
     """
+    from scara_collab.core.lanes import GRASP_LEAD
     job, pick, t = at_the_item(cell)
     first = grips(job.tick(t))[0].token
     slow = job.s.grip_timeout + 0.1
@@ -172,10 +174,21 @@ def test_a_slow_gripper_answer_counts_and_the_timeout_grows_with_what_is_measure
     nxt = moves(job.tick(t + slow + 0.02))
     assert nxt and nxt[0].purpose == 'to_bin'
     assert job.grip_lag.worst == pytest.approx(slow)
-    # the next grip waits grip_timeout plus what was measured before asking again
-    job2, pick2, t2 = at_the_item(cell)
+    # a job that measured it meets the item where it will be when the grasp takes hold
+    # (that far downstream), and waits grip_timeout plus it before asking again
+    job2 = make_job(cell)
     job2.grip_lag.add(slow)
-    grips(job2.tick(t2))
+    pick2 = first_pick(cell, job2)
+    # (the meeting time moves a little too: a move to another point takes another time)
+    lead = job2.grasp_lead
+    assert lead == pytest.approx(min(slow, GRASP_LEAD))  # a typical answer time, bounded
+    assert pick2.target[0] - pick.target[0] == pytest.approx(cell.belt.speed * lead, abs=0.015)
+    t2 = pick2.start + 1.0
+    upstream = pick2.target[0] - cell.belt.speed * lead  # the item, as the tool arrives
+    job2.on_items([SeenItem(1, cell.item_classes[0], np.r_[upstream, pick2.target[1],
+                                                           cell.belt.top_z + 0.05], t2)])
+    arrive(cell, job2, pick2, t2)
+    assert grips(job2.tick(t2))
     assert not grips(job2.tick(t2 + job2.s.grip_timeout + 0.05))
     assert grips(job2.tick(t2 + job2.s.grip_timeout + slow + 0.02))
 

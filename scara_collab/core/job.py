@@ -266,7 +266,9 @@ class SortingJob(SharedBelt):
             seen = self.items.get(lane.item.id)
             if seen is None:
                 return self._give_up(lane, now, f'item {lane.item.id} is no longer on the belt')
-            off = sorting.predict(self.cell, seen, now)[:2] - lane.target[:2]
+            # where the item will be when the grasp takes hold (the gripper call's latency)
+            off = sorting.predict(self.cell, seen, now + self.grasp_lead)[:2] \
+                - lane.target[:2]
             if np.hypot(*off) <= self.s.grasp_reach:
                 self._grip(lane, True, now)
             elif not self._chase(lane, seen, now):
@@ -280,7 +282,8 @@ class SortingJob(SharedBelt):
         q0 = self.q[lane.robot]
         aim = pairing.pair_aim(self.cell, item, self.s.pair_offset) if mirrored else item
         hit = sorting.intercept(self.cell, arm, q0, aim, start, self.s.pick_z,
-                                lambda q, p: self.plan(lane.robot, q, p))
+                                lambda q, p: self.plan(lane.robot, q, p),
+                                lead=self.grasp_lead)
         if hit is not None and len(self.lanes) > 1:
             hit = self._unhindered(lane, aim, hit, now)
         if hit is None:

@@ -34,6 +34,9 @@ MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
 #: planner / bridge answers about a move, in the order a move goes through them
 MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
 FAILED_MOVE = ('refused', 'superseded', 'held')
+#: s: the most a grasp is aimed ahead of the tool's arrival (the gripper's reach is 0.06 m,
+#: 0.3 s of belt travel either way: aiming further than that misses for certain)
+GRASP_LEAD = 0.25
 #: the state a planner's status puts a move in (a state not listed changes nothing)
 PLANNER_STATUS = {s: s for s in ('planned', 'queued', 'waiting', 'refused', 'superseded')}
 #: the same for the bridge's; ``preempted`` by the arm's own planner (its new move, its hold): the
@@ -206,6 +209,15 @@ class LaneProtocol:
         # (real time, a busy machine) is waited for as it measures, not as lockstep would be
         self.answer_lag = Lateness()
         self.grip_lag = Lateness()
+
+    @property
+    def grasp_lead(self) -> float:
+        """Return how long after the tool's arrival a grasp takes hold, as measured, s.
+
+        The typical gripper answer time (a round trip: seeing the arrival, then the call), at
+        most ``GRASP_LEAD``; 0 in lockstep, where the call is answered within the tick.
+        """
+        return min(self.grip_lag.typical, GRASP_LEAD)
 
     # --- the decisions, taken by the subclass ----------------------------------------------
     def _arrived(self, lane: Lane, now: float) -> None:

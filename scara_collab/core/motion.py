@@ -335,8 +335,8 @@ class Lateness:
     >>> late = Lateness(window=3)
     >>> for s in (0.0, 0.25, 0.0, 0.0):
     ...     late.add(s)
-    >>> late.worst, (late.add(0.0), late.worst)[1]
-    (0.25, 0.0)
+    >>> late.worst, late.typical, (late.add(0.0), late.worst)[1]
+    (0.25, 0.0, 0.0)
 
     :param window: samples kept; :param cap: s, the most it ever says (a stall is not latency).
     """
@@ -354,8 +354,16 @@ class Lateness:
 
     @property
     def worst(self) -> float:
-        """The largest delay in the window, s."""
+        """The largest delay in the window, s (to wait for: a timeout)."""
         return max(self._samples, default=0.0)
+
+    @property
+    def typical(self) -> float:
+        """The median delay in the window, s (to aim with: a one-off spike does not count)."""
+        if not self._samples:
+            return 0.0
+        ordered = sorted(self._samples)
+        return ordered[(len(ordered) - 1) // 2]
 
 
 class Heard:

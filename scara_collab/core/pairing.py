@@ -117,7 +117,7 @@ def pair_aim(cell: CellModel, item: sorting.SeenItem, offset: float) -> sorting.
 def unhindered(cell: CellModel, plan: PlanFn, robot: str, q0: np.ndarray,
                item: sorting.SeenItem, hit: sorting.Intercept, booked: planning.Timeline,
                z: float, margin: float, tolerance: float, max_delay: float,
-               urgent: bool) -> Optional[sorting.Intercept]:
+               urgent: bool, lead: float = 0.0) -> Optional[sorting.Intercept]:
     """Return the chase ``hit`` timed around the other arm's booked motion, or None.
 
     The chase is scheduled against ``booked`` (:func:`scara_collab.core.planning.schedule`
@@ -133,6 +133,7 @@ def unhindered(cell: CellModel, plan: PlanFn, robot: str, q0: np.ndarray,
 
     :param item: the item as the chase aims at it; :param z: the tool height at the meeting.
     :param max_delay: the longest wait that counts as a delay, s (longer: held up).
+    :param lead: the grasp's latency (:func:`scara_collab.core.sorting.intercept`).
     """
     arm, other = cell.arm(robot), _other(cell, robot)
     for _ in range(2):
@@ -143,7 +144,7 @@ def unhindered(cell: CellModel, plan: PlanFn, robot: str, q0: np.ndarray,
         if timed.delay <= tolerance:
             return hit
         hit = sorting.intercept(cell, arm, q0, item, hit.start + timed.delay, z,
-                                lambda q, p: plan(robot, q, p))
+                                lambda q, p: plan(robot, q, p), lead=lead)
         if hit is None:
             return None
     return hit if urgent else None

@@ -261,7 +261,7 @@ class SharedBelt(LaneProtocol):
             self.cell, self.plan, lane.robot, self.q[lane.robot], item, hit,
             self._committed(other.name, now), self.s.pick_z, self.s.pair_margin,
             tolerance=0.5 * self.s.grasp_reach / max(self.cell.belt.speed, 1e-9),
-            max_delay=self.s.move_timeout, urgent=urgent)
+            max_delay=self.s.move_timeout, urgent=urgent, lead=self.grasp_lead)
 
     def _move_safely(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
         """Ask for a move like :meth:`_move`; a mirrored pair may go round by a waypoint.

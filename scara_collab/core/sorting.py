@@ -150,7 +150,7 @@ def cycle_bound(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start
 
 def intercept(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: float,
               z: float, plan: Callable[[np.ndarray, np.ndarray], Trajectory],
-              iterations: int = 8, tol: float = 0.003) -> Optional[Intercept]:
+              iterations: int = 8, tol: float = 0.003, lead: float = 0.0) -> Optional[Intercept]:
     """Plan the move from ``q_start`` (at rest, free from ``t_start``) that meets ``item``.
 
     The meeting time ``T`` is the earliest at which the item is in reach and the tool can be
@@ -160,6 +160,9 @@ def intercept(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: 
 
     :param z: tool-tip height at the meeting point (see :func:`pick_height`).
     :param plan: ``plan(q_start, target) -> Trajectory`` (raises ``ValueError`` if refused).
+    :param lead: s from the tool's arrival to the grasp taking hold (the gripper call's
+        measured latency): the tool waits where the item will be then, not where it is on
+        arrival (0 in lockstep, where the call is answered within the tick).
     :return: the :class:`Intercept`, or None if the item leaves the arm's reach first.
     """
     speed = max(cell.belt.speed, 1e-9)
@@ -168,7 +171,7 @@ def intercept(cell: CellModel, arm: ArmModel, q_start, item: SeenItem, t_start: 
         return None
     arrive = bound[0]
     for _ in range(iterations):  # then real plans (usually one or two) until it settles
-        p = predict(cell, item, arrive)
+        p = predict(cell, item, arrive + lead)
         p[2] = z
         try:
             traj = plan(q_start, p)
