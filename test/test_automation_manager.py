@@ -137,16 +137,26 @@ def test_the_job_starts_only_once_every_endpoint_it_uses_is_matched():
 
 
 class _Injector:
-    """Injects faults into an in-process job at given sim times, and watches what follows."""
+    """Injects a fault into an in-process job at given sim times, and watches what follows.
 
-    def __init__(self, times):
-        self.times = list(times)
+    ``inject(g, nodes, now)`` makes the fault and returns True if it did; the injector is the
+    job's ``during`` hook (:func:`scara_collab.bench.job.run_job`).
+    """
+
+    def __init__(self, times, inject):
+        self.times, self.inject = list(times), inject
         self.done = []      # (sim time, sorted count then)
         self.sorted = []    # (sim time, sorted count) at each turn
         self.probe = None
 
-    def counts(self, nodes):
-        return nodes['automation_manager'].job.counts.get('sorted', 0)
+    def __call__(self, g, nodes, now):
+        count = nodes['automation_manager'].job.counts.get('sorted', 0)
+        self.sorted.append((now, count))
+        if not self.times or now < self.times[0]:
+            return
+        self.times.pop(0)
+        if self.inject(g, nodes, now):
+            self.done.append((now, count))
 
     def recovered_within(self, seconds):
         """Return the injections after which the job sorted again within ``seconds``."""
@@ -171,14 +181,7 @@ def test_raw_crossing_commands_during_a_job_never_break_the_margin():
     from scara_collab.core.trajectory import joint_move
     from scara_collab.nodes import conversions as conv
 
-    rng = np.random.default_rng(11)
-    inj = _Injector(np.sort(rng.uniform(8.0, 120.0, 20)))
-
-    def during(g, nodes, now):
-        inj.sorted.append((now, inj.counts(nodes)))
-        if not inj.times or now < inj.times[0]:
-            return
-        inj.times.pop(0)
+    def crossing(g, nodes, now):
         bridge = nodes['pybullet_bridge']
         cell = bridge.cell
         if inj.probe is None:
@@ -194,13 +197,14 @@ def test_raw_crossing_commands_during_a_job_never_break_the_margin():
             if goal.ok:
                 break
         else:
-            return
+            return False
         move = joint_move(cell.follower, q_right, goal.q)
         inj.pub.publish(conv.trajectory_msg(cell.follower.joint_names, move.t, move.q,
                                             move.qd, move.qdd, frame_id=f'raw/{now:.3f}'))
-        inj.done.append((now, inj.counts(nodes)))
+        return True
 
-    s = run_graph('collaborative', 130.0, feed=1.8, seed=5, during=during)
+    inj = _Injector(np.sort(np.random.default_rng(11).uniform(8.0, 120.0, 20)), crossing)
+    s = run_graph('collaborative', 130.0, feed=1.8, seed=5, during=inj)
     print(f'\nraw crossing: {s}\nrecovered: {inj.recovered_within(5.0)}')
     assert len(inj.done) == 20
     assert s['min_separation_m'] >= 0.10 and s['emergency_stops'] == 0, s['estop_reason']
@@ -220,22 +224,17 @@ def test_a_nan_joint_state_is_a_protective_stop_the_job_recovers_from():
 
     from scara_collab.nodes import conversions as conv
 
-    inj = _Injector([20.0])
-
-    def during(g, nodes, now):
-        inj.sorted.append((now, inj.counts(nodes)))
-        if not inj.times or now < inj.times[0]:
-            return
-        inj.times.pop(0)
+    def nan_state(g, nodes, now):
         bridge = nodes['pybullet_bridge']
         probe = g.probe('nan_state')
         pub = probe.create_publisher(JointState, '/joint_states', 10)
         names, pos, vel, eff = bridge.sim.joint_state()
         pos = [math.nan] + list(pos[1:])
         pub.publish(conv.joint_state(bridge.sim.time, names, pos, vel, eff))
-        inj.done.append((now, inj.counts(nodes)))
+        return True
 
-    s = run_graph('collaborative', 60.0, feed=1.8, seed=5, during=during)
+    inj = _Injector([20.0], nan_state)
+    s = run_graph('collaborative', 60.0, feed=1.8, seed=5, during=inj)
     print(f'\nnan state: {s}')
     assert s['protective_stops'] >= 1 and s['emergency_stops'] == 0
     assert not s['estop'], s['estop_reason']  # no stop left standing

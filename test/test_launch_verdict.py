@@ -6,26 +6,10 @@ A real launch (separate processes, the session's ROS_DOMAIN_ID: conftest.py), as
 import json
 import time
 
-import pytest
-
-from test_launcher import Launch
+from test_launcher import launch  # noqa: F401 (the fixture: start(*args) launches)
 
 
-@pytest.fixture
-def launch():
-    """Yield ``start(*args)``, which launches; launchers still running are killed after."""
-    made = []
-
-    def start(*args):
-        made.append(Launch(*args))
-        return made[-1]
-
-    yield start
-    for la in made:
-        la.kill()
-
-
-def test_a_second_clock_publisher_mid_run_fails_the_run(launch, tmp_path):
+def test_a_second_clock_publisher_mid_run_fails_the_run(launch, tmp_path):  # noqa: F811
     """A /clock publisher that appears mid-run is named; the run ends at its duration, exit 6.
 
     The reason is the report's first line and ``exit_reason`` in ``summary.json``.

@@ -241,8 +241,13 @@ def test_the_simulator_starts_and_ends_each_move_when_the_model_says(cell, poses
     npt.assert_allclose(sim.arm_state(LEFT)[0], b.q[-1], atol=2e-3)
 
 
-def test_the_simulator_refuses_at_the_door_and_drops_at_the_start(cell, poses):
-    """The simulator drops a follower move that a leader move made unsafe; refuses it anew."""
+def test_the_simulator_drops_a_move_made_unsafe_reports_it_once_and_refuses_it_anew(
+        cell, poses):
+    """A follower move waiting for its start, then a leader move into the same place.
+
+    The leader's starts first (the follower yields): the follower's is dropped as it would
+    take over, reported once (for the bridge's ``refused`` status), and refused if sent again.
+    """
     sim = _sim(cell)
     sim.reset_arm(LEFT, poses['left_out'])
     sim.reset_arm(RIGHT, poses['right_out'])
@@ -252,23 +257,10 @@ def test_the_simulator_refuses_at_the_door_and_drops_at_the_start(cell, poses):
     sim.execute(LEFT, 0.2 + lead.t, lead.q, lead.qd, lead.qdd, 'L', 0.2)  # leader first
     sim.step(int(0.6 / DT))
     assert not sim.active(RIGHT)
+    assert [(r, m) for r, m, _ in sim.pop_dropped()] == [(RIGHT, 'R')]
+    assert sim.pop_dropped() == []
     with pytest.raises(Refused, match='within'):
         sim.execute(RIGHT, sim.time + follow.t, follow.q, follow.qd, follow.qdd, 'R2', 0.0)
-
-
-def test_a_waiting_move_dropped_at_its_start_is_reported_once(cell, poses):
-    """A move dropped at its start is reported once (for the bridge's ``refused`` status)."""
-    sim = _sim(cell)
-    sim.reset_arm(LEFT, poses['left_out'])
-    sim.reset_arm(RIGHT, poses['right_out'])
-    lead = joint_move(cell.leader, poses['left_out'], poses['left_in'])
-    follow = joint_move(cell.follower, poses['right_out'], poses['right_in'])
-    sim.execute(RIGHT, 0.5 + follow.t, follow.q, follow.qd, follow.qdd, 'R', 0.5)
-    sim.execute(LEFT, 0.2 + lead.t, lead.q, lead.qd, lead.qdd, 'L', 0.2)
-    sim.step(int(0.6 / DT))
-    dropped = sim.pop_dropped()
-    assert [(r, m) for r, m, _ in dropped] == [(RIGHT, 'R')]
-    assert sim.pop_dropped() == []
 
 
 # --- 200 raw commands through the other arm's workspace ----------------------------------------

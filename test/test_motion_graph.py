@@ -23,15 +23,15 @@ LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
 
 
-@pytest.fixture
-def cell():
-    """Yield the motion graph on sim time, its topics collected.
+def motion_graph(**bridge):
+    """Return the motion graph on sim time, its topics collected.
 
-    The bridge, both planners, the replication manager and the monitor, once both planners
-    have a state.
+    The bridge (``bridge``: more of its parameters), both planners, the replication manager
+    and the monitor, once both planners have a state.
     """
     g = Graph()
-    g.bridge = g.add_node_of('pybullet_bridge', real_time_factor=0.0, feed_interval=0.0, **SIM)
+    g.bridge = g.add_node_of('pybullet_bridge', real_time_factor=0.0, feed_interval=0.0,
+                             **bridge, **SIM)
     names = ('left_planner', 'right_planner', 'replication_manager', 'collision_monitor')
     g.left, g.right, g.replicator, g.monitor = (g.add_node_of(n, **SIM) for n in names)
     g.states = g.collect(JointState, '/joint_states')
@@ -43,6 +43,13 @@ def cell():
     g.estop = g.collect(Bool, '/emergency_stop', LATCHED)
     assert g.spin_until(lambda: g.left.q is not None and g.right.q is not None
                         and g.left._now() > 0.1 and g.right._now() > 0.1)
+    return g
+
+
+@pytest.fixture
+def cell():
+    """Yield the motion graph (:func:`motion_graph`)."""
+    g = motion_graph()
     yield g
     g.close()
 
@@ -201,6 +208,16 @@ def _raw_crossing(g):
     return q0, joint_move(right, q0, ik(right, [1.8, -0.2, 0.4], q_current=q0).unwrap())
 
 
+def _send_raw(g, move, move_id):
+    """Publish ``move`` raw on the right arm's trajectory topic; return its statuses (a list)."""
+    right = g.bridge.cell.follower
+    executions = g.collect(DiagnosticStatus, f'/{right.name}/execution_status')
+    g.raw = g.probe.create_publisher(JointTrajectory, f'/{right.name}/joint_trajectory', 10)
+    g.raw.publish(conv.trajectory_msg(right.joint_names, move.t, move.q, move.qd, move.qdd,
+                                      frame_id=move_id))
+    return executions
+
+
 def _execution(g, executions, move):
     assert g.spin_until(lambda: any(proto.ExecutionStatus.from_msg(m).move == move
                                     for m in executions))
@@ -213,13 +230,8 @@ def test_a_raw_crossing_trajectory_is_refused_at_the_door(cell):
     The bridge judges it against the left arm's committed motion and refuses it with the
     reason: the right arm does not move, no stop is needed, the margin is never approached.
     """
-    right = cell.bridge.cell.follower
     q0, through = _raw_crossing(cell)
-    executions = cell.collect(DiagnosticStatus, '/scara_right/execution_status')
-    raw = cell.probe.create_publisher(JointTrajectory, '/scara_right/joint_trajectory', 10)
-    raw.publish(conv.trajectory_msg(right.joint_names, through.t, through.q, through.qd,
-                                    through.qdd, frame_id='raw/1'))
-    st = _execution(cell, executions, 'raw/1')
+    st = _execution(cell, _send_raw(cell, through, 'raw/1'), 'raw/1')
     assert st.state == 'refused' and 'within 0.11 m of scara_left' in st.reason, st.reason
     run_until(cell, cell.bridge.sim.time + 1.0)
     np.testing.assert_allclose(cell.bridge.sim.arm_state('scara_right')[0], q0, atol=2e-3)
@@ -230,18 +242,7 @@ def test_a_raw_crossing_trajectory_is_refused_at_the_door(cell):
 @pytest.fixture
 def open_door():
     """Yield the motion graph with the bridge's admission check off: the monitor alone."""
-    g = Graph()
-    g.bridge = g.add_node_of('pybullet_bridge', real_time_factor=0.0, feed_interval=0.0,
-                             admission_allowance=-1.0, **SIM)
-    names = ('left_planner', 'right_planner', 'replication_manager', 'collision_monitor')
-    g.left, g.right, g.replicator, g.monitor = (g.add_node_of(n, **SIM) for n in names)
-    g.status = {n: g.collect(DiagnosticStatus, f'/{n}/planner_status')
-                for n in ('scara_left', 'scara_right')}
-    g.trajs = {n: g.collect(JointTrajectory, f'/{n}/joint_trajectory')
-               for n in ('scara_left', 'scara_right')}
-    g.distance = g.collect(Float64, '/collision_monitor/min_distance')
-    assert g.spin_until(lambda: g.left.q is not None and g.right.q is not None
-                        and g.left._now() > 0.1 and g.right._now() > 0.1)
+    g = motion_graph(admission_allowance=-1.0)
     yield g
     g.close()
 
@@ -260,10 +261,8 @@ def test_the_monitor_stops_a_crossing_the_door_let_through_and_resumes(open_door
     margin = g.bridge.cell.safety_margin
     right = g.bridge.cell.follower
     q0, through = _raw_crossing(g)
-    executions = g.collect(DiagnosticStatus, '/scara_right/execution_status')
-    raw = g.probe.create_publisher(JointTrajectory, '/scara_right/joint_trajectory', 10)
-    raw.publish(conv.trajectory_msg(right.joint_names, through.t, through.q, through.qd,
-                                    through.qdd, frame_id='raw/1'))
+    executions = _send_raw(g, through, 'raw/1')
+    raw = g.raw
     assert g.spin_until(lambda: g.monitor.stopped, timeout=60)
     assert g.monitor.kind == 'protective' and g.monitor.reason.startswith('predicted')
     assert g.spin_until(lambda: not g.monitor.stopped, timeout=60)  # released by itself

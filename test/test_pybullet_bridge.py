@@ -22,14 +22,19 @@ LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
                      reliability=ReliabilityPolicy.RELIABLE)
 
 
+def bridge_graph(**overrides) -> Graph:
+    """Return a graph with an unthrottled bridge (``overrides``: more of its parameters)."""
+    g = Graph()
+    g.bridge = g.add(PyBulletBridge(context=g.context, cli_args=params_args(
+        'simulation', 'controllers',
+        overrides={'real_time_factor': 0.0, 'feed_interval': 0.0, **overrides})))
+    return g
+
+
 @pytest.fixture
 def graph():
     """Yield a graph with an unthrottled bridge, its states and statuses collected."""
-    g = Graph()
-    g.bridge = g.add(PyBulletBridge(
-        context=g.context,
-        cli_args=params_args('simulation', 'controllers',
-                             overrides={'real_time_factor': 0.0, 'feed_interval': 0.0})))
+    g = bridge_graph()
     g.states = g.collect(JointState, '/joint_states')
     g.status = {a.name: g.collect(DiagnosticStatus, f'/{a.name}/execution_status')
                 for a in g.bridge.cell.arms}
@@ -177,11 +182,7 @@ def test_lockstep_guard_silent_holds_both_arms_and_refuses_moves_until_it_answer
     bridge's sim time) while ``alive``; the left arm is in the middle of a long move when it
     falls silent.
     """
-    g = Graph()
-    g.bridge = g.add(PyBulletBridge(context=g.context, cli_args=params_args(
-        'simulation', 'controllers', overrides={
-            'real_time_factor': 0.0, 'feed_interval': 0.0, 'lockstep_timeout': 0.5,
-            'lockstep_guards': "['/guard']"})))
+    g = bridge_graph(lockstep_timeout=0.5, lockstep_guards="['/guard']")
     try:
         g.states = g.collect(JointState, '/joint_states')
         status = {a.name: g.collect(DiagnosticStatus, f'/{a.name}/execution_status')
@@ -308,11 +309,7 @@ def test_a_participant_that_hears_the_clock_late_still_hears_the_time_it_is_wait
     discovery on a busy machine) would wait for a clock that never comes and be dropped as
     silent: the bridge publishes the same time again every 0.25 s wall while it waits.
     """
-    g = Graph()
-    g.bridge = g.add(PyBulletBridge(context=g.context, cli_args=params_args(
-        'simulation', 'controllers', overrides={
-            'real_time_factor': 0.0, 'feed_interval': 0.0, 'lockstep_timeout': 30.0,
-            'lockstep_expect': "['/late']"})))
+    g = bridge_graph(lockstep_timeout=30.0, lockstep_expect="['/late']")
     try:
         assert g.spin_until(lambda: g.bridge._parked, timeout=10)  # waits for /late
         waited_at = sim_time(g)
