@@ -162,22 +162,12 @@ def test_the_leader_does_not_wait_for_a_later_follower_move_judged_at_its_start(
     assert cm[RIGHT].running is None and cm[RIGHT].waiting is None
 
 
-def test_a_running_follower_move_binds_the_leader_a_waiting_one_yields(cell, poses):
-    """The leader respects a follower move once it runs, not one still waiting to start.
-
-    A waiting follower move yields to every leader move, even one starting later: it is
-    dropped when it would take over into the leader's committed motion.
-    """
+def test_a_follower_move_starting_first_binds_the_leader(cell, poses):
+    """A follower move that starts before the leader's binds the leader (it started first)."""
     cm = _cell_motion(cell, poses)
     cm.take(RIGHT, _move('R', 0.2, poses['right_out'], poses['right_in'], 2.0), 0.0, _q(cm))
-    cm.take(LEFT, _move('L', 0.5, poses['left_out'], poses['left_in'], 2.0), 0.0, _q(cm))
-    dropped = cm.advance(0.2, _q(cm))
-    assert [(r, e, m.id) for r, e, m, _ in dropped] == [(RIGHT, 'dropped', 'R')]
-    cm = _cell_motion(cell, poses)
-    cm.take(RIGHT, _move('R', 0.2, poses['right_out'], poses['right_in'], 2.0), 0.0, _q(cm))
-    cm.advance(0.2, _q(cm))  # it runs now
-    with pytest.raises(Refused, match='its running move R'):
-        cm.take(LEFT, _move('L', 0.5, poses['left_out'], poses['left_in'], 2.0), 0.3, _q(cm))
+    with pytest.raises(Refused, match='its next move'):
+        cm.take(LEFT, _move('L', 0.5, poses['left_out'], poses['left_in'], 2.0), 0.0, _q(cm))
 
 
 def test_arms_stopped_too_close_may_only_be_parted(cell, poses):

@@ -15,11 +15,11 @@ ros2_control's joint trajectory controller keeps them. The rules, written here o
   (:meth:`ArmMotion.hold`, :meth:`ArmMotion.brake`).
 - **Safe against the other arm.** A trajectory is admitted only if, against what the other
   arm is committed to (its running move, a brake included, and its waiting one), the capsules
-  stay ``margin`` apart (:meth:`CellMotion.judge`). The priority rule of
-  :mod:`scara_collab.core.planning` applies: a follower move that has not started yields to
-  every leader move, so the leader does not wait for one; that follower move is judged again
-  when it takes over (:meth:`CellMotion.advance`): a move that would start later than the
-  moment its safety was judged for is judged again, never started blindly.
+  stay ``margin`` apart (:meth:`CellMotion.admit`). The priority rule of
+  :mod:`scara_collab.core.planning` applies: the leader does not wait for a follower move
+  that starts at or after its own start, because that follower move is checked again when it
+  takes over (:meth:`CellMotion.advance`): a move that would start later than the moment its
+  safety was judged for is judged again, never started blindly.
 
 :class:`CellMotion` is what the bridge's simulator executes from (the servo samples the moves
 it admits). Observers that only hear the trajectories and the bridge's statuses (the collision
@@ -257,10 +257,10 @@ class CellMotion:
         """Judge ``move`` of ``robot`` against every other arm's commitments from ``now``.
 
         ``robot`` runs what it runs until ``move`` starts, then ``move``. The leader's view of
-        a follower leaves out the follower's move waiting for its start (it yields: it is
-        judged again when it takes over), never its running one. Arms already within the
-        margin (stopped too close) may only be parted: the move must take ``robot`` away from
-        arms that stand still (:func:`scara_collab.core.safety.separating`).
+        a follower leaves out a follower move waiting to start at or after the leader's
+        start. Arms already within the margin (stopped too close) may only be parted: the
+        move must take ``robot`` away from arms that stand still
+        (:func:`scara_collab.core.safety.separating`).
 
         :param q: ``{robot: (3,)}`` the measured poses.
         """
@@ -270,7 +270,7 @@ class CellMotion:
         mine = splice(self.arms[robot].current(now, q.get(robot)), move.timeline.since(now))
         for other in self.others(robot):
             view = self.arms[other].motion(now, q.get(other),
-                                           before=now if robot == self.leader else None)
+                                           before=move.start if robot == self.leader else None)
             d_now = float(collision.arm_distance(me, mine.at(now), self.models[other],
                                                  view.at(now)))
             if d_now < self.margin:
