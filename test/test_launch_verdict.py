@@ -42,3 +42,23 @@ def test_a_second_clock_publisher_mid_run_fails_the_run(launch, tmp_path):  # no
     assert summary['problems'] == [{'code': 6, 'text': summary['exit_reason']}]
     report = (out / 'report.txt').read_text().splitlines()
     assert report[0].startswith('scara_collab run: mode idle, FAILED, exit 6: ')
+
+
+def test_two_launchers_at_once_on_one_domain_do_not_both_pass(launch, tmp_path):  # noqa: F811
+    """Two launchers started at the same moment on one domain both pass the start-up check.
+
+    Their graphs merge; each names the other's graph (and clock) while it runs, so they do not
+    both exit 0, and a failing one says why in its summary.
+    """
+    runs = [launch('--mode', 'idle', '--duration', '6', '--rtf', '1', '--output',
+                   str(tmp_path / f'twin_{k}'), '--no-plots', '--one-process')
+            for k in range(2)]
+    codes = [la.wait() for la in runs]
+    assert codes != [0, 0], '\n'.join(la.output for la in runs)
+    for k, code in enumerate(codes):
+        summary_file = tmp_path / f'twin_{k}' / 'summary.json'
+        if code != 0 and summary_file.is_file():
+            summary = json.loads(summary_file.read_text())
+            named = ' '.join(p['text'] for p in summary.get('problems', []))
+            assert summary.get('second_graphs') or summary.get('foreign_clocks') \
+                or 'second' in named or 'graph' in named, summary.get('exit_reason')

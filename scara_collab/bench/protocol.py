@@ -48,7 +48,8 @@ def row(summary: Dict[str, object]) -> Dict[str, object]:
                                        'mirror_error_max_m',
                                        'mirror_in_step_moves', 'mirror_not_in_step',
                                        'real_time_factor', 'sim_seconds')},
-        **{k: len(summary.get(k) or []) for k in ('emergency_stops', 'protective_stops')},
+        **{k: len(summary[k]) if isinstance(summary.get(k), list) else 0
+           for k in ('emergency_stops', 'protective_stops')},
         'give_ups': job.get('give_ups'), 'retries': job.get('retries'),
         'last_give_up': job.get('last_give_up'),
     }
