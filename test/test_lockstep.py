@@ -7,6 +7,7 @@ import threading
 import time
 
 import pytest
+import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -111,7 +112,7 @@ def test_a_leaving_participant_is_no_longer_waited_for():
         assert g.spin_until(lambda: '/busy' in g.bridge.gate.reached, 20.0)
         busy.stop.set()
         busy.thread.join(5.0)
-        lockstep.leave(busy.node)
+        busy.part.leave()
         assert g.spin_until(lambda: '/busy' not in g.bridge.gate.reached, 10.0)
         t = g.bridge.sim.time
         # the participant no longer spins; with a 30 s timeout only its leaving frees the clock
@@ -436,10 +437,13 @@ def test_the_graph_names_exactly_the_nodes_that_answer():
     g = Graph()
     try:
         for spec in graph.job_nodes():
-            node = g.add(spec.build(context=g.context,
-                                    cli_args=params_args(*spec.configs)))
-            joined = isinstance(getattr(node, 'lockstep', None), lockstep.LockstepParticipant)
-            assert joined == spec.lockstep, spec.name
+            g.add(spec.build(context=g.context, cli_args=params_args(*spec.configs)))
+        expected = sorted(graph.lockstep_expect(graph.job_nodes()))
+
+        def answering():
+            return sorted(i.node_name for i in g.probe.get_publishers_info_by_topic(
+                graph.resolve(lockstep.TOPIC)))
+        assert g.spin_until(lambda: answering() == expected, 10.0), answering()
     finally:
         g.close()
 
@@ -471,4 +475,30 @@ def test_an_awaited_reply_holds_sim_time_until_it_comes_or_its_deadline():
         t = g.bridge.sim.time
         assert g.spin_until(lambda: g.bridge.sim.time > t + 0.05, 5.0)
     finally:
+        g.close()
+
+
+def test_a_participant_leaves_before_its_context_shuts_down():
+    """Closing a context (``shutdown.close``, as the runner does) sends its participants' leave.
+
+    rclpy's own ``Context.on_shutdown`` runs after rcl's shutdown, when nothing can be
+    published; the pre-shutdown hook runs before the nodes are destroyed.
+    """
+    from scara_collab.nodes import shutdown
+    g = Graph()
+    heard = g.collect(Header, lockstep.TOPIC, lockstep.QOS)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = Node('leaver', context=ctx, parameter_overrides=[Parameter('use_sim_time', value=True)])
+    try:
+        part = lockstep.join(node)
+        assert part is not None and not hasattr(node, 'lockstep')
+        assert g.spin_until(lambda: part._pub.get_subscription_count() == 1
+                            and g.probe.count_publishers('/sim/lockstep') == 1, 10.0)
+        shutdown.close(ctx, [node])
+        assert part.left and not ctx.ok()
+        assert g.spin_until(lambda: any(h.frame_id == '/leaver' for h in heard), 10.0)
+        assert heard[-1].stamp.sec == lockstep.END_OF_TIME.sec
+    finally:
+        rclpy.try_shutdown(context=ctx)
         g.close()

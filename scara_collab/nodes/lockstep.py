@@ -6,11 +6,13 @@ separate processes cannot, unless the clock waits for them. Without it, a node t
 still while the bridge steps on: its plans start late and moving items are missed, more so the
 faster the simulation runs or the busier the CPU.
 
-The protocol, on one topic ``/sim/lockstep`` (``std_msgs/Header``):
+The protocol, on one topic ``sim/lockstep`` (``std_msgs/Header``, relative: each cell's
+namespace has its own lockstep):
 
 * a *participant* answers every advance of its node's sim clock (a clock jump callback, run
-  when the node's time source takes a ``/clock`` message, so no second subscription) with a
-  Header whose ``frame_id`` is its node's full name and ``stamp`` the sim time it has
+  when the node's time source takes a clock message, so no second subscription) with a
+  Header whose ``frame_id`` is its node's full name (``/cell_1/left_planner`` in a cell's
+  namespace) and ``stamp`` the sim time it has
   reached; it answers only between callbacks, so while it computes it does not answer;
 * the bridge (:class:`LockstepGate`) never steps more than ``window`` sim seconds beyond the
   oldest answer of the participants it has heard. A busy node therefore holds sim time
@@ -20,7 +22,8 @@ The protocol, on one topic ``/sim/lockstep`` (``std_msgs/Header``):
   :meth:`LockstepParticipant.await_reply`), at most ``REPLY_WAIT`` wall seconds: sim time
   then waits for the reply too, and the next ``/clock`` finds it taken, however the
   processes were scheduled (README, *Repeatable runs*);
-* a participant that leaves says so (stamp = the end of time); one that keeps the bridge
+* a participant that leaves says so (stamp = the end of time), before its context shuts
+  down (:func:`scara_collab.nodes.shutdown.before_shutdown`); one that keeps the bridge
   waiting for ``timeout`` wall seconds is dropped with a warning, and joins again with its
   next answer. The simulation never hangs on a dead node. The wait is counted per
   participant, from when its answer began to hold sim time back (or its last answer, if
@@ -43,11 +46,12 @@ The protocol, on one topic ``/sim/lockstep`` (``std_msgs/Header``):
   its timeout. The other participants still answer (the launcher's liveness watch reads
   them); the bridge just does not wait for them.
 
-Nodes join with :func:`join` (parameter ``lockstep``, default true; only on sim time). The
-bridge's parameters ``lockstep_window`` (sim s, 0 = off), ``lockstep_timeout`` (wall s),
-``lockstep_timeouts`` (``['/node:seconds', ...]``, :func:`parse_timeouts`),
-``lockstep_guards`` (node names, default ``['/collision_monitor']``) and ``lockstep_expect``
-(node names) configure the gate.
+Nodes join with :func:`join` (parameter ``lockstep``, default true; only on sim time), which
+returns their :class:`LockstepParticipant`. The bridge's parameters ``lockstep_window`` (sim
+s, 0 = off), ``lockstep_timeout`` (wall s), ``lockstep_timeouts`` (``['node:seconds', ...]``,
+:func:`parse_timeouts`), ``lockstep_guards`` (node names, default ``['collision_monitor']``)
+and ``lockstep_expect`` (node names) configure the gate; a relative node name there is a node
+of the bridge's own namespace (:func:`full_name`).
 Messages are the standard ``std_msgs/Header``, so ``ros2 topic echo /sim/lockstep`` shows who
 is answering.
 """
@@ -61,7 +65,11 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Header
 
-TOPIC = '/sim/lockstep'
+from scara_collab import graph
+from scara_collab.nodes import shutdown
+from scara_collab.nodes.guarded import guarded
+
+TOPIC = 'sim/lockstep'  # relative: in the cell's namespace
 QOS = QoSProfile(depth=50)
 END_OF_TIME = Time(sec=2**31 - 1, nanosec=0)
 #: wall s a participant holds its answer for an awaited reply (a lost one: then it answers)
@@ -72,18 +80,25 @@ def _sec(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def full_name(name: str) -> str:
-    """Return a node name as the participants sign their answers: ``monitor`` -> ``/monitor``."""
-    name = name.strip()
-    return name if name.startswith('/') else '/' + name
+def full_name(name: str, namespace: str = '') -> str:
+    """Return a node name as the participants sign their answers (the node's full name).
+
+    A relative name is a node of ``namespace``; an absolute one stays as it is.
+
+    >>> full_name('monitor'), full_name('monitor', '/cell_1'), full_name('/monitor', '/cell_1')
+    ('/monitor', '/cell_1/monitor', '/monitor')
+    """
+    return graph.resolve(name.strip(), namespace)
 
 
-def parse_timeouts(entries: Iterable[str]) -> Dict[str, float]:
-    """Parse per-node timeouts: ``['/collision_monitor:2.0']`` -> ``{'/collision_monitor': 2.0}``.
+def parse_timeouts(entries: Iterable[str], namespace: str = '') -> Dict[str, float]:
+    """Parse per-node timeouts: ``['collision_monitor:2.0']`` -> ``{'/collision_monitor': 2.0}``.
 
     Empty entries are ignored (a string-array parameter cannot be empty).
 
-    :param entries: ``'<node>:<wall seconds>'`` strings; the node name with or without ``/``.
+    :param entries: ``'<node>:<wall seconds>'`` strings; a relative node name is one of
+        ``namespace`` (:func:`full_name`).
+    :param namespace: the namespace of relative node names (the bridge's).
     :raises ValueError: an entry without a name, or a timeout that is not a number > 0.
     """
     out: Dict[str, float] = {}
@@ -97,16 +112,20 @@ def parse_timeouts(entries: Iterable[str]) -> Dict[str, float]:
             seconds = float('nan')
         if not name.strip() or not seconds > 0:
             raise ValueError(f'lockstep timeout {entry!r}: expected <node>:<seconds > 0>, '
-                             "e.g. '/collision_monitor:2.0'")
-        out[full_name(name)] = seconds
+                             "e.g. 'collision_monitor:2.0'")
+        out[full_name(name, namespace)] = seconds
     return out
 
 
 class LockstepParticipant:
-    """Answer ``/clock`` on ``/sim/lockstep`` for ``node``; see the module docstring."""
+    """Answer the clock on ``sim/lockstep`` for ``node``; see the module docstring.
+
+    It leaves the lockstep before ``node``'s context shuts down
+    (:func:`scara_collab.nodes.shutdown.before_shutdown`), or when :meth:`leave` is called.
+    """
 
     def __init__(self, node: Node):
-        """Answer every forward step of ``node``'s sim clock on ``/sim/lockstep``."""
+        """Answer every forward step of ``node``'s sim clock on ``sim/lockstep``."""
         self.node = node
         self.name = node.get_fully_qualified_name()
         self._pub = node.create_publisher(Header, TOPIC, QOS)
@@ -119,7 +138,9 @@ class LockstepParticipant:
         self.awaited: Dict[object, float] = {}  # reply key -> wall deadline
         self.owed = False  # an answer held back for a reply
         self.late = 0  # replies given up on (their wall deadline passed)
+        self.left = False
         self._timer = None
+        shutdown.before_shutdown(node.context, self.leave)
 
     def _on_advance(self, _jump) -> None:
         if self.awaited:
@@ -136,7 +157,6 @@ class LockstepParticipant:
         """Hold this node's answers until :meth:`reply` ``(key)``, at most ``seconds`` (wall)."""
         self.awaited[key] = time.monotonic() + seconds
         if self._timer is None:  # the deadline is wall time: sim time waits for this node
-            from scara_collab.nodes.runner import guarded  # runner imports this module
             self._timer = self.node.create_timer(
                 0.05, guarded(self.node, self._expire),
                 clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -160,10 +180,13 @@ class LockstepParticipant:
                 self._answer()
 
     def leave(self) -> None:
-        """Tell the bridge not to wait for this node any more (best effort)."""
+        """Tell the bridge not to wait for this node any more (once; best effort)."""
+        if self.left:
+            return
+        self.left = True
         try:
             self._pub.publish(Header(stamp=END_OF_TIME, frame_id=self.name))
-        except Exception:  # noqa: B902 - the context may already be shut down
+        except Exception:  # noqa: B902 - the node or its context may already be gone
             pass
 
 
@@ -171,6 +194,8 @@ def join(node: Node) -> Optional[LockstepParticipant]:
     """Make ``node`` a lockstep participant unless its parameter ``lockstep`` is false.
 
     Declares ``lockstep`` (bool, default true). Nodes on wall time do not take part.
+
+    :return: the participant (the node keeps it if it awaits replies), or None.
     """
     if not node.has_parameter('lockstep'):
         node.declare_parameter('lockstep', True)
@@ -178,33 +203,25 @@ def join(node: Node) -> Optional[LockstepParticipant]:
         return None
     if not node.get_parameter('use_sim_time').value:
         return None
-    part = LockstepParticipant(node)
-    node.lockstep = part
-    return part
-
-
-def leave(node: Node) -> None:
-    """Announce that ``node`` leaves the lockstep, if it takes part."""
-    part = getattr(node, 'lockstep', None)
-    if isinstance(part, LockstepParticipant):
-        part.leave()
+    return LockstepParticipant(node)
 
 
 class LockstepGate:
     """The bridge's side: how far physics may step, given the participants' answers.
 
-    :param node: the bridge node (subscribes ``/sim/lockstep``).
+    :param node: the bridge node (subscribes ``sim/lockstep``; its namespace is the one of
+        the relative names in ``timeouts``, ``guards`` and ``expect``).
     :param window: sim seconds the bridge may run ahead of the oldest answer; 0 = no gate.
     :param timeout: wall seconds a participant may keep the bridge waiting before it is
         dropped (it joins again when it answers).
     :param on_answer: called after each answer (the bridge re-arms its stepping timer).
     :param timeouts: per-node ``timeout`` (full node names, see :func:`parse_timeouts`).
-    :param guards: full names of the participants the arms must not move without.
+    :param guards: names of the participants the arms must not move without.
     :param on_guard: ``on_guard(name, present, why)``: a guard is about to be dropped or has
         left (``present`` false: hold the arms), or answers again (true). Called before the
         gate lets sim time go on without the guard.
     :param wall_clock: wall time source, s (tests pass a fake one).
-    :param expect: full names of participants waited for from the start, as if they had
+    :param expect: names of participants waited for from the start, as if they had
         answered sim time 0 (dropped after their timeout like any other).
 
     With ``window`` 0 the gate waits for nobody (:meth:`limit` is ``inf``) but still watches
@@ -217,12 +234,13 @@ class LockstepGate:
                  on_guard: Optional[Callable[[str, bool, str], None]] = None,
                  wall_clock: Callable[[], float] = time.monotonic,
                  expect: Iterable[str] = ()):
-        """Store the settings; with a window or guards, subscribe ``/sim/lockstep``."""
+        """Store the settings; with a window or guards, subscribe ``sim/lockstep``."""
         self.node = node
         self.window = float(window)
         self.timeout = float(timeout)
         self.timeouts = dict(timeouts or {})
-        self.guards = frozenset(full_name(g) for g in guards)
+        ns = node.get_namespace()
+        self.guards = frozenset(full_name(g, ns) for g in guards)
         self.on_answer = on_answer
         self.on_guard = on_guard
         self._wall = wall_clock
@@ -233,17 +251,17 @@ class LockstepGate:
         self.absent: Dict[str, str] = {}        # guard -> why it is missing (arms held)
         self.sim_now = 0.0                      # the sim time of the last look (limit)
         if self.window > 0:
-            self.reached.update({full_name(n): 0.0 for n in expect})
+            self.reached.update({full_name(n, ns): 0.0 for n in expect})
             if self.reached:
                 node.get_logger().info(f'lockstep: waiting from the start for '
                                        f'{", ".join(sorted(self.reached))}')
         elif self.guards:  # real time: wait for nobody, but never move the arms unwatched
-            self.reached.update({n: 0.0 for n in map(full_name, expect) if n in self.guards})
+            self.reached.update({n: 0.0 for n in (full_name(e, ns) for e in expect)
+                                 if n in self.guards})
             node.get_logger().info(
                 f'lockstep off: waiting for nobody; watching {", ".join(sorted(self.guards))} '
                 '(the arms hold when one is more than its timeout, sim s, behind)')
         if self.window > 0 or self.guards:
-            from scara_collab.nodes.runner import guarded  # runner imports this module
             node.create_subscription(Header, TOPIC, guarded(node, self.receive), QOS)
 
     @property
@@ -256,7 +274,7 @@ class LockstepGate:
         return self.timeouts.get(name, self.timeout)
 
     def receive(self, msg: Header) -> None:
-        """Take one answer from ``/sim/lockstep`` (the subscription's callback)."""
+        """Take one answer from ``sim/lockstep`` (the subscription's callback)."""
         name, t = msg.frame_id, _sec(msg.stamp)
         if not self.enabled:
             self._watch_answer(name, msg)

@@ -6,17 +6,16 @@ dispatches callbacks from C++ and costs about a third of the CPU per message of 
 hears ``/clock`` and ``/joint_states`` at 50 Hz sim time times the real-time factor.
 ``SCARA_COLLAB_EXECUTOR=single`` selects the ``SingleThreadedExecutor`` instead.
 """
-import functools
 import os
 import signal
-import traceback
 from typing import Callable, List, Optional, Sequence
 
 import rclpy
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
-from scara_collab.nodes import lockstep
+from scara_collab.nodes import shutdown
+from scara_collab.nodes.guarded import guarded  # noqa: F401 - the nodes' import of it
 
 
 EXECUTORS = ('events', 'single')
@@ -30,42 +29,6 @@ def localhost_by_default() -> None:
     launcher), so a cell started on a shared network never talks to another one by accident.
     """
     os.environ.setdefault(DISCOVERY_ENV, 'LOCALHOST')
-
-
-def guarded(node: Node, callback: Callable, service: bool = False) -> Callable:
-    """Wrap a callback so that no exception escapes it: the node logs and lives on.
-
-    A message the protocol or the conversions refuse (a ``ValueError``: malformed,
-    non-finite, unknown names) is logged as a throttled warning with its reason; anything else
-    is a bug, logged as an error with its traceback (throttled). A service callback answers
-    ``success = False`` with the reason instead of leaving its client without a response.
-
-    :param node: the node whose logger reports.
-    :param callback: the subscription, timer or service callback.
-    :param service: ``callback(request, response)`` is a service callback.
-    """
-    name = getattr(callback, '__name__', 'callback')
-
-    @functools.wraps(callback)
-    def run(*args):
-        try:
-            return callback(*args)
-        except ValueError as exc:
-            node.get_logger().warning(f'{name}: refused: {exc}', throttle_duration_sec=5.0)
-            reason = f'refused: {exc}'
-        except Exception as exc:  # noqa: B902 - the last-resort guard keeps the node alive
-            node.get_logger().error(f'{name}: {type(exc).__name__}: {exc}\n'
-                                    f'{traceback.format_exc()}', throttle_duration_sec=5.0)
-            reason = f'internal error: {type(exc).__name__}: {exc}'
-        if service and len(args) == 2:
-            res = args[1]
-            if hasattr(res, 'success'):
-                res.success = False
-            if hasattr(res, 'message'):
-                res.message = reason
-            return res
-        return None
-    return run
 
 
 def make_executor(kind: Optional[str] = None, context=None) -> Executor:
@@ -142,25 +105,19 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Optional[list] = No
                 break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    finally:
-        for node in reversed(nodes):
-            lockstep.leave(node)
-            node.destroy_node()
-        rclpy.try_shutdown()
+    finally:  # the nodes' goodbyes (a lockstep leave) first: shutdown.before_shutdown
+        shutdown.close(rclpy.get_default_context(), reversed(nodes))
 
 
 def close_graph(executor, nodes, context) -> None:
-    """Tear down nodes built in-process: stop the executor, destroy the nodes, shut down.
+    """Tear down nodes built in-process: stop the executor, then :func:`shutdown.close`.
 
     :param executor: the executor the nodes were added to.
     :param nodes: the nodes, in any order.
     :param context: the ``rclpy.Context`` they were created in.
     """
     executor.shutdown()
-    for node in nodes:
-        lockstep.leave(node)
-        node.destroy_node()
-    rclpy.try_shutdown(context=context)
+    shutdown.close(context, nodes)
 
 
 class InProcess:
