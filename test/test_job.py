@@ -13,13 +13,17 @@ from scara_collab.core.sorting import drop_point, SeenItem
 HOME = np.array([0.0, 1.5708, 0.0])
 
 
-def make_job(cell, mode='collaborative', **overrides):
-    """Return a SortingJob on ``cell`` with the automation config (``overrides`` on top)."""
+def make_job(cell, mode='collaborative', plan=None, **overrides):
+    """Return a SortingJob on ``cell`` with the automation config (``overrides`` on top).
+
+    :param plan: the job's plan function (default: the planners' line-or-joint planning).
+    """
     cfg = dict(load_config('automation'), **overrides)
     settings = JobSettings.from_config(cell, cfg, mode)
 
-    def plan(robot, q0, target):
+    def planned(robot, q0, target):
         return plan_path(cell.arm(robot), q0, target, mode='line_or_joint')
+    plan = plan or planned
 
     logs = []
     job = SortingJob(cell, settings, plan, lambda level, text: logs.append((level, text)))
@@ -85,7 +89,7 @@ def test_a_lost_planner_answer_is_asked_again_with_the_same_request(cell):
     """A planner answer that never comes is asked for again under the same request id."""
     job = make_job(cell)
     pick = first_pick(cell, job)
-    s = job.s
+    s = job.settings
     assert not moves(job.tick(s.answer_timeout * 0.5))  # not yet
     again = moves(job.tick(s.answer_timeout + 0.01))
     assert [m.request for m in again] == [pick.request]  # same id: the planner is idempotent
@@ -118,18 +122,18 @@ def test_every_waiting_phase_has_a_deadline(cell):
     job = make_job(cell)
     pick = first_pick(cell, job)
     job.on_planner(pick.robot, pick.request, 'planned', pick.start, pick.start + 1.0)
-    job.tick(pick.start + 1.0 + job.s.arrive_timeout * 0.5)
+    job.tick(pick.start + 1.0 + job.settings.arrive_timeout * 0.5)
     assert job.give_ups == 0
-    job.tick(pick.start + 1.0 + job.s.arrive_timeout + 0.01)
+    job.tick(pick.start + 1.0 + job.settings.arrive_timeout + 0.01)
     assert job.give_ups == 1 and 'did not arrive' in job.last_give_up
 
     # queued / waiting in the planner for longer than move_timeout
     job = make_job(cell)
     pick = first_pick(cell, job)
     job.on_planner(pick.robot, pick.request, 'waiting', None, None, 'blocked')
-    job.tick(job.s.move_timeout - 0.1)
+    job.tick(job.settings.move_timeout - 0.1)
     assert job.give_ups == 0
-    job.tick(job.s.move_timeout + 0.1)
+    job.tick(job.settings.move_timeout + 0.1)
     assert job.give_ups == 1 and 'no plan' in job.last_give_up
 
 
@@ -139,7 +143,7 @@ def test_lost_gripper_answers_are_asked_again_then_fail(cell):
     out = grips(job.tick(t))
     assert len(out) == 1 and out[0].grasp
     first = out[0].token
-    out = grips(job.tick(t + job.s.grip_timeout + 0.01))  # no answer: ask again, new token
+    out = grips(job.tick(t + job.settings.grip_timeout + 0.01))  # no answer: ask again, new token
     assert len(out) == 1 and out[0].token != first and out[0].grasp
     job.on_grip(out[0].token, True, 'already holds item 1')  # idempotent server: success
     nxt = moves(job.tick(t + 0.5))
@@ -150,8 +154,8 @@ def test_lost_gripper_answers_are_asked_again_then_fail(cell):
     # no answer at all: bounded retries, then the grasp failed and the arm is free again
     job, pick, t = at_the_item(cell)
     job.tick(t)
-    for k in range(job.s.grip_retries + 1):
-        t += job.s.grip_timeout + 0.01
+    for k in range(job.settings.grip_retries + 1):
+        t += job.settings.grip_timeout + 0.01
         job.tick(t)
     assert job.phases()[pick.robot] == 'idle' and job.lanes[0].failures == {1: 1}
 
@@ -166,21 +170,21 @@ def test_a_slow_gripper_answer_counts_and_the_timeout_grows_with_what_is_measure
     from scara_collab.core.lanes import GRASP_LEAD
     job, pick, t = at_the_item(cell)
     first = grips(job.tick(t))[0].token
-    slow = job.s.grip_timeout + 0.1
-    again = grips(job.tick(t + job.s.grip_timeout + 0.02))  # asked again meanwhile
+    slow = job.settings.grip_timeout + 0.1
+    again = grips(job.tick(t + job.settings.grip_timeout + 0.02))  # asked again meanwhile
     assert again and again[0].token != first
     job.tick(t + slow)
     job.on_grip(first, True, 'grasped (slow)')  # the first call's answer, late
     nxt = moves(job.tick(t + slow + 0.02))
     assert nxt and nxt[0].purpose == 'to_bin'
-    assert job.grip_lag.worst == pytest.approx(slow)
+    assert job.protocol.grip_lag.worst == pytest.approx(slow)
     # a job that measured it meets the item where it will be when the grasp takes hold
     # (that far downstream), and waits grip_timeout plus it before asking again
     job2 = make_job(cell)
-    job2.grip_lag.add(slow)
+    job2.protocol.grip_lag.add(slow)
     pick2 = first_pick(cell, job2)
     # (the meeting time moves a little too: a move to another point takes another time)
-    lead = job2.grasp_lead
+    lead = job2.protocol.grasp_lead
     assert lead == pytest.approx(min(slow, GRASP_LEAD))  # a typical answer time, bounded
     assert pick2.target[0] - pick.target[0] == pytest.approx(cell.belt.speed * lead, abs=0.015)
     t2 = pick2.start + 1.0
@@ -189,23 +193,23 @@ def test_a_slow_gripper_answer_counts_and_the_timeout_grows_with_what_is_measure
                                                            cell.belt.top_z + 0.05], t2)])
     arrive(cell, job2, pick2, t2)
     assert grips(job2.tick(t2))
-    assert not grips(job2.tick(t2 + job2.s.grip_timeout + 0.05))
-    assert grips(job2.tick(t2 + job2.s.grip_timeout + slow + 0.02))
+    assert not grips(job2.tick(t2 + job2.settings.grip_timeout + 0.05))
+    assert grips(job2.tick(t2 + job2.settings.grip_timeout + slow + 0.02))
 
 
 def test_a_slow_planner_answer_lengthens_the_wait_before_asking_again(cell):
     """The time a planner took to answer is added to ``answer_timeout`` for what follows."""
     job = make_job(cell)
     pick = first_pick(cell, job)
-    late = 0.4 * job.s.answer_timeout
+    late = 0.4 * job.settings.answer_timeout
     job.tick(late)
     job.on_planner(pick.robot, pick.request, 'planned', pick.start + late, pick.start + 1.0)
-    assert job.answer_lag.worst == pytest.approx(late)
+    assert job.protocol.answer_lag.worst == pytest.approx(late)
     job2 = make_job(cell)
-    job2.answer_lag.add(late)
+    job2.protocol.answer_lag.add(late)
     pick2 = first_pick(cell, job2)
-    assert not moves(job2.tick(job2.s.answer_timeout + 0.02))  # not yet: it measured late
-    assert moves(job2.tick(job2.s.answer_timeout + late + 0.02))[0].request == pick2.request
+    assert not moves(job2.tick(job2.settings.answer_timeout + 0.02))  # not yet: it measured late
+    assert moves(job2.tick(job2.settings.answer_timeout + late + 0.02))[0].request == pick2.request
 
 
 def test_a_grasped_event_confirms_a_grasp_whose_answer_was_lost(cell):
@@ -226,13 +230,13 @@ def test_a_grasped_item_is_lifted_only_when_it_would_sweep_the_belt(cell):
         z = cell.belt.top_z + cell.item_size / 2
         here = np.r_[pick.target[:2], z]
         # another item where the held item passes on its way to the bin (or well clear of it)
-        drop = drop_point(cell, pick.robot, cell.item_classes[0], job.s.drop_clearance)
+        drop = drop_point(cell, pick.robot, cell.item_classes[0], job.settings.drop_clearance)
         path = job.plan(pick.robot, ik(cell.leader, pick.target, q_current=job.q[pick.robot]).q,
                         drop)
         k = len(path.t) // 8  # early in the move, while the held item is still low
         seen = [SeenItem(1, cell.item_classes[0], here, t)]
         for n, (dx, dy) in enumerate(neighbours):
-            x = path.p[k, 0] - cell.belt.speed * (job.s.decision_lead + path.t[k]) + dx
+            x = path.p[k, 0] - cell.belt.speed * (job.settings.decision_lead + path.t[k]) + dx
             seen.append(SeenItem(10 + n, cell.item_classes[1],
                                  np.r_[x, path.p[k, 1] + dy, z], t))
         job.on_items(seen)
@@ -241,7 +245,7 @@ def test_a_grasped_item_is_lifted_only_when_it_would_sweep_the_belt(cell):
         nxt = moves(job.tick(t + 0.02))[0]
         assert nxt.purpose == expected, (neighbours, nxt.purpose)
         if expected == 'lift':
-            assert nxt.target[2] == pytest.approx(job.s.carry_z)
+            assert nxt.target[2] == pytest.approx(job.settings.carry_z)
 
 
 def test_an_arm_holding_an_item_retries_its_bin_instead_of_dropping_it(cell):
@@ -266,8 +270,9 @@ def test_mirrored_moves_are_one_request_for_both_arms(cell):
     assert pick.mirrored and pick.robot == lead
     assert job.claimed == {1: lead, 2: foll}
     # one hop more to both planners (the replication manager): asked a pair lead further ahead
-    assert pick.start >= job.s.decision_lead + job.s.pair_lead - 1e-9
-    assert first_pick(cell, make_job(cell)).start < job.s.decision_lead + job.s.pair_lead
+    assert pick.start >= job.settings.decision_lead + job.settings.pair_lead - 1e-9
+    assert first_pick(cell, make_job(cell)).start < \
+        job.settings.decision_lead + job.settings.pair_lead
     t = pick.start + 1.0
     arrive(cell, job, pick, t)  # only the leader arrived: the lane waits for the follower
     job.tick(t)
@@ -287,7 +292,7 @@ def test_mirrored_picks_keep_the_pair_apart(cell):
     job = make_job(cell, 'mirrored')
     job.on_items([item_on_belt(cell, 1, y=-0.06), item_on_belt(cell, 2, y=0.06)])
     pick = moves(job.tick(0.0))[0]
-    assert pick.target[1] == pytest.approx(-job.s.pair_offset)  # aimed off the centre line
+    assert pick.target[1] == pytest.approx(-job.settings.pair_offset)  # aimed off the centre line
 
 
 def test_estop_pauses_and_stop_is_idempotent(cell):
@@ -313,7 +318,7 @@ def test_an_arm_in_the_way_parks_and_a_deadlock_is_broken_by_the_follower(cell):
     job.on_planner(lead, pick.request, 'waiting', None, None, 'scara_right blocks it')
     job.tick(0.1)
     assert job.phases()[foll] == 'idle'  # not yet: unblock_after
-    out = moves(job.tick(0.1 + job.s.unblock_after + 0.01))
+    out = moves(job.tick(0.1 + job.settings.unblock_after + 0.01))
     assert job.phases()[foll] == 'to_park' and [m.robot for m in out] == [foll]
 
     # both wait for each other: the follower's lane gives way (it parks), the leader stays
@@ -325,7 +330,7 @@ def test_an_arm_in_the_way_parks_and_a_deadlock_is_broken_by_the_follower(cell):
     out = moves(job.tick(0.02))
     assert [m.robot for m in out] == [foll]
     job.on_planner(foll, out[0].request, 'waiting', None, None, 'the other arm blocks it')
-    job.tick(job.s.unblock_after + 0.1)
+    job.tick(job.settings.unblock_after + 0.1)
     assert job.phases() == {lead: 'to_item', foll: 'to_park'}
     assert 'scara_right gives way' in job.last_give_up
 
@@ -345,10 +350,10 @@ def test_two_arms_holding_items_and_blocking_each_other_untangle(cell):
         job.on_arm_state(robot, ik(cell.arm(robot), tool).unwrap())
     for k, lane in enumerate(job.lanes):
         lane.phase, lane.holding, lane.item = 'to_bin', True, item_on_belt(cell, k + 1)
-        lane.target = drop_point(cell, lane.robot, lane.item.cls, job.s.drop_clearance)
+        lane.target = drop_point(cell, lane.robot, lane.item.cls, job.settings.drop_clearance)
         lane.request = 1000 + k
         lane.moves = {lane.robot: MoveTrack(state='waiting', since=0.0)}
-    out = moves(job.tick(job.s.unblock_after + 0.1))
+    out = moves(job.tick(job.settings.unblock_after + 0.1))
     assert [m.robot for m in out] == [foll] and out[0].purpose == 'via'
     assert out[0].target[1] >= cell.belt.centre_y + 0.6  # out on the right arm's side
     assert job.phases() == {lead: 'to_bin', foll: 'via'}
@@ -359,7 +364,7 @@ def test_two_arms_holding_items_and_blocking_each_other_untangle(cell):
     job.on_arm_state(foll, ik(cell.follower, out[0].target).unwrap())
     job.on_planner(foll, out[0].request, 'finished', None, None)
     job.on_execution(foll, out[0].request, 'finished', None, None)
-    nxt = moves(job.tick(job.s.unblock_after + 1.0))
+    nxt = moves(job.tick(job.settings.unblock_after + 1.0))
     assert [m.purpose for m in nxt if m.robot == foll] == ['to_bin']
 
 
@@ -377,12 +382,12 @@ def test_a_retreat_that_did_not_clear_the_way_is_followed_by_one_further_out(cel
     job.on_arm_state(lead, ik(cell.arm(lead), [1.34, -0.26, 0.34]).unwrap())
     for k, lane in enumerate(job.lanes):
         lane.phase, lane.holding, lane.item = 'to_bin', True, item_on_belt(cell, k + 1)
-        lane.target = drop_point(cell, lane.robot, lane.item.cls, job.s.drop_clearance)
+        lane.target = drop_point(cell, lane.robot, lane.item.cls, job.settings.drop_clearance)
         lane.request = 1000 + k
         lane.moves = {lane.robot: MoveTrack(state='waiting', since=0.0)}
     ys = []
     for step in range(4):
-        t = job.s.unblock_after + 0.1 + step
+        t = job.settings.unblock_after + 0.1 + step
         for lane in job.lanes:  # still both waiting after whatever came before
             lane.phase = 'to_bin'
             lane.moves = {lane.robot: MoveTrack(state='waiting', since=t - 0.6)}
@@ -416,11 +421,11 @@ def test_an_arm_waiting_for_the_other_arms_work_re_aims_instead_of_giving_up(cel
     busy.target = busy.item.position
     busy.moves = {lead: MoveTrack(state='accepted', start=0.0, end=3.0)}
     job.claimed[97] = foll
-    assert job._chase(lane, item, 0.0)
+    assert job.chase(foll, item, 0.0)
     first = lane.request
     job.on_planner(foll, first, 'waiting', None, None, f'{lead} blocks it')
-    assert moves(job.tick(job.s.unblock_after - 0.1)) == []  # waiting is normal at first
-    t = job.s.unblock_after + 0.1
+    assert moves(job.tick(job.settings.unblock_after - 0.1)) == []  # waiting is normal at first
+    t = job.settings.unblock_after + 0.1
     job.on_items([SeenItem(97, item.cls, item.position + [cell.belt.speed * t, 0, 0], t)])
     again = moves(job.tick(t))
     assert [(m.robot, m.purpose) for m in again] == [(foll, 'to_item')]
@@ -458,37 +463,34 @@ def test_an_arm_takes_no_item_the_other_arms_booked_move_would_make_it_wait_for(
     def follower_chase(booked: bool):
         job = make_job(cell)
         job.on_items([near, ours])
-        busy = next(la for la in job.lanes if la.robot == lead.name)
-        assert job._chase(busy, near, 0.0)
-        cmd = job._out[-1]
+        busy = job.lane(lead.name)
+        cmd = job.chase(lead.name, near, 0.0)[-1]
         track = busy.moves[lead.name]
         if booked:  # the leader's planner timed it: the job now knows the motion
             job.on_planner(lead.name, cmd.request, 'planned', cmd.start, cmd.start + 2.0)
         else:  # blind: as if the job had not planned the leader's intercept itself
             track.timeline = None
         assert (track.timeline is not None) == booked
-        lane = next(la for la in job.lanes if la.robot == foll.name)
-        job._out = []
-        took = job._chase(lane, ours, 0.0)
-        return job, track, lane, took
+        took = job.chase(foll.name, ours, 0.0)
+        return job, track, job.lane(foll.name), took
 
     job, _, lane, took = follower_chase(booked=False)
     assert took  # blind to the leader's motion: it goes at once ...
     plan = job.plan(foll.name, job.q[foll.name], lane.target)
-    first = job._out[-1]
+    first = took[-1]
     job, track, lane, took = follower_chase(booked=True)
     leader_motion = track.timeline
     # ... into a move the planners would hold back for the leader (the follower yields)
-    held = planning.schedule(foll, plan, first.start, lead, leader_motion, job.s.pair_margin,
-                             leader=False)
-    tolerance = 0.5 * job.s.grasp_reach / cell.belt.speed
+    held = planning.schedule(foll, plan, first.start, lead, leader_motion,
+                             job.settings.pair_margin, leader=False)
+    tolerance = 0.5 * job.settings.grasp_reach / cell.belt.speed
     assert held is None or held.delay > tolerance
     if took:  # booked: met later, when the way is clear, never into a wait
-        cmd = job._out[-1]
+        cmd = took[-1]
         assert cmd.start > first.start
         traj = job.plan(foll.name, job.q[foll.name], cmd.target)
         later = planning.schedule(foll, traj, cmd.start, lead, leader_motion,
-                                  job.s.pair_margin, leader=False)
+                                  job.settings.pair_margin, leader=False)
         assert later is not None and later.delay <= tolerance
     else:
         assert lane.phase == 'idle' and lane.item is None
@@ -505,18 +507,23 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
     """
     from scara_collab.core import planning
     lead = cell.leader
+    calls, refuse = [], []
+
+    def counted(robot, q0, target):  # the job's plans, counted; refused while ``refuse``
+        calls.append(robot)
+        if refuse:
+            raise ValueError('no plan now')
+        return plan_path(cell.arm(robot), q0, target, mode='line_or_joint')
+
     for published_first in (True, False):
-        job = make_job(cell)
-        calls = []
-        plan = job.plan
-        job.plan = lambda *a: calls.append(a) or plan(*a)
+        job = make_job(cell, plan=counted)
         job.on_items([item_on_belt(cell, 98, x=1.07, y=0.27)])
-        busy = next(la for la in job.lanes if la.robot == lead.name)
-        assert job._chase(busy, job.items[98], 0.0)
-        cmd, calls[:] = job._out[-1], []
-        intended = job._committed(lead.name, 0.0)  # asked, not yet answered: the job's plan
+        cmd = job.chase(lead.name, job.items[98], 0.0)[-1]
+        intended = job.belt.committed(lead.name, 0.0, job.q)  # asked, not answered: the job's
         assert intended.start == pytest.approx(cmd.start) and intended.end > cmd.start
-        traj = plan(lead.name, job.q[lead.name], cmd.target)
+        traj = job.plan(lead.name, job.q[lead.name], cmd.target)
+        job.plan.forget()  # from here on, planning the move again would be counted
+        calls[:] = []
         published = traj.t + cmd.start + 0.05, traj.q + 1e-3  # the planner's, not the job's
         if published_first:
             job.on_trajectory(lead.name, cmd.request, *published)
@@ -524,34 +531,34 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
                        cmd.start + 0.05 + traj.duration)
         if not published_first:
             job.on_trajectory(lead.name, cmd.request, *published)
-        booked = job._committed(lead.name, 0.0)
+        booked = job.belt.committed(lead.name, 0.0, job.q)
         np.testing.assert_allclose(booked.q, published[1])
         job.on_execution(lead.name, cmd.request, 'accepted', cmd.start + 0.25,
                          cmd.start + 0.25 + traj.duration)
-        np.testing.assert_allclose(job._committed(lead.name, 0.0).t, published[0] + 0.2)
+        np.testing.assert_allclose(job.belt.committed(lead.name, 0.0, job.q).t,
+                                   published[0] + 0.2)
         assert calls == []  # never planned again
         job.on_trajectory(lead.name, cmd.request + 1, *published)  # not a move it asked for
-        assert job._committed(lead.name, 0.0).start == pytest.approx(published[0][0] + 0.2)
-    lost = make_job(cell)  # a park move: booked as the job plans it when it asks
-    busy = lost.lanes[0]
-    lost._park(busy, 0.0)
-    cmd = lost._out[-1]
-    assert cmd.purpose == 'to_park' and lost._committed(lead.name, 0.0).end > cmd.start
-    plan = lost.plan
-    lost.plan = lambda *a: (_ for _ in ()).throw(ValueError('no plan now'))
-    lost._park(busy, 1.0)  # the job cannot plan it: not booked until timed, then planned once
-    cmd = lost._out[-1]
+        assert job.belt.committed(lead.name, 0.0, job.q).start == \
+            pytest.approx(published[0][0] + 0.2)
+    lost = make_job(cell, plan=counted)  # a park move: booked as the job plans it when it asks
+    busy = lost.lane(lead.name)
+    cmd = lost.park(lead.name, 0.0)[-1]
+    assert cmd.purpose == 'to_park' and lost.belt.committed(lead.name, 0.0, lost.q).end > cmd.start
+    refuse.append(True)
+    lost.plan.forget()
+    cmd = lost.park(lead.name, 1.0)[-1]  # the job cannot plan it: not booked until timed ...
     assert busy.moves[lead.name].timeline is None
-    assert lost._committed(lead.name, 1.0).end == 1.0  # asked, unplanned: the arm holds
-    lost.plan = plan
+    assert lost.belt.committed(lead.name, 1.0, lost.q).end == 1.0  # asked, unplanned: it holds
+    refuse.clear()
+    lost.plan.forget()
     lost.on_planner(lead.name, cmd.request, 'planned', cmd.start, cmd.start + 2.0)
-    assert isinstance(busy.moves[lead.name].timeline, planning.Timeline)
+    assert isinstance(busy.moves[lead.name].timeline, planning.Timeline)  # ... then planned
     single = make_job(cell, mode='single')
     single.on_items([item_on_belt(cell, 98, x=1.07, y=0.27)])
-    assert single._chase(single.lanes[0], single.items[98], 0.0)
-    cmd = single._out[-1]
+    cmd = single.chase(lead.name, single.items[98], 0.0)[-1]
     single.on_trajectory(lead.name, cmd.request, *published)
-    assert single.lanes[0].moves[lead.name].timeline is None  # one arm: nothing to book
+    assert single.lane(lead.name).moves[lead.name].timeline is None  # one arm: nothing to book
 
 
 def test_a_chase_asked_in_the_same_tick_is_respected_before_its_answer(cell):
@@ -565,17 +572,17 @@ def test_a_chase_asked_in_the_same_tick_is_respected_before_its_answer(cell):
     near, ours = item_on_belt(cell, 98, x=1.07, y=0.27), item_on_belt(cell, 97, x=1.12, y=0.01)
     job = make_job(cell)
     job.on_items([near, ours])
-    busy = next(la for la in job.lanes if la.robot == lead.name)
-    assert job._chase(busy, near, 0.0)
-    intended = job._committed(lead.name, 0.0)
+    busy = job.lane(lead.name)
+    assert job.chase(lead.name, near, 0.0)
+    intended = job.belt.committed(lead.name, 0.0, job.q)
     assert busy.moves[lead.name].state == 'asked' and intended.end > intended.start
-    lane = next(la for la in job.lanes if la.robot == foll.name)
-    job._out = []
-    tolerance = 0.5 * job.s.grasp_reach / cell.belt.speed
-    if job._chase(lane, ours, 0.0):
-        cmd = job._out[-1]
+    lane = job.lane(foll.name)
+    tolerance = 0.5 * job.settings.grasp_reach / cell.belt.speed
+    took = job.chase(foll.name, ours, 0.0)
+    if took:
+        cmd = took[-1]
         traj = job.plan(foll.name, job.q[foll.name], cmd.target)
-        timed = planning.schedule(foll, traj, cmd.start, lead, intended, job.s.pair_margin,
+        timed = planning.schedule(foll, traj, cmd.start, lead, intended, job.settings.pair_margin,
                                   leader=False)
         assert timed is not None and timed.delay <= tolerance
     else:
@@ -603,8 +610,9 @@ def test_the_followers_move_goes_out_after_the_leaders_planner_has_answered(cell
             job.on_planner(lead.name, out[0].request, 'planned', out[0].start, out[0].start + 1)
             late = moves(job.tick(0.04))
         else:
-            assert moves(job.tick(job.s.answer_timeout - 0.01)) == []
-            late = [c for c in moves(job.tick(job.s.answer_timeout)) if c.robot == foll.name]
+            assert moves(job.tick(job.settings.answer_timeout - 0.01)) == []
+            late = [c for c in moves(job.tick(job.settings.answer_timeout))
+                    if c.robot == foll.name]
         assert [(c.robot, c.request) for c in late] == [(foll.name, held.request)]
     single = make_job(cell, mode='single')
     single.on_items([item_on_belt(cell, 1, x=1.2, y=-0.2)])
@@ -619,37 +627,38 @@ def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):
     deferred it for the other's booked move. An item with less than ``URGENT_SLACK`` left in
     the arm's reach is chased at once (the planner holds the arm back if it must).
     """
-    from scara_collab.core import planning, sharing as job_module
+    from scara_collab.core import planning, sharing
     from scara_collab.core.sorting import reach_span
     lead, foll = cell.leader, cell.follower
     job = make_job(cell)
     near = item_on_belt(cell, 98, x=2.5, y=0.0)
     ours = item_on_belt(cell, 97, x=2.7, y=0.05)  # beside it, downstream
-    exit_x = reach_span(foll, ours.position[1], job.s.pick_z, 0.0, cell.belt.x_end)[1]
+    exit_x = reach_span(foll, ours.position[1], job.settings.pick_z, 0.0, cell.belt.x_end)[1]
     job.on_items([near, ours])
-    busy = next(la for la in job.lanes if la.robot == lead.name)
-    assert job._chase(busy, near, 0.0)
+    busy = job.lane(lead.name)
+    first = job.chase(lead.name, near, 0.0)[-1]
     booked = busy.moves[lead.name]
-    job.on_planner(lead.name, busy.request, 'planned', job._out[-1].start, 3.0)
+    job.on_planner(lead.name, busy.request, 'planned', first.start, 3.0)
     assert booked.timeline is not None
-    lane = next(la for la in job.lanes if la.robot == foll.name)
-    assert job._chase(lane, ours, 0.0)  # urgent: taken at once, though the leader is in the way
-    cmd = job._out[-1]
+    lane = job.lane(foll.name)
+    took = job.chase(foll.name, ours, 0.0)  # urgent: taken at once, the leader in the way
+    assert took
+    cmd = took[-1]
     plan = job.plan(foll.name, job.q[foll.name], cmd.target)
-    held = planning.schedule(foll, plan, cmd.start, lead, booked.timeline, job.s.pair_margin,
-                             leader=False)
-    tolerance = 0.5 * job.s.grasp_reach / cell.belt.speed
+    held = planning.schedule(foll, plan, cmd.start, lead, booked.timeline,
+                             job.settings.pair_margin, leader=False)
+    tolerance = 0.5 * job.settings.grasp_reach / cell.belt.speed
     assert held is None or held.delay > tolerance  # it will wait: deferring would have skipped
-    assert (exit_x - ours.position[0]) / cell.belt.speed < job_module.URGENT_SLACK
+    assert (exit_x - ours.position[0]) / cell.belt.speed < sharing.URGENT_SLACK
     # the same item with time to spare is deferred (met later or left for another)
-    job_module.URGENT_SLACK, saved = 0.0, job_module.URGENT_SLACK
+    sharing.URGENT_SLACK, saved = 0.0, sharing.URGENT_SLACK
     try:
         lane.phase, lane.item = 'idle', None
-        job._out = []
-        if job._chase(lane, ours, 0.0):
-            assert job._out[-1].start > cmd.start
+        later = job.chase(foll.name, ours, 0.0)
+        if later:
+            assert later[-1].start > cmd.start
     finally:
-        job_module.URGENT_SLACK = saved
+        sharing.URGENT_SLACK = saved
 
 
 def test_an_urgent_chase_is_timed_around_the_other_arms_booked_move(cell):
@@ -673,10 +682,10 @@ def test_an_urgent_chase_is_timed_around_the_other_arms_booked_move(cell):
         job = make_job(cell)
         item = item_on_belt(cell, 97, x=2.6, y=0.1)
         job.on_items([item])
-        blind = intercept(cell, lead, job.q[lead.name], item, job.s.decision_lead,
-                          job.s.pick_z, lambda q, p: job.plan(lead.name, q, p))
+        blind = intercept(cell, lead, job.q[lead.name], item, job.settings.decision_lead,
+                          job.settings.pick_z, lambda q, p: job.plan(lead.name, q, p))
         stay = ik(foll, blind.target + [0.0, 0.12, 0.0]).q  # on the meeting point
-        away = ik(foll, np.array([3.3, 1.6, job.s.pick_z])).q
+        away = ik(foll, np.array([3.3, 1.6, job.settings.pick_z])).q
         motion = planning.Timeline(np.array([0.0, leaves_at, leaves_at + 0.5]),
                                    np.array([stay, stay, away]))
         busy = next(la for la in job.lanes if la.robot == foll.name)
@@ -684,19 +693,18 @@ def test_an_urgent_chase_is_timed_around_the_other_arms_booked_move(cell):
         busy.moves = {foll.name: MoveTrack('planned', start=0.0, end=motion.end,
                                            timeline=motion)}
         job.on_arm_state(foll.name, stay)
-        lane = next(la for la in job.lanes if la.robot == lead.name)
-        assert time_in_reach(cell, lead, item.position, job.s.pick_z) < URGENT_SLACK
-        took = job._chase(lane, item, 0.0)
-        return job, blind, motion, lane, took
+        assert time_in_reach(cell, lead, item.position, job.settings.pick_z) < URGENT_SLACK
+        took = job.chase(lead.name, item, 0.0)
+        return job, blind, motion, job.lane(lead.name), took
 
     job, blind, motion, lane, took = chase(leaves_at=2.0)
     assert took
-    cmd = job._out[-1]
+    cmd = took[-1]
     assert cmd.start > blind.start + tolerance  # waits for the way to clear ...
     moved = cell.belt.speed * (cmd.start - blind.start)
     assert cmd.target[0] - blind.target[0] == pytest.approx(moved, abs=0.03)  # ... aimed later
     traj = job.plan(lead.name, job.q[lead.name], cmd.target)
-    held = planning.schedule(lead, traj, cmd.start, foll, motion, job.s.pair_margin,
+    held = planning.schedule(lead, traj, cmd.start, foll, motion, job.settings.pair_margin,
                              leader=False)
     assert held is not None and held.delay <= tolerance  # no further wait: it meets the item
     job, blind, motion, lane, took = chase(leaves_at=3.5)
@@ -717,20 +725,20 @@ def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
     lane = job.lanes[0]
     arm = cell.arm(lane.robot)
     job.on_arm_state(lane.robot, ik(arm, sorting.drop_point(cell, lane.robot, 'red', 0.1)).q)
-    z, start = job.s.pick_z, job.s.decision_lead
+    z, start = job.settings.pick_z, job.settings.decision_lead
 
     def spare(it):
         return sorting.time_in_reach(cell, arm, sorting.predict(cell, it, start), z)
 
     def cost(it):
         return sorting.cycle_bound(cell, arm, job.q[lane.robot], it, start, z,
-                                   job.s.drop_clearance)
+                                   job.settings.drop_clearance)
 
     def ranked(items):
         urgency = sorting.order_candidates(cell, arm, items, start, z, True, False, groups=True)
         return ([it.id for _, it in urgency],
                 [it.id for _, it in sorting.rank_by_cycle(
-                    cell, arm, job.q[lane.robot], urgency, start, z, job.s.drop_clearance,
+                    cell, arm, job.q[lane.robot], urgency, start, z, job.settings.drop_clearance,
                     sharing.URGENT_SLACK, job_module.SAVABLE)])
 
     red = item_on_belt(cell, 1, x=0.7, y=-0.2, cls='red')
@@ -764,7 +772,7 @@ def test_every_item_in_reach_is_ranked_not_only_the_most_urgent(cell):
     lane = job.lanes[0]
     arm = cell.arm(lane.robot)
     job.on_arm_state(lane.robot, ik(arm, sorting.drop_point(cell, lane.robot, 'red', 0.1)).q)
-    z, start = job.s.pick_z, job.s.decision_lead
+    z, start = job.settings.pick_z, job.settings.decision_lead
     blues = [item_on_belt(cell, 1 + k, x=0.85 + 0.1 * k, y=-0.2, cls='blue') for k in range(7)]
     red = item_on_belt(cell, 20, x=0.7, y=-0.2, cls='red')
     items = blues + [red]
@@ -773,7 +781,8 @@ def test_every_item_in_reach_is_ranked_not_only_the_most_urgent(cell):
     urgency = sorting.order_candidates(cell, arm, items, start, z, True, False, groups=True)
     assert [it.id for _, it in urgency][-1] == red.id  # the least urgent
     order = sorting.rank_by_cycle(cell, arm, job.q[lane.robot], urgency, start, z,
-                                  job.s.drop_clearance, sharing.URGENT_SLACK, job_module.SAVABLE)
+                                  job.settings.drop_clearance, sharing.URGENT_SLACK,
+                                  job_module.SAVABLE)
     assert order[0][1].id == red.id
     assert sorted(it.id for _, it in order) == sorted(it.id for it in items)
 
@@ -831,7 +840,7 @@ def test_one_arms_moves_carry_the_jobs_plan_so_the_planner_need_not_plan_again(c
     np.testing.assert_allclose(pick.plan.q[0], HOME, atol=1e-9)
     np.testing.assert_allclose(pick.plan.p[-1], pick.target, atol=1e-9)
     assert pick.plan.qd.shape == pick.plan.qdd.shape == pick.plan.q.shape
-    again = moves(job.tick(job.s.answer_timeout + 0.01))
+    again = moves(job.tick(job.settings.answer_timeout + 0.01))
     assert [m.request for m in again] == [pick.request] and again[0].plan is pick.plan
     # grasped at the item: the move on (lift or to the bin) is planned from where the arm is
     job, pick, t = at_the_item(cell, mode='single')

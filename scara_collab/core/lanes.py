@@ -1,13 +1,13 @@
 """The job's request protocol, without ROS: moves and grips asked, answered, retried, timed out.
 
-A *lane* is one arm's work (both arms' in mirrored mode). :class:`LaneProtocol` keeps what is
-known of each lane's current move (per arm: the planner's and the bridge's answers, its start
-and end, whether it arrived) and grip (per arm: its token, attempts, outcome), turns the
-observations into that state and the state into commands, and enforces every deadline of the
-table in :mod:`scara_collab.core.job`. What to do next (a move arrived, a grip answered, a
-request failed) is the job's decision: :class:`scara_collab.core.job.SortingJob` subclasses
-it and decides in :meth:`LaneProtocol._arrived`, :meth:`LaneProtocol._gripped` and
-:meth:`LaneProtocol._give_up`.
+A *lane* is one arm's work (both arms' in mirrored mode): a :class:`Lane` holds what it is
+doing now. :class:`LaneProtocol` keeps what is known of each lane's current move (per arm: the
+planner's and the bridge's answers, its start and end, whether it arrived) and grip (per arm:
+its token, attempts, outcome), turns the observations into that state, and enforces every
+deadline of the table in :mod:`scara_collab.core.job`. It decides nothing about items: asked
+for a move or a grip it returns the command to send; ticked, it returns the commands it sends
+again and the :class:`LaneEvent` that ends the lane's wait (``arrived``, ``gripped`` or
+``failed``), which the job decides on.
 
 Every observation names what it is about (a move by its request, a grip by its token), so a
 late, duplicated or unknown one is ignored. Move requests are identified by their requested
@@ -15,25 +15,25 @@ start in integer nanoseconds (:mod:`scara_collab.nodes.protocol` carries that id
 planner and bridge); they are unique per arm.
 """
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Sequence, Tuple, TYPE_CHECKING
+from typing import Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from scara_collab.core import planning, sorting
+from scara_collab.core.job_settings import JobSettings
 from scara_collab.core.kinematics import fk
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import CellModel
 from scara_collab.core.motion import Lateness
 from scara_collab.core.trajectory import Trajectory
 
-if TYPE_CHECKING:  # the job's settings (JobSettings lives with the job)
-    from scara_collab.core.job import JobSettings
-
 PHASES = ('idle', 'to_item', 'grasping', 'lift', 'via', 'to_bin', 'releasing', 'to_park')
 MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
 #: planner / bridge answers about a move, in the order a move goes through them
 MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
 FAILED_MOVE = ('refused', 'superseded', 'held')
+#: what ends a lane's wait (:class:`LaneEvent`)
+EVENTS = ('arrived', 'gripped', 'failed')
 #: s: the most a grasp is aimed ahead of the tool's arrival (the gripper's reach is 0.06 m,
 #: 0.3 s of belt travel either way: aiming further than that misses for certain)
 GRASP_LEAD = 0.25
@@ -82,6 +82,10 @@ class GripCommand:
     token: int
 
 
+#: what the job sends: a move or a gripper call
+Command = Union[MoveCommand, GripCommand]
+
+
 @dataclass
 class MoveTrack:
     """What is known of one arm's move of the current request."""
@@ -114,7 +118,10 @@ class GripTrack:
 
 @dataclass
 class Lane:
-    """One arm's work (both arms' in mirrored mode); see :mod:`scara_collab.core.job`."""
+    """One arm's work (both arms' in mirrored mode); see :mod:`scara_collab.core.job`.
+
+    ``robot`` is the arm the lane decides for; ``robots`` every arm it moves (``robot`` first).
+    """
 
     robot: str
     robots: Tuple[str, ...]
@@ -136,10 +143,29 @@ class Lane:
     failures: Dict[int, int] = field(default_factory=dict)
     next_look: float = 0.0  # idle with nothing to take: look again from then
 
+    @property
+    def mirrored(self) -> bool:
+        """Return True if the lane moves a mirrored pair (the follower to the mirror image)."""
+        return len(self.robots) > 1
+
     def idle(self) -> None:
         """Forget the current item, move and grips: the lane is free for the next item."""
         self.phase, self.item, self.moves, self.grips = 'idle', None, {}, {}
         self.holding, self.route, self.reaims = False, [], 0
+
+
+@dataclass(frozen=True, eq=False)
+class LaneEvent:
+    """What ended a lane's wait: ``kind`` one of :data:`EVENTS`; ``why`` a failure's reason.
+
+    ``arrived``: every arm of ``lane`` completed its move; ``gripped``: every gripper of it
+    answered (or was given up: its :class:`GripTrack` says ``ok`` False); ``failed``: a move
+    was refused or ran out of time.
+    """
+
+    kind: str
+    lane: Lane
+    why: str = ''
 
 
 class PlanMemo:
@@ -185,26 +211,27 @@ class LaneProtocol:
     """Moves and grips of the lanes, asked and tracked to an outcome (see the module docstring).
 
     :param cell: the cell model.
-    :param settings: the timeouts and retries (:class:`scara_collab.core.job.JobSettings`).
-    :param lanes: the lanes, ``(robot, robots it moves)`` each.
+    :param settings: the timeouts and retries.
+    :param lanes: the job's lanes (the protocol keeps their request state in them).
     :param plan: ``plan(robot, q_start, target) -> Trajectory`` with the planners' settings
-        (raises ``ValueError`` if refused): a timed move's motion is known from it.
+        (raises ``ValueError`` if refused): the plan a move is offered with.
     :param log: ``log(level, text)`` for events worth a log line (``'info'``, ``'warn'``).
     """
 
-    def __init__(self, cell: CellModel, settings: 'JobSettings',
-                 lanes: Sequence[Tuple[str, Tuple[str, ...]]], plan: PlanFn,
-                 log: Callable[[str, str], None]):
-        """Set up idle lanes; nothing is asked yet."""
-        self.cell, self.s, self.log = cell, settings, log
-        self.plan = PlanMemo(plan)
-        self.lanes = [Lane(r, rs) for r, rs in lanes]
+    def __init__(self, cell: CellModel, settings: JobSettings, lanes: Sequence[Lane],
+                 plan: PlanFn, log: Callable[[str, str], None] = lambda level, text: None):
+        """Take the lanes; nothing is asked yet."""
+        self.cell, self.settings, self.log = cell, settings, log
+        self.plan = plan
+        self.lanes = list(lanes)
+        #: the arms' measured joints ``(3,)`` by name
         self.q: Dict[str, np.ndarray] = {}
+        #: requests and gripper calls sent again so far
         self.retries = 0
+        #: sim s of the latest tick (answers are timed against it)
+        self.now = 0.0
         self._last_request: Dict[str, int] = {a.name: 0 for a in cell.arms}
         self._token = 0
-        self._out: List[object] = []
-        self._now = 0.0
         # how long answers have lately taken (sim s): added to the timeouts, so a slow graph
         # (real time, a busy machine) is waited for as it measures, not as lockstep would be
         self.answer_lag = Lateness()
@@ -219,24 +246,9 @@ class LaneProtocol:
         """
         return min(self.grip_lag.typical, GRASP_LEAD)
 
-    # --- the decisions, taken by the subclass ----------------------------------------------
-    def _arrived(self, lane: Lane, now: float) -> None:
-        """Decide what follows a move every arm of ``lane`` has completed."""
-        raise NotImplementedError
-
-    def _gripped(self, lane: Lane, now: float) -> None:
-        """Decide what follows a grip every gripper of ``lane`` has answered (or given up)."""
-        raise NotImplementedError
-
-    def _give_up(self, lane: Lane, now: float, why: str) -> None:
-        """Decide what follows a move that failed or ran out of time."""
-        raise NotImplementedError
-
-    def _book(self, robot: str, request: int, track: MoveTrack) -> None:
-        """Keep the motion a move just timed commits ``robot`` to (two lanes: the subclass)."""
-
-    def _book_asked(self, lane: Lane) -> None:
-        """Keep the motion a move just asked for commits its arm to (two lanes: the subclass)."""
+    def knows_every_arm(self) -> bool:
+        """Return True once every arm's joints have been measured."""
+        return len(self.q) >= len(self.cell.arms)
 
     # --- observations -----------------------------------------------------------------------
     def on_arm_state(self, robot: str, q: np.ndarray) -> None:
@@ -244,38 +256,46 @@ class LaneProtocol:
         self.q[robot] = np.asarray(q, dtype=float)
 
     def on_planner(self, robot: str, request: int, state: str, start: Optional[float],
-                   end: Optional[float], reason: str = '') -> None:
-        """Take a planner status about ``robot``'s move for ``request`` (others are ignored)."""
+                   end: Optional[float], reason: str = '') -> Optional[MoveTrack]:
+        """Take a planner status about ``robot``'s move for ``request`` (others are ignored).
+
+        :return: the move's track if this status timed it (``planned``: its start and end
+            are known now), else None.
+        """
         for lane in self.lanes:  # the first answer to a request: how long answers take
             track = lane.moves.get(robot) if lane.request == request else None
             if track is not None and track.state == 'asked' and lane.phase in MOVING:
-                self.answer_lag.add(self._now - lane.sent)
-        self._on_status(robot, request, PLANNER_STATUS.get(state), start, end, reason)
+                self.answer_lag.add(self.now - lane.sent)
+        return self._on_status(robot, request, PLANNER_STATUS.get(state), start, end, reason)
 
     def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
-                     end: Optional[float], reason: str = '') -> None:
-        """Take a bridge execution status about ``robot``'s move for ``request``."""
-        self._on_status(robot, request, BRIDGE_STATUS.get(state), start, end, reason)
+                     end: Optional[float], reason: str = '') -> Optional[MoveTrack]:
+        """Take a bridge execution status about ``robot``'s move for ``request``.
+
+        :return: the move's track if this status timed it (``accepted``), else None.
+        """
+        return self._on_status(robot, request, BRIDGE_STATUS.get(state), start, end, reason)
 
     def _on_status(self, robot: str, request: int, new: Optional[str], start: Optional[float],
-                   end: Optional[float], reason: str) -> None:
+                   end: Optional[float], reason: str) -> Optional[MoveTrack]:
         """Move the track of ``robot``'s move ``request`` to the state ``new``."""
-        track = self._open_track(robot, request)
+        track = self.open_track(robot, request)
         if track is None or new is None:
-            return
+            return None
         if new in ('planned', 'accepted'):
             if new == 'planned' and track.state == 'accepted' and abs(start - track.start) < 1e-6:
-                return  # the bridge already runs it (its start is the one that counts)
+                return None  # the bridge already runs it (its start is the one that counts)
             track.state, track.start, track.end = new, start, end
-            self._book(robot, request, track)
-        elif new in ('queued', 'waiting'):  # not (or no longer) committed
+            return track
+        if new in ('queued', 'waiting'):  # not (or no longer) committed
             if track.state != new:
-                track.since = self._now
+                track.since = self.now
             track.state, track.start, track.end = new, None, None
         elif new == 'finished':
             track.state = new
         else:
             track.state, track.reason = new, reason or new
+        return None
 
     def on_grip(self, token: int, ok: bool, message: str = '') -> None:
         """Take a gripper response for request ``token``: any attempt of a grip still open."""
@@ -283,17 +303,17 @@ class LaneProtocol:
             for track in lane.grips.values():
                 if track.ok is None and (token == track.token or token in track.calls):
                     track.ok, track.message = bool(ok), message
-                    self.grip_lag.add(self._now - track.calls.get(token, track.sent))
+                    self.grip_lag.add(self.now - track.calls.get(token, track.sent))
 
-    def _confirm_grip(self, kind: str, robot: str) -> None:
-        """Take a bridge ``grasped`` or ``released`` event: the response may be lost."""
+    def confirm_grip(self, kind: str, robot: str) -> None:
+        """Take a bridge item event: ``grasped`` or ``released`` answers a lost response."""
         phase = {'grasped': 'grasping', 'released': 'releasing'}.get(kind)
         for lane in self.lanes:
             track = lane.grips.get(robot)
             if lane.phase == phase and track is not None and track.ok is None:
                 track.ok, track.message = True, f'{kind} event'
 
-    def _open_track(self, robot: str, request: int) -> Optional[MoveTrack]:
+    def open_track(self, robot: str, request: int) -> Optional[MoveTrack]:
         """Return the track of ``robot``'s current move ``request``, None if unknown or over."""
         for lane in self.lanes:
             if lane.phase in MOVING and lane.request == request and robot in lane.moves:
@@ -312,13 +332,13 @@ class LaneProtocol:
             self._last_request[r] = req
         return req
 
-    def _move(self, lane: Lane, phase: str, target, start: float, now: float,
-              traj: Optional[Trajectory] = None) -> None:
-        """Ask for ``lane``'s move to ``target`` from ``start`` (``traj``: as the job planned it).
+    def move(self, lane: Lane, phase: str, target, start: float, now: float,
+             traj: Optional[Trajectory] = None) -> MoveCommand:
+        """Ask for ``lane``'s move to ``target`` from ``start``; return the command to send.
 
-        The move goes with the job's plan of it (``traj``, else planned here from the arm's
-        state; a mirrored pair's: the lane's arm), which the planner takes instead of planning
-        it again; with two lanes the move is booked (:meth:`_book_asked`).
+        The lane enters ``phase`` with a new request. The move goes with the job's plan of it
+        (``traj``, else planned here from the arm's state; a mirrored pair's: the lane's arm),
+        which the planner takes instead of planning it again.
         """
         lane.phase, lane.target = phase, np.asarray(target, dtype=float)
         lane.request = self._request(lane.robots, max(start, now + 1e-3))
@@ -331,22 +351,27 @@ class LaneProtocol:
                 lane.plan = traj or self.plan(lane.robot, self.q[lane.robot], lane.target)
             except ValueError:
                 pass  # the planner will refuse it with the reason
-        self._send(lane)
-        self._book_asked(lane)
+        return self._command(lane)
 
-    def _soon(self, lane: Lane, now: float) -> float:
+    def move_once(self, robot: str, target, start: float, purpose: str) -> MoveCommand:
+        """Return a move of ``robot`` that no lane follows up (an unused arm's park)."""
+        return MoveCommand(robot, np.asarray(target, dtype=float),
+                           self._request([robot], start), False, purpose)
+
+    def soon(self, lane: Lane, now: float) -> float:
         """Return the start to ask for a move that should start as soon as possible.
 
         One arm: now (its planner adds its own planning lead). A mirrored pair: ``pair_lead``
         ahead, so both planners get a start that is still in the future and plan the same.
         """
-        return now + (self.s.pair_lead if len(lane.robots) > 1 else 1e-3)
+        return now + (self.settings.pair_lead if lane.mirrored else 1e-3)
 
-    def _send(self, lane: Lane) -> None:
-        self._out.append(MoveCommand(lane.robot, lane.target, lane.request,
-                                     len(lane.robots) > 1, lane.phase, lane.plan))
+    def _command(self, lane: Lane) -> MoveCommand:
+        return MoveCommand(lane.robot, lane.target, lane.request, lane.mirrored, lane.phase,
+                           lane.plan)
 
-    def _target_of(self, lane: Lane, robot: str) -> np.ndarray:
+    def target_of(self, lane: Lane, robot: str) -> np.ndarray:
+        """Return where ``lane``'s current move takes ``robot``'s tool (world)."""
         if robot == lane.robot:
             return lane.target
         return mirror_point(self.cell.arm(lane.robot), self.cell.arm(robot), lane.target)
@@ -356,62 +381,84 @@ class LaneProtocol:
         if q is None:
             return False
         tip = fk(self.cell.arm(robot), q)
-        return float(np.linalg.norm(tip - self._target_of(lane, robot))) <= \
-            self.s.arrive_tolerance
+        return float(np.linalg.norm(tip - self.target_of(lane, robot))) <= \
+            self.settings.arrive_tolerance
 
-    def _tick_move(self, lane: Lane, now: float) -> None:
-        limit = self.s.carry_timeout if lane.holding else self.s.move_timeout
+    # --- the clock ----------------------------------------------------------------------------
+    def tick(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
+        """Advance ``lane``'s move or grip to ``now`` (sim s).
+
+        :return: the commands sent again (a lost answer), in order, and the event that ends
+            the lane's wait, or None while it waits (always None for an idle lane).
+        """
+        if lane.phase in MOVING:
+            return self._tick_move(lane, now)
+        if lane.phase in ('grasping', 'releasing'):
+            return self._tick_grip(lane, now)
+        return [], None
+
+    def _tick_move(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
+        s = self.settings
+        out: List[Command] = []
+        limit = s.carry_timeout if lane.holding else s.move_timeout
         for robot, track in lane.moves.items():
             if track.arrived:
                 continue
             if track.state in FAILED_MOVE:
-                return self._give_up(lane, now, f'{robot} move {track.state}: {track.reason}')
+                return out, LaneEvent('failed', lane,
+                                      f'{robot} move {track.state}: {track.reason}')
             if track.state == 'finished':
                 track.arrived = True
                 continue
             if (track.state == 'asked'
-                    and now - lane.sent > self.s.answer_timeout + self.answer_lag.worst):
-                if lane.sends > self.s.answer_retries:
-                    return self._give_up(lane, now, f'no answer from the {robot} planner '
-                                         f'after {lane.sends} requests')
+                    and now - lane.sent > s.answer_timeout + self.answer_lag.worst):
+                if lane.sends > s.answer_retries:
+                    return out, LaneEvent('failed', lane, f'no answer from the {robot} planner '
+                                          f'after {lane.sends} requests')
                 lane.sends += 1
                 lane.sent = now
                 self.retries += 1
                 self.log('info', f'{robot}: no planner answer for request {lane.request} in '
-                         f'{self.s.answer_timeout:g} s; asking again ({lane.sends})')
-                self._send(lane)
+                         f'{s.answer_timeout:g} s; asking again ({lane.sends})')
+                out.append(self._command(lane))
                 continue
             if track.end is None:  # asked, queued or waiting
                 if now - lane.since > limit:
                     others = ', '.join(f'{o.robot} {o.phase}' + (' holding' if o.holding else '')
                                        for o in self.lanes if o is not lane)
-                    return self._give_up(lane, now, f'no plan from the {robot} planner in '
-                                         f'{limit:g} s ({track.state}'
-                                         + (f'; {others})' if others else ')'))
+                    return out, LaneEvent('failed', lane, f'no plan from the {robot} planner in '
+                                          f'{limit:g} s ({track.state}'
+                                          + (f'; {others})' if others else ')'))
                 continue
             if now >= track.end and self._at_target(lane, robot):
                 track.arrived = True
-            elif now > track.end + self.s.arrive_timeout:
-                return self._give_up(lane, now, f'{robot} did not arrive within '
-                                     f'{self.s.arrive_timeout:g} s of its end ({track.state})')
+            elif now > track.end + s.arrive_timeout:
+                return out, LaneEvent('failed', lane, f'{robot} did not arrive within '
+                                      f'{s.arrive_timeout:g} s of its end ({track.state})')
         if all(t.arrived for t in lane.moves.values()):
-            self._arrived(lane, now)
+            return out, LaneEvent('arrived', lane)
+        return out, None
 
     # --- gripper ------------------------------------------------------------------------------
-    def _grip(self, lane: Lane, grasp: bool, now: float) -> None:
+    def grip(self, lane: Lane, grasp: bool, now: float) -> List[GripCommand]:
+        """Call every gripper of ``lane`` (``grasp`` or release); return the calls to make."""
         lane.phase = 'grasping' if grasp else 'releasing'
         lane.since = now
         lane.grips = {}
+        out = []
         for robot in lane.robots:
             self._token += 1
             lane.grips[robot] = GripTrack(self._token, now, calls={self._token: now})
-            self._out.append(GripCommand(robot, grasp, self._token))
+            out.append(GripCommand(robot, grasp, self._token))
+        return out
 
-    def _tick_grip(self, lane: Lane, now: float) -> None:
+    def _tick_grip(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
+        s = self.settings
+        out: List[Command] = []
         grasp = lane.phase == 'grasping'
         for robot, track in lane.grips.items():
-            if track.ok is None and now - track.sent > self.s.grip_timeout + self.grip_lag.worst:
-                if track.attempts > self.s.grip_retries:
+            if track.ok is None and now - track.sent > s.grip_timeout + self.grip_lag.worst:
+                if track.attempts > s.grip_retries:
                     track.ok, track.message = False, f'no answer after {track.attempts} calls'
                     continue
                 self._token += 1
@@ -419,8 +466,9 @@ class LaneProtocol:
                 track.calls[self._token] = now
                 track.attempts += 1
                 self.retries += 1
-                self.log('info', f'{robot}: no gripper answer in {self.s.grip_timeout:g} s; '
+                self.log('info', f'{robot}: no gripper answer in {s.grip_timeout:g} s; '
                          f'asking again ({track.attempts})')
-                self._out.append(GripCommand(robot, grasp, track.token))
+                out.append(GripCommand(robot, grasp, track.token))
         if all(t.ok is not None for t in lane.grips.values()):
-            self._gripped(lane, now)
+            return out, LaneEvent('gripped', lane)
+        return out, None

@@ -1,0 +1,70 @@
+"""The sorting job's settings, without ROS: its modes and its tuning.
+
+Every part of the job reads them (:mod:`scara_collab.core.job`, :mod:`scara_collab.core.lanes`,
+:mod:`scara_collab.core.sharing`); they import nothing of the job.
+"""
+from dataclasses import dataclass
+from typing import Optional
+
+from scara_collab.core import sorting
+from scara_collab.core.model import CellModel
+
+MODES = ('single', 'collaborative', 'mirrored')
+
+
+@dataclass(frozen=True)
+class JobSettings:
+    """The job's tuning, from ``config/automation.yaml`` (see that file for the meanings)."""
+
+    mode: str
+    pick_z: float
+    carry_z: float
+    drop_clearance: float
+    grasp_reach: float
+    decision_lead: float
+    answer_timeout: float
+    answer_retries: int
+    move_timeout: float
+    carry_timeout: float
+    arrive_timeout: float
+    arrive_tolerance: float
+    grip_timeout: float
+    grip_retries: int
+    pair_offset: float = 0.0
+    pair_margin: float = 0.13
+    pair_lead: float = 0.1
+    unblock_after: float = 0.5
+    bin_retries: int = 3
+    steal_cycle: float = 0.0
+
+    @staticmethod
+    def from_config(cell: CellModel, cfg: dict, mode: Optional[str] = None,
+                    planning_buffer: float = 0.03) -> 'JobSettings':
+        """Build the settings from the ``automation`` config tree (``mode`` overrides).
+
+        :param planning_buffer: ``controllers.yaml`` ``planning_buffer``: mirrored pairs are
+            checked against the planners' margin (safety margin + this).
+        :raises ValueError: a mode not in :data:`MODES`.
+        """
+        mode = mode or cfg['mode']
+        if mode not in MODES:
+            raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
+        pick_z = sorting.pick_height(cell, cfg['pick_clearance'])
+        # a held item hangs item_size + pick_clearance below the tool: lifted to carry_z, its
+        # bottom clears the tops of the items on the belt by carry_clearance
+        carry_z = (pick_z + cell.item_size + float(cfg['carry_clearance'])
+                   if cfg['lift_after_grasp'] else pick_z)
+        return JobSettings(
+            mode=mode, pick_z=pick_z, carry_z=carry_z,
+            drop_clearance=float(cfg['drop_clearance']), grasp_reach=float(cfg['grasp_reach']),
+            decision_lead=float(cfg['decision_lead']),
+            answer_timeout=float(cfg['answer_timeout']), answer_retries=int(cfg['answer_retries']),
+            move_timeout=float(cfg['move_timeout']), carry_timeout=float(cfg['carry_timeout']),
+            arrive_timeout=float(cfg['arrive_timeout']),
+            arrive_tolerance=float(cfg['arrive_tolerance']),
+            grip_timeout=float(cfg['grip_timeout']), grip_retries=int(cfg['grip_retries']),
+            pair_offset=float(cfg['mirror_pair_offset']),
+            pair_lead=float(cfg['mirror_start_lead']),
+            unblock_after=float(cfg['unblock_after']),
+            steal_cycle=float(cfg['steal_cycle']),
+            pair_margin=cell.safety_margin + float(planning_buffer))
