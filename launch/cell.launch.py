@@ -10,7 +10,10 @@ Arguments: ``mode`` (``collaborative``, ``single``, ``mirrored`` or ``idle``), `
 ``viewer`` (``true``: the live 3D view), ``rviz`` (``true``: RViz with ``config/cell.rviz``;
 implies ``tf``), ``auto_start`` (``true``: the job starts once the graph is connected),
 ``lockstep`` (``true``: sim time waits for every node; ``false``: real time, the clock waits
-for nobody, as on hardware or in Gazebo: the bridge's ``lockstep_window`` 0).
+for nobody, as on hardware or in Gazebo: the bridge's ``lockstep_window`` 0), ``namespace``
+(e.g. ``/cell_1``: every node of the cell in that namespace with the graph's remaps,
+:func:`scara_collab.graph.remaps`, so cells in different namespaces share a domain; default
+none).
 """
 import os
 
@@ -24,7 +27,7 @@ from scara_collab import graph
 
 PACKAGE = 'scara_collab'
 ARGUMENTS = {'mode': 'collaborative', 'tf': 'false', 'viewer': 'false', 'rviz': 'false',
-             'auto_start': 'true', 'lockstep': 'true'}
+             'auto_start': 'true', 'lockstep': 'true', 'namespace': ''}
 
 
 def _typed(value: str):
@@ -44,6 +47,9 @@ def nodes(context):
         raise ValueError(f"lockstep must be true or false, got {arg['lockstep']!r}")
     if arg['lockstep'].lower() == 'false':  # real time: the clock waits for nobody
         params['pybullet_bridge']['lockstep_window'] = 0.0
+    namespace = graph.namespace_of(arg['namespace'])
+    placed = {'namespace': namespace, 'remappings': list(graph.remaps(namespace).items())
+              } if namespace else {}
     out = []
     for spec in graph.job_nodes(automation=arg['mode'] != 'idle',
                                 viewer=arg['viewer'].lower() == 'true',
@@ -51,11 +57,11 @@ def nodes(context):
         files = [os.path.join(share, 'config', f'{c}.yaml') for c in spec.configs]
         values = {k: _typed(v) for k, v in params.get(spec.name, {}).items()}
         out.append(Node(package=PACKAGE, executable=spec.name, name=spec.name, output='screen',
-                        parameters=files + [dict(values, use_sim_time=True)]))
+                        parameters=files + [dict(values, use_sim_time=True)], **placed))
     if rviz:
         out.append(Node(package='rviz2', executable='rviz2', name='rviz2', output='screen',
                         arguments=['-d', os.path.join(share, 'config', 'cell.rviz')],
-                        parameters=[{'use_sim_time': True}]))
+                        parameters=[{'use_sim_time': True}], **placed))
     return out
 
 

@@ -9,15 +9,25 @@ nodes publish are :data:`TOPICS` (name, type and the publisher's QoS, one of the
 of :data:`QOS`, which :mod:`scara_collab.nodes.qos` turns into rclpy profiles); the run
 recorder and its MCAP log subscribe what :func:`topics` lists.
 
+Names are relative, so a namespace moves a whole cell: every node of a cell runs in the cell's
+namespace (none by default: the root, the names below) with the remaps :func:`remaps` gives,
+:func:`ros_args` and :func:`node_args` put both on a node's command line, and :func:`resolve`
+says what a relative name becomes in a namespace (``joint_states`` in ``/cell_1`` is
+``/cell_1/joint_states``). ``/clock`` is the exception: rclpy's time source always subscribes
+the absolute ``/clock``, so every node of a namespaced cell gets ``/clock:=<ns>/clock`` and the
+bridge publishes the relative ``clock``. Two cells under ``/cell_0`` and ``/cell_1`` share a
+ROS domain without hearing each other (rcl's own ``/rosout`` and ``/parameter_events`` stay
+shared).
+
 Everything that starts the graph reads this module: the launcher (one process per node, or
 all in one container), ``setup.py`` (the console scripts, so ``ros2 run`` has the same
 names), the in-process graph of the benchmarks (:func:`scara_collab.bench.job.run_job`) and
 the tests' graphs (``test/ros_harness.py``). In launch order::
 
-    pybullet_bridge      clock, /joint_states, trajectories, belt, gripper   ready: service
-    left_planner         /scara_left/target(_trajectory) -> trajectory       ready: subscribed
-    right_planner        /scara_right/target(_trajectory) -> trajectory      ready: subscribed
-    replication_manager  /collab/target(_trajectory) -> both arms, mirrored  ready: service
+    pybullet_bridge      clock, joint_states, trajectories, belt, gripper    ready: service
+    left_planner         scara_left/target(_trajectory) -> trajectory        ready: subscribed
+    right_planner        scara_right/target(_trajectory) -> trajectory       ready: subscribed
+    replication_manager  collab/target(_trajectory) -> both arms, mirrored   ready: service
     collision_monitor    arm-to-arm distance, e-stop                         ready: service
     automation_manager   the sorting job                                     ready: service
     cell_viewer          live 3D view (optional)                             ready: page answers
@@ -28,8 +38,10 @@ the tests' graphs (``test/ros_harness.py``). In launch order::
 {'enabled': 'true'}
 >>> ros_args((), {'mode': 'joint'}, config_dir=Path('/cfg'))
 ['--ros-args', '-p', 'use_sim_time:=true', '-p', 'mode:=joint']
->>> topic('/emergency_stop')
-Topic(name='/emergency_stop', type='std_msgs/msg/Bool', qos='latched')
+>>> node_args('/cell_1')
+['--ros-args', '-r', '__ns:=/cell_1', '-r', '/clock:=/cell_1/clock']
+>>> topic('emergency_stop'), topic('emergency_stop', namespace='/cell_1').name
+(Topic(name='/emergency_stop', type='std_msgs/msg/Bool', qos='latched'), '/cell_1/emergency_stop')
 >>> QOS['latched']
 Qos(depth=1, latched=True)
 """
@@ -42,6 +54,60 @@ PACKAGE = 'scara_collab'
 JOB_MODES = ('single', 'collaborative', 'mirrored')
 LAUNCH_MODES = ('idle',) + JOB_MODES  # idle: the graph without the sorting job
 ROBOTS = ('scara_left', 'scara_right')  # the arms' namespaces (config/cell.yaml), leader first
+CLOCK = 'clock'  # the bridge's sim clock, relative: a cell's clock is in its namespace
+SIM_TIME_CLOCK = '/clock'  # what rclpy's time source subscribes (use_sim_time), always absolute
+
+
+def namespace_of(namespace: Optional[str]) -> str:
+    """Return a cell namespace in one form: ``''`` for the root, else ``'/a/b'``.
+
+    >>> namespace_of(None), namespace_of('/'), namespace_of('cell_1'), namespace_of('/cell_1/')
+    ('', '', '/cell_1', '/cell_1')
+
+    :raises ValueError: for a name rcl would refuse (``~``, spaces, empty parts, ...).
+    """
+    ns = (namespace or '').strip().strip('/')
+    if not ns:
+        return ''
+    for part in ns.split('/'):
+        if not part or part[0].isdigit() or not all(c.isalnum() or c == '_' for c in part):
+            raise ValueError(f'not a ROS namespace: {namespace!r} (want e.g. /cell_1)')
+    return '/' + ns
+
+
+def resolve(name: str, namespace: Optional[str] = '') -> str:
+    """Return the absolute name a relative ``name`` has in ``namespace`` (absolute: unchanged).
+
+    >>> resolve('joint_states'), resolve('joint_states', '/cell_1'), resolve('/rosout', 'cell_1')
+    ('/joint_states', '/cell_1/joint_states', '/rosout')
+    """
+    if name.startswith('/'):
+        return name
+    return f'{namespace_of(namespace)}/{name}'
+
+
+def remaps(namespace: Optional[str] = '') -> Dict[str, str]:
+    """Return the remaps every node of a cell in ``namespace`` needs (none in the root).
+
+    rclpy's time source subscribes the absolute ``/clock`` (:data:`SIM_TIME_CLOCK`); in a
+    namespace it must hear the cell's own clock.
+
+    >>> remaps(), remaps('cell_1')
+    ({}, {'/clock': '/cell_1/clock'})
+    """
+    ns = namespace_of(namespace)
+    return {SIM_TIME_CLOCK: resolve(CLOCK, ns)} if ns else {}
+
+
+def node_args(namespace: Optional[str] = '') -> List[str]:
+    """Return the ``--ros-args`` that put a node into ``namespace`` ([] for the root)."""
+    ns = namespace_of(namespace)
+    if not ns:
+        return []
+    out = ['--ros-args', '-r', f'__ns:={ns}']
+    for source, target in remaps(ns).items():
+        out += ['-r', f'{source}:={target}']
+    return out
 
 
 @dataclass(frozen=True)
@@ -51,20 +117,21 @@ class Readiness:
     ``kind``: ``'subscribed'`` (the node subscribes to the topic ``name``), ``'published'``
     (it publishes it), ``'service'`` (the service ``name`` of type ``srv_type``,
     ``'package/srv/Type'``, answers), ``'page'`` (subscribed to ``name`` and its web page
-    answers on the node's ``port`` parameter).
+    answers on the node's ``port`` parameter). ``name`` is relative (:func:`resolve`).
     """
 
     kind: str
     name: str = ''
     srv_type: str = ''
 
-    def describe(self, node: str, params: Mapping[str, str]) -> str:
+    def describe(self, node: str, params: Mapping[str, str], namespace: str = '') -> str:
         """Return what the launcher waits for, in words (for its console lines)."""
+        name = resolve(self.name, namespace)
         if self.kind == 'subscribed':
-            return f'node {node} subscribed to {self.name}'
+            return f'node {node} subscribed to {name}'
         if self.kind == 'service':
-            return f'service {self.name}'
-        return (f'node {node} subscribed to {self.name}, live 3D view on '
+            return f'service {name}'
+        return (f'node {node} subscribed to {name}, live 3D view on '
                 f'http://localhost:{params.get("port", "?")}')
 
 
@@ -79,7 +146,7 @@ class NodeSpec:
     ready: Readiness
     fixed: Mapping[str, str] = field(default_factory=dict)  # the class's own keywords
     optional: bool = False     # started only when asked for (the viewer, transforms)
-    lockstep: bool = False     # answers /clock on /sim/lockstep (scara_collab.nodes.lockstep)
+    lockstep: bool = False     # answers clock on sim/lockstep (scara_collab.nodes.lockstep)
 
     def build(self, **kwargs):
         """Build the node in this process: ``Class(**fixed, **kwargs)`` (``context``, ...)."""
@@ -93,31 +160,31 @@ def _n(module: str) -> str:
 
 NODES: Tuple[NodeSpec, ...] = (
     NodeSpec('pybullet_bridge', _n('pybullet_bridge:main'), _n('pybullet_bridge:PyBulletBridge'),
-             ('simulation', 'controllers'), Readiness('service', '/sim/resume',
+             ('simulation', 'controllers'), Readiness('service', 'sim/resume',
                                                       'std_srvs/srv/Trigger')),
     NodeSpec('left_planner', _n('planner:main_left'), _n('planner:Planner'), ('controllers',),
-             Readiness('subscribed', f'/{ROBOTS[0]}/target'),
+             Readiness('subscribed', f'{ROBOTS[0]}/target'),
              {'robot': ROBOTS[0], 'node_name': 'left_planner'}, lockstep=True),
     NodeSpec('right_planner', _n('planner:main_right'), _n('planner:Planner'), ('controllers',),
-             Readiness('subscribed', f'/{ROBOTS[1]}/target'),
+             Readiness('subscribed', f'{ROBOTS[1]}/target'),
              {'robot': ROBOTS[1], 'node_name': 'right_planner'}, lockstep=True),
     NodeSpec('replication_manager', _n('replication_manager:main'),
              _n('replication_manager:ReplicationManager'), (),
-             Readiness('service', '/replication_manager/enable', 'std_srvs/srv/SetBool'),
+             Readiness('service', 'replication_manager/enable', 'std_srvs/srv/SetBool'),
              lockstep=True),
     NodeSpec('collision_monitor', _n('collision_monitor:main'),
              _n('collision_monitor:CollisionMonitor'), (),
-             Readiness('service', '/collision_monitor/clear', 'std_srvs/srv/Trigger'),
+             Readiness('service', 'collision_monitor/clear', 'std_srvs/srv/Trigger'),
              lockstep=True),
     NodeSpec('automation_manager', _n('automation_manager:main'),
              _n('automation_manager:AutomationManager'), ('automation', 'controllers'),
-             Readiness('service', '/automation_manager/start', 'std_srvs/srv/Trigger'),
+             Readiness('service', 'automation_manager/start', 'std_srvs/srv/Trigger'),
              lockstep=True),
     NodeSpec('cell_viewer', _n('cell_viewer:main'), _n('cell_viewer:CellViewer'), (),
-             Readiness('page', '/joint_states'), optional=True),
+             Readiness('page', 'joint_states'), optional=True),
     NodeSpec('state_publisher', _n('state_publisher:main'),
              _n('state_publisher:StatePublisher'), (),
-             Readiness('published', '/robot_description'), optional=True),
+             Readiness('published', 'robot_description'), optional=True),
 )
 BY_NAME: Dict[str, NodeSpec] = {n.name: n for n in NODES}
 BY_ENTRY: Dict[str, NodeSpec] = {n.entry: n for n in NODES}
@@ -146,7 +213,11 @@ QOS: Dict[str, Qos] = {
 
 @dataclass(frozen=True)
 class Topic:
-    """One topic of the graph: absolute name, full type name, the publisher's QoS profile."""
+    """One topic of the graph: name, full type name, the publisher's QoS profile.
+
+    In :data:`TOPICS` and :data:`ROBOT_TOPICS` the names are relative (``/rosout``, rcl's,
+    excepted); :func:`topics` resolves them in a cell's namespace.
+    """
 
     name: str
     type: str                  # 'pkg/msg/Type'
@@ -161,56 +232,61 @@ class Topic:
 _STATUS = 'diagnostic_msgs/msg/DiagnosticStatus'
 _POINT = 'geometry_msgs/msg/PointStamped'
 _TRAJECTORY = 'trajectory_msgs/msg/JointTrajectory'
-#: the cell-wide topics the nodes publish (not /sim/lockstep: scara_collab.nodes.lockstep)
+#: the cell-wide topics the nodes publish (not sim/lockstep: scara_collab.nodes.lockstep)
 TOPICS: Tuple[Topic, ...] = (
-    Topic('/clock', 'rosgraph_msgs/msg/Clock'),                    # pybullet_bridge
-    Topic('/joint_states', 'sensor_msgs/msg/JointState'),
-    Topic('/conveyor/items', 'visualization_msgs/msg/MarkerArray'),
-    Topic('/conveyor/events', _STATUS, 'events'),
-    Topic('/collab/target', _POINT),                               # automation_manager
-    Topic('/collab/target_trajectory', _TRAJECTORY),               # ... its plan of a move
-    Topic('/collision_monitor/min_distance', 'std_msgs/msg/Float64'),
-    Topic('/collision_monitor/status', _STATUS),
-    Topic('/collision_monitor/stops', _STATUS, 'events'),          # protective / emergency
-    Topic('/collision_monitor/capsules', 'visualization_msgs/msg/MarkerArray'),
-    Topic('/replication_manager/mirror_error', 'std_msgs/msg/Float64'),
-    Topic('/replication_manager/status', _STATUS),
-    Topic('/automation_manager/stats', _STATUS),
-    Topic('/emergency_stop', 'std_msgs/msg/Bool', 'latched'),      # collision_monitor
-    Topic('/protective_stop', 'std_msgs/msg/Bool', 'latched'),     # collision_monitor
-    Topic('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),  # bridge, monitor, managers
-    Topic('/robot_description', 'std_msgs/msg/String', 'latched'),  # state_publisher
+    Topic(CLOCK, 'rosgraph_msgs/msg/Clock'),                       # pybullet_bridge
+    Topic('joint_states', 'sensor_msgs/msg/JointState'),
+    Topic('conveyor/items', 'visualization_msgs/msg/MarkerArray'),
+    Topic('conveyor/events', _STATUS, 'events'),
+    Topic('collab/target', _POINT),                                # automation_manager
+    Topic('collab/target_trajectory', _TRAJECTORY),                # ... its plan of a move
+    Topic('collision_monitor/min_distance', 'std_msgs/msg/Float64'),
+    Topic('collision_monitor/status', _STATUS),
+    Topic('collision_monitor/stops', _STATUS, 'events'),           # protective / emergency
+    Topic('collision_monitor/capsules', 'visualization_msgs/msg/MarkerArray'),
+    Topic('replication_manager/mirror_error', 'std_msgs/msg/Float64'),
+    Topic('replication_manager/status', _STATUS),
+    Topic('automation_manager/stats', _STATUS),
+    Topic('emergency_stop', 'std_msgs/msg/Bool', 'latched'),       # collision_monitor
+    Topic('protective_stop', 'std_msgs/msg/Bool', 'latched'),      # collision_monitor
+    Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),   # bridge, monitor, managers
+    Topic('robot_description', 'std_msgs/msg/String', 'latched'),  # state_publisher
     Topic('/rosout', 'rcl_interfaces/msg/Log', 'events'),  # rcl's (records.bag.ROSOUT_QOS)
 )
 #: the topics of each robot, ``{robot}`` standing for its namespace
 ROBOT_TOPICS: Tuple[Topic, ...] = (
-    Topic('/{robot}/target', _POINT),                              # the job or the mirror
-    Topic('/{robot}/target_trajectory', _TRAJECTORY),              # the job's plan of a move
-    Topic('/{robot}/joint_trajectory', _TRAJECTORY),               # its planner
-    Topic('/{robot}/planned_path', 'nav_msgs/msg/Path'),
-    Topic('/{robot}/planner_status', _STATUS, 'events'),
-    Topic('/{robot}/execution_status', _STATUS, 'events'),         # pybullet_bridge
+    Topic('{robot}/target', _POINT),                               # the job or the mirror
+    Topic('{robot}/target_trajectory', _TRAJECTORY),               # the job's plan of a move
+    Topic('{robot}/joint_trajectory', _TRAJECTORY),                # its planner
+    Topic('{robot}/planned_path', 'nav_msgs/msg/Path'),
+    Topic('{robot}/planner_status', _STATUS, 'events'),
+    Topic('{robot}/execution_status', _STATUS, 'events'),          # pybullet_bridge
 )
 
 
-def topics(robots: Sequence[str] = ROBOTS) -> List[Topic]:
+def topics(robots: Sequence[str] = ROBOTS, namespace: Optional[str] = '') -> List[Topic]:
     """Return the topics of a run: :data:`TOPICS`, then :data:`ROBOT_TOPICS` per robot.
 
+    The names are absolute, resolved in the cell's ``namespace`` (:func:`resolve`).
+
     :param robots: the robot namespaces, e.g. ``('scara_left', 'scara_right')``.
+    :param namespace: the cell's namespace (default: the root).
     """
-    return list(TOPICS) + [replace(t, name=t.name.format(robot=robot))
-                           for robot in robots for t in ROBOT_TOPICS]
+    return [replace(t, name=resolve(t.name, namespace)) for t in TOPICS] + [
+        replace(t, name=resolve(t.name.format(robot=robot), namespace))
+        for robot in robots for t in ROBOT_TOPICS]
 
 
-def topic(name: str, robots: Sequence[str] = ROBOTS) -> Topic:
-    """Return the topic called ``name`` (absolute).
+def topic(name: str, robots: Sequence[str] = ROBOTS, namespace: Optional[str] = '') -> Topic:
+    """Return the topic called ``name`` (relative, or absolute), resolved in ``namespace``.
 
     :raises KeyError: if the graph has no such topic.
     """
+    full = resolve(name, namespace)
     try:
-        return next(t for t in topics(robots) if t.name == name)
+        return next(t for t in topics(robots, namespace) if t.name == full)
     except StopIteration:
-        raise KeyError(f'no topic {name!r} in the graph') from None
+        raise KeyError(f'no topic {full!r} in the graph') from None
 
 
 def message_class(type_name: str):
@@ -251,10 +327,12 @@ def job_nodes(automation: bool = True, viewer: bool = False,
 def lockstep_expect(nodes: Sequence[NodeSpec]) -> List[str]:
     """Return the bridge's ``lockstep_expect`` for a run of ``nodes``: those that answer.
 
+    Relative names: the bridge resolves them in its own namespace.
+
     >>> lockstep_expect(job_nodes())[:2]
-    ['/left_planner', '/right_planner']
+    ['left_planner', 'right_planner']
     """
-    return [f'/{n.name}' for n in nodes if n.lockstep]
+    return [n.name for n in nodes if n.lockstep]
 
 
 def job_params(mode: str) -> Dict[str, Dict[str, str]]:
@@ -287,17 +365,22 @@ def param_value(value) -> str:
 
 
 def ros_args(configs: Sequence[str] = (), params: Optional[Mapping[str, object]] = None,
-             sim_time: bool = True, config_dir: Optional[Path] = None) -> List[str]:
+             sim_time: bool = True, config_dir: Optional[Path] = None,
+             namespace: Optional[str] = '') -> List[str]:
     """Return a node's ``--ros-args``: sim time, ``--params-file`` per config, ``-p`` per param.
+
+    In a ``namespace`` also the node's namespace and the cell's remaps (:func:`node_args`).
 
     :param configs: ``config/<name>.yaml`` files, in order (later ones override).
     :param params: single parameters, set after the files.
     :param config_dir: where the files are (default: the package's config folder).
+    :param namespace: the cell's namespace (default: the root, no remaps).
     """
     if config_dir is None and configs:
         from scara_collab.core.paths import config_dir as package_config_dir
         config_dir = package_config_dir()
     out = ['--ros-args', '-p', f'use_sim_time:={"true" if sim_time else "false"}']
+    out += node_args(namespace)[1:]
     for name in configs:
         out += ['--params-file', str(Path(config_dir) / f'{name}.yaml')]
     for key, value in (params or {}).items():

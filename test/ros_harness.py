@@ -16,21 +16,30 @@ from scara_collab.graph import ros_args
 CONFIG = Path(__file__).resolve().parents[1] / 'config'
 
 
-def params_args(*names: str, overrides: dict = None) -> List[str]:
-    """``--ros-args`` loading the real ``config/<name>.yaml`` files, plus ``-p`` overrides."""
-    return ros_args(names, overrides, config_dir=CONFIG)
+def params_args(*names: str, overrides: dict = None, namespace: str = '') -> List[str]:
+    """``--ros-args`` loading the real ``config/<name>.yaml`` files, plus ``-p`` overrides.
+
+    In a ``namespace``, also the cell's namespace and remaps (:func:`scara_collab.graph.ros_args`).
+    """
+    return ros_args(names, overrides, config_dir=CONFIG, namespace=namespace)
 
 
 class Graph:
-    """A Context, an executor and the nodes added to it; closed by :meth:`close`."""
+    """A Context, an executor and the nodes added to it; closed by :meth:`close`.
 
-    def __init__(self):
+    :param namespace: the cell's namespace: the probe and the graph's nodes live there, so
+        relative names (``collect(JointState, 'joint_states')``) are the cell's.
+    """
+
+    def __init__(self, namespace: str = ''):
         """Initialise a Context of its own, with an executor and the ``probe`` node."""
+        self.namespace = graph.namespace_of(namespace)
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes: List[Node] = []
-        self.probe = self.add(Node('probe', context=self.context))
+        self.probe = self.add(Node('probe', context=self.context,
+                                   cli_args=graph.node_args(self.namespace)))
 
     def add(self, node: Node) -> Node:
         """Add ``node`` to the executor and return it."""
@@ -45,7 +54,8 @@ class Graph:
         """
         spec = graph.node(name)
         return self.add(spec.build(context=self.context,
-                                   cli_args=params_args(*spec.configs, overrides=overrides)))
+                                   cli_args=params_args(*spec.configs, overrides=overrides,
+                                                        namespace=self.namespace)))
 
     def spin_until(self, predicate: Callable[[], bool], timeout: float = 20.0) -> bool:
         """Spin until ``predicate()`` is true; False if ``timeout`` wall seconds pass first."""

@@ -50,9 +50,10 @@ from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.faults import call_with_faults, declare_faults
+from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import DEFAULT, LATCHED
-from scara_collab.nodes.runner import guarded, run_node
+from scara_collab.nodes.runner import run_node
 from scara_collab.nodes.sim_timer import every
 
 
@@ -87,40 +88,40 @@ class AutomationManager(Node):
 
         self.job = SortingJob(self.cell, self.settings, plan, self._log)
         self.faults = declare_faults(self)
-        self.target_pub = {a.name: self.create_publisher(PointStamped, f'/{a.name}/target', 10)
+        self.target_pub = {a.name: self.create_publisher(PointStamped, f'{a.name}/target', 10)
                            for a in self.cell.arms}
         self.plan_pub = {a.name: self.create_publisher(JointTrajectory,
-                                                       f'/{a.name}/target_trajectory', 10)
+                                                       f'{a.name}/target_trajectory', 10)
                          for a in self.cell.arms}
-        self.collab_pub = self.create_publisher(PointStamped, '/collab/target', 10)
+        self.collab_pub = self.create_publisher(PointStamped, 'collab/target', 10)
         self.collab_plan_pub = self.create_publisher(JointTrajectory,
-                                                     '/collab/target_trajectory', 10)
+                                                     'collab/target_trajectory', 10)
         self.stats_pub = self.create_publisher(DiagnosticStatus, '~/stats', 10)
         self.diagnostics = Diagnostics(self, self.stats_pub)  # and on /diagnostics
-        self.grippers = {a.name: self.create_client(SetBool, f'/{a.name}/gripper')
+        self.grippers = {a.name: self.create_client(SetBool, f'{a.name}/gripper')
                          for a in self.cell.arms}
         self.status_subs = {}
         for a in self.cell.arms:
             self.status_subs[a.name] = (
-                self.create_subscription(DiagnosticStatus, f'/{a.name}/planner_status',
+                self.create_subscription(DiagnosticStatus, f'{a.name}/planner_status',
                                          guarded(self, self._on_planner), 50),
-                self.create_subscription(DiagnosticStatus, f'/{a.name}/execution_status',
+                self.create_subscription(DiagnosticStatus, f'{a.name}/execution_status',
                                          guarded(self, self._on_execution), 50),
-                self.create_subscription(JointTrajectory, f'/{a.name}/joint_trajectory',
+                self.create_subscription(JointTrajectory, f'{a.name}/joint_trajectory',
                                          guarded(self, self._on_trajectory), 10))
         # every state and item list, each in turn: with a depth of 1, the callback of one
         # takes the newest (one published after the next /clock, if the node is behind), and
         # the tick sees it or not by timing (README, *Repeatable runs*)
         self.world_subs = (
-            self.create_subscription(MarkerArray, '/conveyor/items',
+            self.create_subscription(MarkerArray, 'conveyor/items',
                                      guarded(self, self._on_items), DEFAULT),
-            self.create_subscription(DiagnosticStatus, '/conveyor/events',
+            self.create_subscription(DiagnosticStatus, 'conveyor/events',
                                      guarded(self, self._on_event), 100),
-            self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
+            self.create_subscription(JointState, 'joint_states', guarded(self, self._on_state),
                                      DEFAULT))
         self._stops = {'emergency': False, 'protective': False}  # the job pauses under either
         for kind in self._stops:
-            self.create_subscription(Bool, f'/{kind}_stop', guarded(
+            self.create_subscription(Bool, f'{kind}_stop', guarded(
                 self, lambda msg, k=kind: self._on_estop(k, msg)), LATCHED)
         self.create_service(Trigger, '~/start', guarded(self, self._on_start, service=True))
         self.create_service(Trigger, '~/stop', guarded(self, self._on_stop, service=True))
@@ -218,7 +219,7 @@ class AutomationManager(Node):
                 missing += [f'{sub.topic_name} (no publisher)'
                             for sub in self.status_subs[robot] if sub.get_publisher_count() == 0]
                 if not self.grippers[robot].service_is_ready():
-                    missing.append(f'/{robot}/gripper (no server)')
+                    missing.append(f'{self.grippers[robot].srv_name} (no server)')
         missing += [f'{sub.topic_name} (no publisher)'
                     for sub in self.world_subs if sub.get_publisher_count() == 0]
         return missing

@@ -344,16 +344,16 @@ class CellViewer(Node):
         self.frames = 0  # scene updates that moved the arms
         self._dirty = set()
 
-        self.create_subscription(JointState, '/joint_states', self._on_state,
+        self.create_subscription(JointState, 'joint_states', self._on_state,
                                  QoSProfile(depth=1))
-        self.create_subscription(MarkerArray, '/conveyor/items', self._on_items, 10)
+        self.create_subscription(MarkerArray, 'conveyor/items', self._on_items, 10)
         for a in self.cell.arms:
-            self.create_subscription(Path, f'/{a.name}/planned_path',
+            self.create_subscription(Path, f'{a.name}/planned_path',
                                      lambda m, n=a.name: self._on_path(n, m), 10)
-        self.create_subscription(Float64, '/collision_monitor/min_distance',
+        self.create_subscription(Float64, 'collision_monitor/min_distance',
                                  self._on_distance, 10)
-        self.create_subscription(Bool, '/emergency_stop', self._on_estop, LATCHED)
-        self.create_subscription(DiagnosticStatus, '/automation_manager/stats', self._on_stats,
+        self.create_subscription(Bool, 'emergency_stop', self._on_estop, LATCHED)
+        self.create_subscription(DiagnosticStatus, 'automation_manager/stats', self._on_stats,
                                  10)
         self.create_timer(1.0 / rate, self._draw,
                           clock=Clock(clock_type=ClockType.STEADY_TIME))

@@ -47,9 +47,10 @@ from scara_collab.core.motion import Heard, Lateness
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
+from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.params import declare_checked
 from scara_collab.nodes.qos import DEFAULT, EVENTS, LATCHED
-from scara_collab.nodes.runner import guarded, run_node
+from scara_collab.nodes.runner import run_node
 from scara_collab.nodes.sim_timer import every
 
 PARTS = ('link 1', 'link 2', 'quill')
@@ -117,24 +118,24 @@ class CollisionMonitor(Node):
         self._next_marker = 0.0
         self._published_min: Optional[float] = None
         self.dist_pub = self.create_publisher(Float64, '~/min_distance', 10)
-        self.estop_pub = self.create_publisher(Bool, '/emergency_stop', LATCHED)
-        self.protective_pub = self.create_publisher(Bool, '/protective_stop', LATCHED)
+        self.estop_pub = self.create_publisher(Bool, 'emergency_stop', LATCHED)
+        self.protective_pub = self.create_publisher(Bool, 'protective_stop', LATCHED)
         self.stops_pub = self.create_publisher(DiagnosticStatus, '~/stops', EVENTS)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
         self.diagnostics = Diagnostics(self, self.status_pub)  # and on /diagnostics
         self.marker_pub = self.create_publisher(MarkerArray, '~/capsules', 10)
         # every state (a depth of 1 would skip one whenever the monitor is a state behind)
-        self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
+        self.create_subscription(JointState, 'joint_states', guarded(self, self._on_state),
                                  DEFAULT)
         self.create_service(Trigger, '~/clear', guarded(self, self._on_clear, True))
         # anyone may ask for an emergency stop (the monitor's own true comes back here too)
-        self.create_subscription(Bool, '/emergency_stop', guarded(self, self._on_estop), LATCHED)
+        self.create_subscription(Bool, 'emergency_stop', guarded(self, self._on_estop), LATCHED)
         for arm in self.cell.arms:
             self.create_subscription(
-                JointTrajectory, f'/{arm.name}/joint_trajectory',
+                JointTrajectory, f'{arm.name}/joint_trajectory',
                 guarded(self, lambda msg, n=arm.name: self._on_trajectory(n, msg)), 10)
             self.create_subscription(
-                DiagnosticStatus, f'/{arm.name}/execution_status',
+                DiagnosticStatus, f'{arm.name}/execution_status',
                 guarded(self, self._on_execution), 50)
         every(self, self.stale_after / 2, self._watch)  # on the sim clock
         every(self, 1.0, self._publish_status)

@@ -10,7 +10,7 @@ from rclpy.node import Node
 
 from scara_collab.nodes.qos import DEFAULT
 
-TOPIC = '/diagnostics'
+TOPIC = 'diagnostics'
 
 
 class Diagnostics:

@@ -43,6 +43,8 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
+from scara_collab.nodes.guarded import guarded
+
 KINDS = ('drop', 'delay', 'latency')
 FORMS = ('drop:/<name>:<N>, delay:/<name>:<N>:<seconds> or '
          'latency:/<name>:<mean seconds>:<jitter seconds>')
@@ -229,7 +231,6 @@ class _LineDelivery:
     """
 
     def __init__(self, node: Node, line: LatencyLine):
-        from scara_collab.nodes.runner import guarded  # runner -> lockstep; nodes import us
         from scara_collab.nodes.sim_timer import SimTimer
         self.line = line
         self._clock = node.get_clock()

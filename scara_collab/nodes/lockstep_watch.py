@@ -27,7 +27,7 @@ from std_msgs.msg import Header
 
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import lockstep
-from scara_collab.nodes.runner import guarded
+from scara_collab.nodes.guarded import guarded
 
 # the launcher's look at /sim/lockstep, taken once a second: the newest 200 answers (40 clocks
 # of 5 nodes; a live node is never more than the lockstep window behind), best effort so that

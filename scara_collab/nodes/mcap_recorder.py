@@ -5,7 +5,9 @@ wire) on a node of its own that no executor spins; a wall-clock timer on the nod
 (the launcher's run recorder) drains their queues every ``period`` and hands every message,
 with its receive time, to the file (:class:`scara_collab.records.mcap_log.McapWriter`, which says
 how the file is laid out and timed). The topics and their QoS are the graph's
-(:func:`scara_collab.graph.topics`, :func:`scara_collab.nodes.qos.recording`).
+(:func:`scara_collab.graph.topics`, :func:`scara_collab.nodes.qos.recording`). A node in a
+cell's namespace records that cell's topics (``/cell_1/joint_states``); the file names them as
+a cell in the root namespace would (``/joint_states``), so every cell's file reads alike.
 
 Usage (a sketch, not a doctest: it needs a running node, e.g. the launcher's run
 recorder)::
@@ -44,7 +46,12 @@ class McapLog(McapWriter):
                  topics: Optional[Iterable[graph.Topic]] = None,
                  robots: Sequence[str] = graph.ROBOTS, period: float = 0.05, **writer):
         """Open the file, subscribe every topic raw and start the timer that drains them."""
-        topics = list(graph.topics(robots) if topics is None else topics)
+        wire: Dict[str, str] = {}  # name in the file -> name on the graph (else the same)
+        if topics is None:
+            topics = graph.topics(robots)
+            ns = graph.namespace_of(node.get_namespace())
+            wire = {t.name: w.name for t, w in zip(topics, graph.topics(robots, ns))}
+        topics = list(topics)
         classes = {t.type: graph.message_class(t.type) for t in topics}
         super().__init__(path, topics, sim_clock=node.get_parameter('use_sim_time').value,
                          **writer)
@@ -53,11 +60,11 @@ class McapLog(McapWriter):
         # The subscriptions live on a node of their own that no executor spins: drain() takes
         # their queues in one go (rclpy's take_message), which costs a fifth of an executor
         # callback per message and leaves the recorder node's wait set as it was.
-        self._reader = Node(f'{node.get_name()}_mcap_log', context=node.context,
-                            start_parameter_services=False)
+        self._reader = Node(f'{node.get_name()}_mcap_log', namespace=node.get_namespace(),
+                            context=node.context, start_parameter_services=False)
         self._subs: List = [
-            self._reader.create_subscription(classes[t.type], t.name, _never_called,
-                                             qos.recording(t), raw=True)
+            self._reader.create_subscription(classes[t.type], wire.get(t.name, t.name),
+                                             _never_called, qos.recording(t), raw=True)
             for t in self.wire_topics]
         self._timer = node.create_timer(float(period), self.drain,
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))

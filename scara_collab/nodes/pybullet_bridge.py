@@ -22,14 +22,14 @@ Parameter ``faults`` (:mod:`scara_collab.nodes.faults`) can lose or delay its st
 ``/sim/pause``, ``/sim/resume``, ``/sim/step`` and ``/sim/reset`` (std_srvs/Trigger) control
 the simulation (:mod:`scara_collab.nodes.sim_control`).
 
-Lockstep (:mod:`scara_collab.nodes.lockstep`): the nodes on sim time answer each ``/clock``
-on ``/sim/lockstep``, and the bridge never steps more than ``lockstep_window`` sim seconds
+Lockstep (:mod:`scara_collab.nodes.lockstep`): the nodes on sim time answer each clock
+on ``sim/lockstep``, and the bridge never steps more than ``lockstep_window`` sim seconds
 (default 0.02, 0 = off) beyond the oldest answer, so a node that is computing holds sim time
 instead of falling behind it. A node that keeps sim time waiting for ``lockstep_timeout`` wall
-seconds (per node: ``lockstep_timeouts``, e.g. ``['/collision_monitor:2.0']``) is no longer
+seconds (per node: ``lockstep_timeouts``, e.g. ``['collision_monitor:2.0']``) is no longer
 waited for; the wait is counted for each node on its own, so one frozen node does not take the
 others down. The arms never move without the nodes named in ``lockstep_guards`` (default
-``['/collision_monitor']``): before such a node is dropped, or when it leaves, both arms are
+``['collision_monitor']``): before such a node is dropped, or when it leaves, both arms are
 held (status ``held``, reason ``<node> silent ...: holding``) and trajectories are refused
 until it answers again (status ``cleared``). The nodes named in ``lockstep_expect`` are waited
 for from the start (as if they had answered sim time 0), so the first steps do not depend on
@@ -56,15 +56,17 @@ from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import within_limits
 from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.model import load_cell
+from scara_collab.graph import CLOCK
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.execution import Execution
 from scara_collab.nodes.faults import declare_faults, FaultyPublisher
+from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.lockstep import LockstepGate, parse_timeouts
 from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import EVENTS, LATCHED
-from scara_collab.nodes.runner import guarded, run_node
+from scara_collab.nodes.runner import run_node
 from scara_collab.nodes.sim_control import SimControl
 from scara_collab.nodes.trajectory_action import FollowJointTrajectory, TrajectoryActions
 from scara_collab.sim.cell_sim import CellSim
@@ -155,8 +157,8 @@ class PyBulletBridge(Node):
                              on_change=self._on_config)
         params = declare_checked(self, PARAMETERS, RULES)
         for key, default, what in (
-                ('lockstep_timeouts', [''], "per-node lockstep_timeout: ['/<node>:<s>', ...]"),
-                ('lockstep_guards', ['/collision_monitor'], 'nodes the arms never move without'),
+                ('lockstep_timeouts', [''], "per-node lockstep_timeout: ['<node>:<s>', ...]"),
+                ('lockstep_guards', ['collision_monitor'], 'nodes the arms never move without'),
                 ('lockstep_expect', [''], 'participants waited for from the start')):
             self.declare_parameter(key, default, ParameterDescriptor(
                 type=ParameterType.PARAMETER_STRING_ARRAY, description=what))
@@ -184,7 +186,7 @@ class PyBulletBridge(Node):
         self.faults = declare_faults(self)
         self.execution = Execution(self.cell, self.sim, self._report, self.get_logger().warning,
                                    blocked=self._unguarded)
-        self.clock_pub = self.create_publisher(ClockMsg, '/clock', STATE_QOS)
+        self.clock_pub = self.create_publisher(ClockMsg, CLOCK, STATE_QOS)
         self.state_pub = FaultyPublisher(self, self.faults, self.create_publisher(
             JointState, 'joint_states', STATE_QOS))  # direct when no fault names it
         self.items_pub = self.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
@@ -213,7 +215,8 @@ class PyBulletBridge(Node):
         self.gate = LockstepGate(
             self, window, float(params['lockstep_timeout']),
             on_answer=self._wake,
-            timeouts=parse_timeouts(self.get_parameter('lockstep_timeouts').value or []),
+            timeouts=parse_timeouts(self.get_parameter('lockstep_timeouts').value or [],
+                                    self.get_namespace()),
             guards=[g for g in self.get_parameter('lockstep_guards').value or [] if g.strip()],
             on_guard=self._on_guard,
             expect=[n for n in self.get_parameter('lockstep_expect').value or [] if n.strip()])

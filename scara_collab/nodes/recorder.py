@@ -1,13 +1,15 @@
 """``run_recorder``: the node inside the launcher that records a run (sim time).
 
-Subscribes ``/joint_states`` (every message becomes a row of ``timeseries.csv``),
+Subscribes ``joint_states`` (every message becomes a row of ``timeseries.csv``),
 ``/conveyor/events`` (``events.csv``), the latched ``/emergency_stop``, the collision
 monitor's stops (``/collision_monitor/stops``) and the statuses that own the run's figures
 (:mod:`scara_collab.nodes.protocol`); names, types and QoS are the graph's
 (:func:`scara_collab.graph.topic`, :func:`scara_collab.nodes.qos.recording`). While it
-records it also looks at the graph once a wall second (``/clock``'s publishers, the node
+records it also looks at the graph once a wall second (the clock's publishers, the node
 names: :meth:`RunRecorder.look`) and notes each backward jump of its sim clock, for the
-summary's foreign clocks and second graphs. The node is the subscriptions, the looks and the
+summary's foreign clocks and second graphs. Its names are relative: in a cell's ``namespace``
+it records that cell (:func:`scara_collab.graph.node_args`) and looks at that cell's clock and
+node names only. The node is the subscriptions, the looks and the
 message conversions; what it hears is kept by the record it also is
 (:class:`scara_collab.records.record.RunRecord`: the files, the job window, the summary, the
 plots, the verdict). The handlers ``on_*`` are public so a test can feed them messages
@@ -31,9 +33,9 @@ from scara_collab.core.model import CellModel
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes import qos
-from scara_collab.nodes.runner import guarded
-from scara_collab.records.graph_watch import full_name
-from scara_collab.records.record import RunRecord
+from scara_collab.nodes.guarded import guarded
+from scara_collab.records.graph_watch import full_name, GraphWatch
+from scara_collab.records.record import ONE_PER_RUN, RunRecord
 
 #: wall s between two looks at the graph
 LOOK_PERIOD = 1.0
@@ -47,28 +49,34 @@ class RunRecorder(Node, RunRecord):
     :param cell: the cell model; default ``load_cell(profile)``.
     :param profile: link profile for the default cell model (and the summary).
     :param batch: joint states per CSV write (see :class:`RunLog`).
+    :param namespace: the cell's namespace (default: the root).
     :param kwargs: passed to :class:`rclpy.node.Node` (e.g. ``context``).
     """
 
     def __init__(self, directory: Union[str, Path], mode: str = 'idle',
                  cell: Optional[CellModel] = None, profile: Optional[str] = None,
-                 batch: int = 200, **kwargs):
+                 batch: int = 200, namespace: str = '', **kwargs):
         """Create the node on sim time, open the record and subscribe the topics it records."""
         overrides = list(kwargs.pop('parameter_overrides', []))
         overrides.append(Parameter('use_sim_time', Parameter.Type.BOOL, True))
-        Node.__init__(self, 'run_recorder', parameter_overrides=overrides, **kwargs)
+        self.namespace = graph.namespace_of(namespace)
+        cli_args = graph.node_args(self.namespace) + list(kwargs.pop('cli_args', None) or [])
+        Node.__init__(self, 'run_recorder', parameter_overrides=overrides, cli_args=cli_args,
+                      **kwargs)
         RunRecord.__init__(self, directory, mode, cell, profile, batch)
+        self.graph_watch = GraphWatch(ONE_PER_RUN, self.namespace)  # this cell's names
+        self.clock_topic = graph.resolve(graph.CLOCK, self.namespace)
         self.stamps = conv.StampGate()  # states must carry the sim clock's time
         self._index: Dict[tuple, np.ndarray] = {}
         self._names = list(self.cell.leader.joint_names) + list(self.cell.follower.joint_names)
         # no exception escapes a callback (runner.guarded: logged, the recording goes on)
-        for name, callback in (('/joint_states', self.on_joint_state),
-                               ('/conveyor/events', self.on_event),
-                               ('/automation_manager/stats', self.on_stats),
-                               ('/collision_monitor/status', self.on_monitor),
-                               ('/replication_manager/status', self.on_mirror),
-                               ('/collision_monitor/stops', self.on_stop),
-                               ('/emergency_stop', self.on_estop)):
+        for name, callback in (('joint_states', self.on_joint_state),
+                               ('conveyor/events', self.on_event),
+                               ('automation_manager/stats', self.on_stats),
+                               ('collision_monitor/status', self.on_monitor),
+                               ('replication_manager/status', self.on_mirror),
+                               ('collision_monitor/stops', self.on_stop),
+                               ('emergency_stop', self.on_estop)):
             topic = graph.topic(name)
             self.create_subscription(graph.message_class(topic.type), name,
                                      guarded(self, callback), qos.recording(topic))
@@ -82,7 +90,7 @@ class RunRecorder(Node, RunRecord):
 
     @property
     def sim_time(self) -> float:
-        """Latest sim time heard on ``/clock``, s; 0 before any.
+        """Latest sim time heard on the cell's clock, s; 0 before any.
 
         The run's time is the bridge's clock, never a joint state's stamp: states are let
         through only when their stamps agree with it (:class:`conversions.StampGate`).
@@ -169,20 +177,20 @@ class RunRecorder(Node, RunRecord):
             self.mirror = status
 
     def on_estop(self, msg: Bool) -> None:
-        """Take the latched ``/emergency_stop`` (its holds, its rising edges)."""
+        """Take the latched ``emergency_stop`` (its holds, its rising edges)."""
         self.add_estop(bool(msg.data))
 
     def on_jump(self, jump) -> None:
-        """Note a backward jump of the sim clock (a ``/clock`` older than the last one)."""
+        """Note a backward jump of the sim clock (a clock older than the last one)."""
         after = self.sim_time
         self.clock_back(after - jump.delta.nanoseconds * 1e-9, after)
 
     def look(self) -> None:
-        """Look at the graph (wall timer, while recording): ``/clock``'s publishers, the nodes."""
+        """Look at the graph (wall timer, while recording): the clock's publishers, the nodes."""
         if not self.recording:
             return
         clocks = [full_name(i.node_namespace, i.node_name)
-                  for i in self.get_publishers_info_by_topic('/clock')]
+                  for i in self.get_publishers_info_by_topic(self.clock_topic)]
         nodes = [full_name(ns, n) for n, ns in self.get_node_names_and_namespaces()]
         self.look_at_graph(clocks, nodes)
 

@@ -41,9 +41,10 @@ from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
+from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.params import declare_checked
 from scara_collab.nodes.qos import DEFAULT, EVENTS
-from scara_collab.nodes.runner import guarded, run_node
+from scara_collab.nodes.runner import run_node
 
 SAME_START = 1e-6  # s: two starts closer than this are the same physics instant
 MIRRORED_START = 0.005  # m: a pair that starts with a larger error did not start mirrored
@@ -79,23 +80,23 @@ class ReplicationManager(Node):
         self.in_step_moves = 0
         self.not_in_step = 0
         self.last_reason = ''
-        self.lead_pub = self.create_publisher(PointStamped, f'/{lead.name}/target', 10)
-        self.foll_pub = self.create_publisher(PointStamped, f'/{foll.name}/target', 10)
+        self.lead_pub = self.create_publisher(PointStamped, f'{lead.name}/target', 10)
+        self.foll_pub = self.create_publisher(PointStamped, f'{foll.name}/target', 10)
         self.offer_pubs = tuple(self.create_publisher(JointTrajectory,
-                                                      f'/{a.name}/target_trajectory', 10)
+                                                      f'{a.name}/target_trajectory', 10)
                                 for a in (lead, foll))
         self.mirror_by_joints = joints_mirror(lead, foll)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
         self.diagnostics = Diagnostics(self, self.status_pub)  # and on /diagnostics
         self.error_pub = self.create_publisher(Float64, '~/mirror_error', 10)
-        self.create_subscription(PointStamped, '/collab/target', guarded(self, self._on_target),
+        self.create_subscription(PointStamped, 'collab/target', guarded(self, self._on_target),
                                  10)
-        self.create_subscription(JointTrajectory, '/collab/target_trajectory',
+        self.create_subscription(JointTrajectory, 'collab/target_trajectory',
                                  guarded(self, self._on_offer), 10)
         self._state_sub = None  # /joint_states only while mirroring (nothing to measure else)
         self._set_enabled(self.enabled)
         for arm in self.cell.arms:
-            self.create_subscription(DiagnosticStatus, f'/{arm.name}/execution_status',
+            self.create_subscription(DiagnosticStatus, f'{arm.name}/execution_status',
                                      guarded(self, self._on_execution), EVENTS)
         self.create_service(SetBool, '~/enable', guarded(self, self._on_enable, True))
         self.create_timer(1.0, guarded(self, self._publish_status))
@@ -107,7 +108,7 @@ class ReplicationManager(Node):
         self.enabled = on
         if on and self._state_sub is None:
             self._state_sub = self.create_subscription(
-                JointState, '/joint_states', guarded(self, self._on_state), DEFAULT)  # each
+                JointState, 'joint_states', guarded(self, self._on_state), DEFAULT)  # each
         elif not on and self._state_sub is not None:
             self.destroy_subscription(self._state_sub)
             self._state_sub = None

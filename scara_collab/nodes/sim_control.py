@@ -22,7 +22,7 @@ from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.node import Node
 from std_srvs.srv import Trigger
 
-from scara_collab.nodes.runner import guarded
+from scara_collab.nodes.guarded import guarded
 from scara_collab.sim.cell_sim import CellSim
 
 
@@ -58,7 +58,7 @@ class SimControl:
         self._step_count()  # refuse a bad value at start
         for name, callback in (('pause', self._pause), ('resume', self._resume),
                                ('step', self._step), ('reset', self._reset)):
-            node.create_service(Trigger, f'/sim/{name}', guarded(node, callback, service=True))
+            node.create_service(Trigger, f'sim/{name}', guarded(node, callback, service=True))
 
     def _step_count(self) -> int:
         n = self.node.get_parameter('sim_step_count').value

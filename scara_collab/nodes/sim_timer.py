@@ -20,7 +20,7 @@ from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
 
-from scara_collab.nodes.runner import guarded
+from scara_collab.nodes.guarded import guarded
 
 
 class SimTimer:

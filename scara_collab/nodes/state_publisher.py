@@ -19,8 +19,9 @@ from std_msgs.msg import String
 from scara_collab.core.frames import Tree
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.qos import DEFAULT, LATCHED, LATEST
-from scara_collab.nodes.runner import guarded, run_node
+from scara_collab.nodes.runner import run_node
 
 try:  # no PyPI wheel: built by scripts/build_interfaces, or from a ROS install
     from tf2_msgs.msg import TFMessage
@@ -41,20 +42,20 @@ class StatePublisher(Node):
         self.cell = load_cell(self.get_parameter('profile').value or None)
         self.tree = Tree.of(self.cell.urdf)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
-        self.description_pub = self.create_publisher(String, '/robot_description', LATCHED)
+        self.description_pub = self.create_publisher(String, 'robot_description', LATCHED)
         self.description_pub.publish(String(data=self.cell.urdf))
         self.tf_pub: Optional[object] = None
         if TFMessage is None:
             self.get_logger().info('tf2_msgs is not installed: /robot_description only, no '
                                    '/tf (./scripts/build_interfaces builds it)')
             return
-        static = self.create_publisher(TFMessage, '/tf_static', LATCHED)
+        static = self.create_publisher(TFMessage, 'tf_static', LATCHED)
         static.publish(TFMessage(transforms=[
             conv.transform_stamped(parent, child, pose, 0.0)
             for parent, child, pose in self.tree.static()]))
         self._static = static  # kept: a latched publisher must live on
-        self.tf_pub = self.create_publisher(TFMessage, '/tf', DEFAULT)
-        self.create_subscription(JointState, '/joint_states', guarded(self, self._on_state),
+        self.tf_pub = self.create_publisher(TFMessage, 'tf', DEFAULT)
+        self.create_subscription(JointState, 'joint_states', guarded(self, self._on_state),
                                  LATEST)
         self.get_logger().info(f'publishing /tf for {len(self.tree.moving_joints)} joints and '
                                f'/tf_static for {len(self.tree.static())} fixed ones')

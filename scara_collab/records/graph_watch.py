@@ -15,12 +15,20 @@ The bridge is the run's only clock and each run has one of each of its nodes, so
   The launcher refuses to start next to a graph that is already there; this catches the one
   that comes later, or at the same moment.
 
+A cell in a namespace has its own clock (``<ns>/clock``) and its nodes' full names are in that
+namespace, so another cell under another namespace on the same domain is neither.
+
 >>> watch = GraphWatch(['pybullet_bridge', 'automation_manager'])
 >>> watch.look(0.0, 1.0, ['/pybullet_bridge'], ['/pybullet_bridge', '/automation_manager'])
 >>> watch.look(4.0, 5.0, ['/pybullet_bridge', '/player'], ['/pybullet_bridge', '/player'])
 >>> watch.look(5.0, 6.0, ['/pybullet_bridge', '/player'], ['/pybullet_bridge', '/player'])
 >>> [(c['time'], c['publishers'], c['nodes']) for c in watch.summary()['foreign_clocks']]
 [(4.0, 2, ['/player', '/pybullet_bridge'])]
+>>> cell = GraphWatch(['pybullet_bridge'], namespace='/cell_1')
+>>> cell.look(0.0, 1.0, ['/cell_1/pybullet_bridge'], ['/cell_1/pybullet_bridge',
+...                                                   '/cell_0/pybullet_bridge'])
+>>> cell.summary()['second_graphs'], sorted(cell.names)
+([], ['/cell_1/pybullet_bridge'])
 """
 from collections import Counter
 from typing import Dict, Iterable, List, Optional, Sequence
@@ -37,13 +45,14 @@ def full_name(namespace: str, name: str) -> str:
 class GraphWatch:
     """Foreign clocks and second graphs seen during a run; see the module docstring.
 
-    :param names: the node names a run has one of each (root namespace), e.g. the cell's
-        nodes and the launcher's own.
+    :param names: the node names a run has one of each (in the cell's namespace), e.g. the
+        cell's nodes and the launcher's own.
+    :param namespace: the cell's namespace (default: the root).
     """
 
-    def __init__(self, names: Iterable[str]):
+    def __init__(self, names: Iterable[str], namespace: str = ''):
         """Watch for a second node of any of ``names``; nothing seen yet."""
-        self.names = frozenset(full_name('/', n.lstrip('/')) for n in names)
+        self.names = frozenset(full_name(namespace or '/', n.lstrip('/')) for n in names)
         self.foreign_clocks: List[Dict[str, object]] = []
         self.second_graphs: List[Dict[str, object]] = []
         self.jumps: List[Dict[str, float]] = []
@@ -58,7 +67,7 @@ class GraphWatch:
 
         :param t: sim time now, s.
         :param wall: wall seconds since the recording began.
-        :param clock_publishers: the full node name of each publisher of ``/clock``.
+        :param clock_publishers: the full node name of each publisher of the cell's clock.
         :param nodes: the full name of each node on the graph (repeats included).
         """
         self.looks += 1

@@ -3,7 +3,8 @@
 Every wait spins the launcher's executor (the run recorder's) and has a timeout that ends the
 run with an error naming what did not come (:class:`~scara_collab.run.supervisor.RunEnd`);
 while it waits, the launcher's supervision runs (``check``: signals, dead node processes,
-silent nodes).
+silent nodes). Names are relative to the cell's namespace (:func:`scara_collab.graph.resolve`):
+``call(Trigger, 'sim/resume', ...)`` calls this cell's bridge.
 """
 import time
 from typing import Callable, Dict, List, Optional
@@ -45,11 +46,14 @@ class GraphClient:
         :class:`~scara_collab.run.supervisor.RunEnd` to end the run.
     :param signals: the signals the launcher got so far (a second one ends any wait).
     :param timeout: the default wall seconds of a wait (``--ready-timeout``).
+    :param namespace: the cell's namespace (default: the root).
     """
 
     def __init__(self, node: Node, executor: Executor, console: Console, faults: FaultPlan,
-                 check: Callable[[], None], signals: List[str], timeout: float):
+                 check: Callable[[], None], signals: List[str], timeout: float,
+                 namespace: str = ''):
         """Keep what the waits and calls need; no client is created yet."""
+        self.namespace = graph.namespace_of(namespace)
         self.node = node
         self.executor = executor
         self.console = console
@@ -91,7 +95,8 @@ class GraphClient:
 
     # --- services and parameters -----------------------------------------------------------
     def client(self, srv_type, name: str):
-        """Return the client of service ``name``, created on first use."""
+        """Return the client of service ``name`` (in the cell), created on first use."""
+        name = graph.resolve(name, self.namespace)
         if name not in self._clients:
             self._clients[name] = self.node.create_client(srv_type, name)
         return self._clients[name]
@@ -107,6 +112,7 @@ class GraphClient:
         so the request is repeated; the servers are idempotent, so a repeat is safe.
         """
         cli = self.client(srv_type, name)
+        name = cli.srv_name
         self.wait_until(cli.service_is_ready, timeout,
                         lambda: f'{what}: service {name} not available after {timeout:g} s',
                         supervise)
@@ -131,7 +137,8 @@ class GraphClient:
         """Set the bridge's dynamic parameters (``real_time_factor``, ``feed_interval``)."""
         timeout = timeout or self.timeout
         if self._bridge_params is None:
-            self._bridge_params = AsyncParameterClient(self.node, 'pybullet_bridge')
+            self._bridge_params = AsyncParameterClient(
+                self.node, graph.resolve('pybullet_bridge', self.namespace))
         client = self._bridge_params
         self.wait_until(client.services_are_ready, timeout,
                         lambda: f'pybullet_bridge parameter services not available after '
@@ -149,29 +156,31 @@ class GraphClient:
 
     # --- the graph -------------------------------------------------------------------------
     def duplicates(self, name: str) -> int:
-        """Return how many nodes called ``name`` (root namespace) are on the graph."""
+        """Return how many nodes called ``name`` (in the cell's namespace) are on the graph."""
+        here = self.namespace or '/'
         return sum(1 for n, ns in self.node.get_node_names_and_namespaces()
-                   if n == name and ns == '/')
+                   if n == name and ns == here)
 
     def _has(self, node_name: str, topic: str, kind: str) -> bool:
         """Return True if ``node_name`` has a ``kind`` (publisher, subscriber) on ``topic``."""
         query = {'publisher': self.node.get_publisher_names_and_types_by_node,
                  'subscriber': self.node.get_subscriber_names_and_types_by_node}[kind]
         try:
-            return any(name == topic for name, _ in query(node_name, '/'))
+            return any(name == topic for name, _ in query(node_name, self.namespace or '/'))
         except NodeNameNonExistentError:
             return False
 
     def ready_check(self, stage: Stage) -> Callable[[], bool]:
         """Return the readiness predicate of a stage (from :mod:`scara_collab.graph`)."""
         name, ready = stage.name, graph.node(stage.name).ready
+        topic = graph.resolve(ready.name, self.namespace)
         if ready.kind == 'subscribed':
-            return lambda: self._has(name, ready.name, 'subscriber')
+            return lambda: self._has(name, topic, 'subscriber')
         if ready.kind == 'published':
-            return lambda: self._has(name, ready.name, 'publisher')
+            return lambda: self._has(name, topic, 'publisher')
         if ready.kind == 'service':
-            return self.client(SERVICE_TYPES[ready.srv_type], ready.name).service_is_ready
+            return self.client(SERVICE_TYPES[ready.srv_type], topic).service_is_ready
         if ready.kind == 'page':  # on the graph, and its page answers
             url = f'http://127.0.0.1:{stage.params["port"]}/'
-            return lambda: self._has(name, ready.name, 'subscriber') and http_ok(url)
+            return lambda: self._has(name, topic, 'subscriber') and http_ok(url)
         raise ValueError(f'no readiness check of kind {ready.kind!r} ({name})')

@@ -55,6 +55,11 @@ the end, 5 a node silent longer than the bridge's ``lockstep_timeout`` (every si
 named, whatever its length), 6 a foreign ``/clock`` publisher or a second graph on the domain
 (seen at any time of the run), 130 SIGINT, 143 SIGTERM.
 
+``--namespace NS`` runs the whole cell under ``NS`` (every node with the graph's namespace
+and remaps, :func:`scara_collab.graph.ros_args`; the launcher's own nodes too): its topics,
+services, clock and lockstep are the cell's, its checks for a second clock or a second graph
+look at the cell's names, and a cell under another namespace on the same domain is not heard.
+
 ``--record`` also writes the run's topics to ``run.mcap`` from the launcher's own process
 (:mod:`scara_collab.nodes.mcap_recorder`, closed with the other run files); ``--animation``
 renders ``run.gif`` once the run's files are written (:mod:`scara_collab.run.animation`).
@@ -146,6 +151,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    'Gazebo (bridge lockstep_window 0; the nodes still answer for the '
                    'liveness watch and the arms still hold without the collision monitor) '
                    '(default: %(default)s)')
+    p.add_argument('--namespace', default='', metavar='NS',
+                   help='run the cell under the namespace NS (e.g. /cell_1): every node, topic '
+                   'and service of it, its clock and its lockstep, so cells in different '
+                   'namespaces share a ROS domain (default: the root namespace)')
     p.add_argument('--one-process', action='store_true',
                    help='run every node in one process on one executor (a component '
                    'container, scara_collab.run.container) instead of one process per node')
@@ -200,6 +209,10 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         parse_faults(args.fault)
     except ValueError as exc:
         p.error(f'--fault: {exc}')
+    try:
+        args.namespace = graph.namespace_of(args.namespace)
+    except ValueError as exc:
+        p.error(f'--namespace: {exc}')
     if args.step_chunk is not None and not args.step_chunk > 0:
         p.error('--step-chunk must be > 0')
     if not args.silent_timeout > 0:
@@ -263,8 +276,9 @@ class Launcher:
         self.context = rclpy.Context()
         rclpy.init(args=[], context=self.context,
                    signal_handler_options=SignalHandlerOptions.NO)
+        self.namespace = getattr(args, 'namespace', '')
         self.recorder = RunRecorder(output, args.mode, profile=args.profile,
-                                    context=self.context)
+                                    context=self.context, namespace=self.namespace)
         self.recorder.extra['lockstep'] = getattr(args, 'lockstep', 'on')
         if getattr(args, 'record', False):  # raw subscriptions on the recorder; finish() closes
             from scara_collab.nodes.mcap_recorder import McapLog
@@ -278,7 +292,7 @@ class Launcher:
         self.executor.add_node(self.recorder)
         self.ros = GraphClient(self.recorder, self.executor, console,
                                FaultPlan(getattr(args, 'fault', [])), self.check, self.signals,
-                               args.ready_timeout)
+                               args.ready_timeout, self.namespace)
         self.cpu = CpuMeter()
         self._next_poll = self._next_checkpoint = self._next_watch = 0.0
         self.rtf = args.rtf
@@ -286,7 +300,8 @@ class Launcher:
         one_process = getattr(args, 'one_process', False)  # nobody can be behind: no watch
         self.liveness = Liveness([] if one_process else [
             s.name for s in self.stages if graph.node(s.name).lockstep],
-                                 getattr(args, 'silent_timeout', 10.0), self.context)
+                                 getattr(args, 'silent_timeout', 10.0), self.context,
+                                 self.namespace)
 
     def on_signal(self, signum, _frame) -> None:
         """Handle SIGINT / SIGTERM: record it; at the second, say the nodes are killed now."""
@@ -334,14 +349,16 @@ class Launcher:
                          f'rtf {format_factor(self.rtf)}, lockstep '
                          f'{getattr(self.args, "lockstep", "on")}, output {self.output}')
         self.console.say(f'[launch] ROS_DOMAIN_ID {domain}, discovery '
-                         f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}')
+                         f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}'
+                         + (f', namespace {self.namespace}' if self.namespace else ''))
         if not self.with_automation:
             self.console.say(f'[launch] {AUTOMATION_MODULE} is not installed: idle graph '
                              'without the automation manager')
         for stage in self.stages:
             if self.ros.duplicates(stage.name):
-                raise RunEnd(f'a node named {stage.name} is already running on ROS_DOMAIN_ID '
-                             f'{domain}; stop it or use another ROS_DOMAIN_ID')
+                raise RunEnd(f'a node named {graph.resolve(stage.name, self.namespace)} is '
+                             f'already running on ROS_DOMAIN_ID {domain}; stop it or use '
+                             'another ROS_DOMAIN_ID or --namespace')
         container = None
         if getattr(self.args, 'one_process', False):  # every node at once, in one process
             container = self.processes.start(one_process(self.stages))
@@ -366,7 +383,7 @@ class Launcher:
             # refused while its endpoints are not matched yet (DDS discovery): ask again
             deadline = time.monotonic() + self.args.ready_timeout
             while True:
-                res = self.ros.call(Trigger, '/automation_manager/start', Trigger.Request(),
+                res = self.ros.call(Trigger, 'automation_manager/start', Trigger.Request(),
                                     self.args.ready_timeout, 'automation_manager')
                 if res.success:
                     break
@@ -387,7 +404,7 @@ class Launcher:
         if release:
             self.ros.set_bridge(**release)
             self.rtf_released = 'real_time_factor' in release
-        res = self.ros.call(Trigger, '/sim/resume', Trigger.Request(), self.args.ready_timeout,
+        res = self.ros.call(Trigger, 'sim/resume', Trigger.Request(), self.args.ready_timeout,
                             'pybullet_bridge')
         if not res.success:
             raise RunEnd(f'pybullet_bridge refused to resume: {res.message}')
@@ -453,7 +470,7 @@ class Launcher:
             self.recorder.extra['job_stop'] = 'not stopped: automation_manager does not answer'
             return
         try:
-            res = self.ros.call(Trigger, '/automation_manager/stop', Trigger.Request(), 5.0,
+            res = self.ros.call(Trigger, 'automation_manager/stop', Trigger.Request(), 5.0,
                                 'automation_manager', supervise=False, attempts=2,
                                 attempt_timeout=2.0)
         except RunEnd as exc:

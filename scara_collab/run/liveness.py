@@ -21,6 +21,7 @@ from typing import Dict, Iterable, Optional, Tuple
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 
+from scara_collab import graph
 from scara_collab.nodes import lockstep
 from scara_collab.nodes.lockstep_watch import LockstepWatch, LockstepWatchNode, WATCH_QOS
 
@@ -32,15 +33,20 @@ class Liveness:
         the watch is off.
     :param limit: wall seconds a node may leave a ``/clock`` unanswered (``--silent-timeout``).
     :param context: the launcher's rclpy context.
+    :param namespace: the cell's namespace (default: the root): its lockstep, its nodes.
     """
 
-    def __init__(self, names: Iterable[str], limit: float, context: Context):
+    def __init__(self, names: Iterable[str], limit: float, context: Context,
+                 namespace: str = ''):
         """Create the watch node and its executor."""
-        self.watch = LockstepWatch([lockstep.full_name(n) for n in names], limit)
+        self.namespace = graph.namespace_of(namespace)
+        self.watch = LockstepWatch([lockstep.full_name(n, self.namespace) for n in names],
+                                   limit)
         self.silent_node: Optional[str] = None  # the node found silent, once one is
         self._node = self._executor = None
         if self.watch.names:
-            self._node = LockstepWatchNode(self.watch, context=context)
+            self._node = LockstepWatchNode(self.watch, context=context,
+                                           cli_args=graph.node_args(self.namespace))
             self._executor = SingleThreadedExecutor(context=context)
             self._executor.add_node(self._node)
 
@@ -63,7 +69,7 @@ class Liveness:
     def silent(self, sim_now: float, wall: float) -> Optional[Tuple[str, float, float]]:
         """Take the answers; return ``(node, silent wall s, sim time it reached)`` or None.
 
-        :param sim_now: the newest sim time the launcher has heard on ``/clock``, s.
+        :param sim_now: the newest sim time the launcher has heard on the clock, s.
         :param wall: now, s (``time.monotonic()``).
         """
         self.take_answers()
@@ -72,7 +78,7 @@ class Liveness:
         if silent is None:
             return None
         name, seconds, t = silent
-        self.silent_node = name.lstrip('/')
+        self.silent_node = name[len(self.namespace):].lstrip('/')  # its name in the cell
         return self.silent_node, seconds, t
 
     def summary(self) -> Dict[str, object]:

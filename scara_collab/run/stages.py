@@ -3,7 +3,8 @@
 A :class:`Stage` is one node process with its parameters and its command line
 (``python -m scara_collab.run.child <module>:<function> --ros-args ...``); with
 ``--one-process`` one stage runs them all (:func:`one_process`, ``python -m
-scara_collab.run.container --node ... --node ...``).
+scara_collab.run.container --node ... --node ...``). With ``--namespace`` every node runs in
+the cell's namespace with the cell's remaps (:func:`scara_collab.graph.ros_args`).
 """
 import argparse
 from dataclasses import dataclass, field
@@ -26,10 +27,12 @@ class Stage:
     ready: str                  # what the launcher waits for, for messages
     params: Dict[str, str] = field(default_factory=dict)
     members: Tuple['Stage', ...] = ()  # --one-process: the stages this process runs
+    namespace: str = ''         # the cell's namespace ('' = the root)
 
 
 def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
     """Return the graph for ``args``, in launch order (the nodes of :mod:`scara_collab.graph`)."""
+    namespace = graph.namespace_of(getattr(args, 'namespace', None))
     common = {} if args.profile is None else {'profile': args.profile}
     by_mode = graph.job_params(args.mode)
     port = getattr(args, 'viewer', None)
@@ -63,13 +66,15 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
         if faults:  # every node applies the entries naming its own publishers and clients
             params['faults'] = graph.param_value(faults)
         out.append(Stage(spec.name, spec.entry, spec.configs,
-                         spec.ready.describe(spec.name, params), params))
+                         spec.ready.describe(spec.name, params, namespace), params,
+                         namespace=namespace))
     return out
 
 
 def node_args(stage: Stage, config_dir: Path) -> List[str]:
     """Return the ``--ros-args`` of one stage's node."""
-    return graph.ros_args(stage.configs, stage.params, config_dir=config_dir)
+    return graph.ros_args(stage.configs, stage.params, config_dir=config_dir,
+                          namespace=stage.namespace)
 
 
 def command(stage: Stage, config_dir: Path) -> List[str]:
