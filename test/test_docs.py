@@ -1,0 +1,153 @@
+"""The README and docs/ stay short, linked, true to the code and free of history.
+
+STYLE.md's *Documentation*: a README a newcomer reads in ten minutes (the two commands, what
+they print, how to drive the cell, a map, links), the rest in ``docs/``, saying what the code
+does now; history belongs in the git log. Generated pages (``docs/RESULTS.md``,
+``docs/REALTIME.md``) and the generated blocks between ``<!-- name:begin -->`` and
+``<!-- name:end -->`` markers are the benchmarks' and are not checked for history or links.
+"""
+from pathlib import Path
+import re
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / 'README.md'
+DOCS = sorted((ROOT / 'docs').glob('*.md'))
+GENERATED = {'RESULTS.md', 'REALTIME.md'}  # written by scripts/benchmark.py, bench_realtime.py
+MAX_README_LINES = 300
+QUICK_START = ('./scripts/demo', './scripts/test')
+
+BLOCK = re.compile(r'<!-- ([\w:-]+):begin -->.*?<!-- \1:end -->', re.S)
+FENCE = re.compile(r'^```.*?^```', re.S | re.M)
+CODE = re.compile(r'`[^`\n]*`')
+LINK = re.compile(r'!?\[[^\]]*\]\(([^)\s]+)(?:\s+"[^"]*")?\)')
+#: a commit hash: 7-40 hex digits with at least one digit, alone in backticks or parentheses
+HASH = re.compile(r'[`(](?=[0-9a-f]*[0-9])([0-9a-f]{7,40})[`)]')
+ISSUE = re.compile(r'\bissues?\s+#?\d+\b|\(#\d+\)', re.I)
+#: options of other programs the docs name (ROS 2, colcon), and argparse's own
+FOREIGN_OPTIONS = {'--ros-args', '--params-file', '--packages-select', '--clock', '--help'}
+
+
+def pages():
+    """Return README.md and every docs/*.md."""
+    return [README] + DOCS
+
+
+def without_generated(text: str) -> str:
+    """Return ``text`` without its generated blocks (markers included)."""
+    return BLOCK.sub('', text)
+
+
+def prose(text: str) -> str:
+    """Return ``text`` without generated blocks, fenced code and code spans."""
+    return CODE.sub('', FENCE.sub('', without_generated(text)))
+
+
+def slug(heading: str) -> str:
+    """Return GitHub's anchor for a Markdown heading."""
+    text = re.sub(r'[`*_]', '', heading.strip().lower())
+    text = re.sub(r'[^\w\- ]', '', text)
+    return text.replace(' ', '-')
+
+
+def anchors(path: Path):
+    """Return the anchors of ``path``'s headings."""
+    text = FENCE.sub('', path.read_text(encoding='utf-8'))
+    return {slug(m.group(1)) for m in re.finditer(r'^#{1,6}\s+(.+)$', text, re.M)}
+
+
+def test_readme_is_short():
+    """A newcomer reads it in ten minutes: at most 300 lines; the rest lives in docs/."""
+    lines = README.read_text(encoding='utf-8').splitlines()
+    assert len(lines) <= MAX_README_LINES, (
+        f'README.md has {len(lines)} lines (at most {MAX_README_LINES}): move detail to docs/')
+
+
+def test_quick_start_is_the_two_commands_ci_runs():
+    """The quick start is exactly two commands, both scripts exist, and CI runs the second."""
+    text = README.read_text(encoding='utf-8')
+    section = text[text.index('## Quick start'):]
+    block = FENCE.search(section).group(0).splitlines()[1:-1]
+    commands = [line.split('#')[0].strip() for line in block if line.strip()]
+    assert commands == list(QUICK_START), commands
+    for command in commands:
+        script = ROOT / command
+        assert script.is_file() and script.stat().st_mode & 0o111, command
+    ci = [line.strip() for line in (ROOT / '.ci' / 'run').read_text().splitlines()
+          if line.strip() and not line.lstrip().startswith('#')]
+    assert ci[-1] == QUICK_START[1], f'.ci/run must end by running {QUICK_START[1]}: {ci[-1]}'
+
+
+@pytest.mark.parametrize('page', pages(), ids=lambda p: p.name)
+def test_relative_links_resolve(page):
+    """Every relative link (and image) points to a file that exists, and to a heading there."""
+    broken = []
+    for target in LINK.findall(prose(page.read_text(encoding='utf-8'))):
+        if re.match(r'[a-z][a-z0-9+.-]*:', target) or target.startswith('//'):
+            continue  # http:, https:, mailto:
+        path, _, anchor = target.partition('#')
+        dest = (page.parent / path).resolve() if path else page
+        if not dest.exists():
+            broken.append(f'{target} (no such file: {dest})')
+        elif anchor and dest.suffix == '.md' and anchor not in anchors(dest):
+            broken.append(f'{target} (no heading #{anchor} in {dest.name})')
+    assert not broken, f'{page.name}: broken links: {broken}'
+
+
+@pytest.mark.parametrize('page', [p for p in pages() if p.name not in GENERATED],
+                         ids=lambda p: p.name)
+def test_no_history_in_hand_written_docs(page):
+    """No commit hashes and no issue numbers: history belongs in the git log."""
+    text = without_generated(page.read_text(encoding='utf-8'))
+    hashes = HASH.findall(text)
+    issues = ISSUE.findall(text)
+    assert not hashes, f'{page.name}: commit hashes {hashes}'
+    assert not issues, f'{page.name}: issue references {issues}'
+
+
+def test_every_hand_written_doc_is_linked_from_the_readme():
+    """A newcomer finds every page of docs/ from the README."""
+    linked = {(ROOT / t.partition('#')[0]).resolve()
+              for t in LINK.findall(prose(README.read_text(encoding='utf-8')))}
+    missing = [p.name for p in DOCS if p.resolve() not in linked]
+    assert not missing, f'docs not linked from README.md: {missing}'
+
+
+def script_options():
+    """Return every ``--option`` the scripts and the launcher define."""
+    sources = [ROOT / 'scara_collab' / 'run' / 'launcher.py', *sorted(
+        (ROOT / 'scripts').glob('*.py')), *sorted((ROOT / 'scripts').iterdir())]
+    found = set()
+    for path in sources:
+        if path.is_file():
+            found |= set(re.findall(r"""['"](--[a-z][a-z0-9-]*)['"]""", path.read_text()))
+    return found
+
+
+def named_options(text: str):
+    """Return the ``--options`` given to the launcher, the demo or a benchmark in ``text``."""
+    out = set()
+    for line in re.findall(r'scripts/[\w.]+[^\n`|#]*', text):
+        out |= set(re.findall(r'(?<![\w-])--[a-z][a-z0-9-]*', line))
+    for cell in re.findall(r'^\| (`--[^|]*(?:\\\|[^|]*)*)\|', text, re.M):  # an options table
+        out |= set(re.findall(r'(?<![\w-])--[a-z][a-z0-9-]*', cell))
+    return out
+
+
+@pytest.mark.parametrize('page', [p for p in pages() if p.name not in GENERATED],
+                         ids=lambda p: p.name)
+def test_every_option_named_exists(page):
+    """An option the docs tell a user to pass is one the launcher or a script defines."""
+    unknown = named_options(page.read_text(encoding='utf-8')) - script_options() \
+        - FOREIGN_OPTIONS
+    assert not unknown, f'{page.name} names options no script defines: {sorted(unknown)}'
+
+
+def test_readme_names_every_launch_mode_and_lockstep():
+    """The README's launcher section names each mode of the graph and both lockstep values."""
+    from scara_collab import graph
+    text = README.read_text(encoding='utf-8')
+    for mode in graph.LAUNCH_MODES:
+        assert f'`{mode}`' in text, mode
+    assert '--lockstep on|off' in text.replace('\\|', '|')
