@@ -1,5 +1,6 @@
 """Collision geometry: segment distance against brute force and coal, capsule arms, delays."""
 import dataclasses
+from pathlib import Path
 
 import coal
 from hypothesis import given, settings
@@ -533,30 +534,33 @@ SEGMENT_CASES = [  # crossing, parallel, collinear apart and overlapping, points
 
 
 @pytest.mark.parametrize('p0, p1, q0, q1', SEGMENT_CASES)
-def test_the_float_segment_distance_is_the_vectorised_one(p0, p1, q0, q1):
-    """The single-pair float path gives segment_distance's distance, special cases included."""
-    from scara_collab.core.collision import _segment_distance_float
-    d, _, _ = segment_distance(p0, p1, q0, q1)
-    assert _segment_distance_float(p0, p1, q0, q1) == pytest.approx(float(d), abs=1e-15)
+def test_one_segment_pair_is_the_batch_formula(p0, p1, q0, q1):
+    """One pair (plain floats) gives the batch's (arrays) distance and parameters, bit for bit.
+
+    Special cases included: points, parallel and collinear segments.
+    """
+    one = segment_distance(p0, p1, q0, q1)
+    many = segment_distance(*(np.array([v, v]) for v in (p0, p1, q0, q1)))
+    assert all(x.shape == () for x in one)
+    assert np.array_equal(np.array(one), np.array(many)[:, 0])
 
 
 @settings(max_examples=300, deadline=None)
 @given(arrays(float, (4, 3), elements=st.floats(-3, 3)), st.integers(0, 3))
-def test_the_float_segment_distance_agrees_on_random_segments(pts, degenerate):
+def test_one_segment_pair_is_the_batch_formula_on_random_segments(pts, degenerate):
     """Random segments, with one made a point or the two made parallel now and then."""
-    from scara_collab.core.collision import _segment_distance_float
     p0, p1, q0, q1 = pts
     if degenerate == 1:
         p1 = p0
     elif degenerate == 2:
         q1 = q0 + 0.7 * (p1 - p0)
-    d, _, _ = segment_distance(p0, p1, q0, q1)
-    got = _segment_distance_float(*(tuple(v) for v in (p0, p1, q0, q1)))
-    assert got == pytest.approx(float(d), abs=1e-12)
+    one = segment_distance(p0, p1, q0, q1)
+    many = segment_distance(*(np.array([v]) for v in (p0, p1, q0, q1)))
+    assert np.array_equal(np.array(one), np.array(many)[:, 0])
 
 
-def test_one_state_of_each_arm_takes_the_float_path_with_the_same_result(cell):
-    """arm_pair_distances of one state pair equals the vectorised result to rounding."""
+def test_one_state_pair_is_the_batch_formula(cell):
+    """arm_pair_distances of one state pair (plain floats) equals the batch's, bit for bit."""
     left, right = cell.arms
     rng = np.random.default_rng(11)
     q_l = np.vstack([rng.uniform(left.lower, left.upper, (500, 3)), np.zeros(3),
@@ -566,4 +570,31 @@ def test_one_state_of_each_arm_takes_the_float_path_with_the_same_result(cell):
     for k in range(len(q_l)):
         one = arm_pair_distances(left, q_l[k], right, q_r[k])
         assert one.shape == (3, 3)
-        assert_allclose(one, batch[k], rtol=0, atol=1e-12)
+        assert np.array_equal(one, batch[k])
+
+
+REFERENCE = Path(__file__).parent / 'data' / 'collision_reference.npz'
+
+
+def test_results_match_the_reference_values_to_1e_15(cell):
+    """Segment and arm distances equal stored reference values to 1e-15 m.
+
+    ``collision_reference.npz`` holds 300 random segment quadruples (points, parallel, nearly
+    parallel and coplanar ones among them) with their ``(dist, s, t)``, and 300 random state
+    pairs of the cell's arms with their 3 x 3 capsule distances, computed one pair at a time
+    (``pairs_one``) and all at once (``pairs_many``) by a separate scalar and vectorised
+    implementation. Both are met by the one formula, for one pair and for N.
+    """
+    ref = np.load(REFERENCE)
+    left, right = cell.arms
+    seg = ref['segments']
+    many = np.stack(segment_distance(seg[:, 0], seg[:, 1], seg[:, 2], seg[:, 3]), -1)
+    one = np.array([np.array(segment_distance(*s)) for s in seg])
+    for got in (many, one):
+        assert_allclose(got, ref['segment_dst'], rtol=0, atol=1e-15)
+    q_a, q_b = ref['q_a'], ref['q_b']
+    many = arm_pair_distances(left, q_a, right, q_b)
+    one = np.array([arm_pair_distances(left, a, right, b) for a, b in zip(q_a, q_b)])
+    for want in (ref['pairs_one'], ref['pairs_many']):
+        assert_allclose(many, want, rtol=0, atol=1e-15)
+        assert_allclose(one, want, rtol=0, atol=1e-15)

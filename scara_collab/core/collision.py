@@ -2,15 +2,21 @@
 
 Each arm is three capsules (link 1, link 2, the quill). Two arms are apart by the smallest
 capsule *surface* distance over the 3 x 3 capsule pairs: the exact distance between the capsule
-axis segments minus both radii (negative = the capsules overlap). All functions are stateless
-and vectorised: a function that takes N states takes an (N, ...) array and the single state goes
-through the same code by broadcasting.
+axis segments minus both radii (negative = the capsules overlap). All functions are stateless;
+a function that takes N states takes an (N, ...) array.
+
+The formulas (the segment distance, the capsules' forward kinematics) are written once, on
+``(x, y, z)`` tuples of coordinates, over a small "ops" namespace, as
+:func:`scara_collab.core.kinematics.ik` is: evaluated with the ``math`` module and plain
+floats for one segment pair or one state pair (a few microseconds, no numpy per-call
+overhead), with numpy arrays for N (vectorised, broadcasting). The single case is the same
+code, not a copy.
 
 The segment distance is the clamped closed-form solution of Ericson, *Real-Time Collision
-Detection* (2005), section 5.1.9, written branch-free with :func:`numpy.where`, with the
-line-line parameter taken from cross products so nearly parallel segments lose no accuracy.
-Unlike an endpoint-only check (the four endpoint-to-segment distances) it is right for segments
-that cross, e.g. the two diagonals of a unit square::
+Detection* (2005), section 5.1.9, written branch-free (``where``), with the line-line
+parameter taken from cross products so nearly parallel segments lose no accuracy. Unlike an
+endpoint-only check (the four endpoint-to-segment distances) it is right for segments that
+cross, e.g. the two diagonals of a unit square::
 
     >>> d, s, t = segment_distance([0, 0, 0], [1, 1, 0], [0, 1, 0], [1, 0, 0])
     >>> float(d), float(s), float(t)
@@ -52,20 +58,78 @@ _BOUND_SLACK = 1e-9
 _ALL_PAIRS = (np.repeat(np.arange(3), 3), np.tile(np.arange(3), 3))
 
 
-def _dot(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Dot product over the last axis, broadcasting the others."""
-    return np.einsum('...i,...i->...', x, y)
+class _ScalarOps:
+    """``math`` versions of the few operations the formulas use (plain floats)."""
+
+    sqrt = staticmethod(math.sqrt)
+    cos = staticmethod(math.cos)
+    sin = staticmethod(math.sin)
+
+    @staticmethod
+    def where(cond, a, b):
+        return a if cond else b
+
+    @staticmethod
+    def clip01(x):
+        return 0.0 if x < 0.0 else 1.0 if x > 1.0 else x
 
 
-def _cross(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis (numpy.cross, without its overhead on small arrays)."""
-    x0, x1, x2 = x[..., 0], x[..., 1], x[..., 2]
-    y0, y1, y2 = y[..., 0], y[..., 1], y[..., 2]
-    return np.stack([x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0], -1)
+class _VectorOps:
+    """numpy versions of the same operations (arrays that broadcast)."""
+
+    sqrt = staticmethod(np.sqrt)
+    cos = staticmethod(np.cos)
+    sin = staticmethod(np.sin)
+    where = staticmethod(np.where)
+
+    @staticmethod
+    def clip01(x):
+        return np.minimum(np.maximum(x, 0.0), 1.0)
 
 
-def _clip01(x: np.ndarray) -> np.ndarray:
-    return np.minimum(np.maximum(x, 0.0), 1.0)
+def _segments(ops, p0, p1, q0, q1):
+    """Return ``(dist, s, t)`` of :func:`segment_distance`, on (x, y, z) coordinate tuples.
+
+    The one formula: with :class:`_ScalarOps` the coordinates are floats (one pair), with
+    :class:`_VectorOps` arrays that broadcast together (N pairs). Written out per coordinate
+    (no helper calls) so that one pair costs a few microseconds.
+    """
+    where, clip01 = ops.where, ops.clip01
+    (p0x, p0y, p0z), (p1x, p1y, p1z), (q0x, q0y, q0z), (q1x, q1y, q1z) = p0, p1, q0, q1
+    d1x, d1y, d1z = p1x - p0x, p1y - p0y, p1z - p0z
+    d2x, d2y, d2z = q1x - q0x, q1y - q0y, q1z - q0z
+    rx, ry, rz = p0x - q0x, p0y - q0y, p0z - q0z
+    a = d1x * d1x + d1y * d1y + d1z * d1z
+    e = d2x * d2x + d2y * d2y + d2z * d2z
+    b = d1x * d2x + d1y * d2y + d1z * d2z
+    c = d1x * rx + d1y * ry + d1z * rz
+    f = d2x * rx + d2y * ry + d2z * rz
+    point_p = a <= _DEGENERATE_SQ
+    point_q = e <= _DEGENERATE_SQ
+    safe_a = where(point_p, 1.0, a)
+    safe_e = where(point_q, 1.0, e)
+    # Closest point of the infinite lines, clamped (s = 0 for parallel lines: any s will do):
+    # s = (-r x d2) . n / |n|^2 with n = d1 x d2. Through cross products rather than
+    # a e - b^2 and b f - c e: those cancel catastrophically for nearly parallel segments,
+    # these stay accurate to rounding at any angle.
+    nx, ny, nz = d1y * d2z - d1z * d2y, d1z * d2x - d1x * d2z, d1x * d2y - d1y * d2x
+    mx, my, mz = d2y * rz - d2z * ry, d2z * rx - d2x * rz, d2x * ry - d2y * rx  # -r x d2
+    denom = nx * nx + ny * ny + nz * nz
+    parallel = denom <= _PARALLEL_SIN_SQ * a * e
+    s_line = clip01((mx * nx + my * ny + mz * nz) / where(parallel, 1.0, denom))
+    s = where(point_q, clip01(-c / safe_a), where(parallel, 0.0, s_line))
+    s = where(point_p, 0.0, s)
+    # The t closest to that s; if it leaves [0, 1], clamp it and recompute s for the clamped t.
+    t_free = where(point_q, 0.0, (b * s + f) / safe_e)
+    t = clip01(t_free)
+    s = where(point_p | (t == t_free), s, clip01((b * t - c) / safe_a))
+    gx, gy, gz = rx + s * d1x - t * d2x, ry + s * d1y - t * d2y, rz + s * d1z - t * d2z
+    return ops.sqrt(gx * gx + gy * gy + gz * gz), s, t
+
+
+def _coords(x: np.ndarray):
+    """Return the (x, y, z) tuple of the last axis of an (..., 3) array."""
+    return x[..., 0], x[..., 1], x[..., 2]
 
 
 def segment_distance(p0: ArrayLike, p1: ArrayLike, q0: ArrayLike,
@@ -74,7 +138,8 @@ def segment_distance(p0: ArrayLike, p1: ArrayLike, q0: ArrayLike,
 
     The closest points are ``p0 + s (p1 - p0)`` and ``q0 + t (q1 - q0)``. Crossing, parallel,
     collinear (overlapping or not) and zero-length segments are all handled; for parallel
-    segments, whose closest points are not unique, one valid pair is returned.
+    segments, whose closest points are not unique, one valid pair is returned. One pair of
+    segments is computed on plain floats, N on arrays, by the same formula.
 
     :param p0: (..., 3) start of the first segment, m.
     :param p1: (..., 3) end of the first segment, m.
@@ -89,32 +154,11 @@ def segment_distance(p0: ArrayLike, p1: ArrayLike, q0: ArrayLike,
         >>> float(d), float(s), float(t)
         (0.5, 0.5, 0.5)
     """
-    p0 = np.asarray(p0, dtype=float)
-    q0 = np.asarray(q0, dtype=float)
-    d1 = np.subtract(p1, p0)
-    d2 = np.subtract(q1, q0)
-    r = p0 - q0
-    a, e, b = _dot(d1, d1), _dot(d2, d2), _dot(d1, d2)
-    c, f = _dot(d1, r), _dot(d2, r)
-    point_p = a <= _DEGENERATE_SQ
-    point_q = e <= _DEGENERATE_SQ
-    safe_a = np.where(point_p, 1.0, a)
-    safe_e = np.where(point_q, 1.0, e)
-    # Closest point of the infinite lines, clamped (s = 0 for parallel lines: any s will do).
-    # Through cross products rather than a e - b^2 and b f - c e: those cancel catastrophically
-    # for nearly parallel segments, these stay accurate to rounding at any angle.
-    normal = _cross(d1, d2)
-    denom = _dot(normal, normal)
-    parallel = denom <= _PARALLEL_SIN_SQ * a * e
-    s_line = _clip01(_dot(_cross(-r, d2), normal) / np.where(parallel, 1.0, denom))
-    s = np.where(point_q, _clip01(-c / safe_a), np.where(parallel, 0.0, s_line))
-    s = np.where(point_p, 0.0, s)
-    # The t closest to that s; if it leaves [0, 1], clamp it and recompute s for the clamped t.
-    t_free = np.where(point_q, 0.0, (b * s + f) / safe_e)
-    t = _clip01(t_free)
-    s = np.where(point_p | (t == t_free), s, _clip01((b * t - c) / safe_a))
-    gap = r + s[..., None] * d1 - t[..., None] * d2
-    return np.sqrt(_dot(gap, gap)), s, t
+    points = [np.asarray(v, dtype=float) for v in (p0, p1, q0, q1)]
+    if all(v.shape == (3,) for v in points):
+        return tuple(np.float64(x) for x in _segments(
+            _ScalarOps, *(tuple(v.tolist()) for v in points)))
+    return _segments(_VectorOps, *(_coords(v) for v in points))
 
 
 def capsule_distance(p0: ArrayLike, p1: ArrayLike, radius_p: ArrayLike, q0: ArrayLike,
@@ -139,43 +183,45 @@ def capsule_distance(p0: ArrayLike, p1: ArrayLike, radius_p: ArrayLike, q0: Arra
     return dist - np.asarray(radius_p, dtype=float) - np.asarray(radius_q, dtype=float)
 
 
-def _capsule_segments(arm: ArmModel,
-                      q: ArrayLike) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Capsule axes of ``arm`` at joint state ``q``, computed here from the arm geometry.
+def _radii(arm: ArmModel) -> Tuple[float, float, float]:
+    return (arm.link_radius, arm.link_radius, arm.quill_radius)
 
-    Stands in for ``kinematics.arm_points`` (shoulder, elbow, tool tip) so this module does
-    not depend on it; see :func:`arm_capsules` for the layout.
+
+def _capsules(ops, arm: ArmModel, theta1, theta2, d3):
+    """Return the capsule axes of ``arm`` in ``world``: ``[(start, end)] * 3``, (x, y, z) tuples.
+
+    The one forward kinematics of the capsules (see :func:`arm_capsules` for the layout), on
+    floats (:class:`_ScalarOps`, one state) or arrays (:class:`_VectorOps`, N states); the
+    coordinates that do not depend on the state are floats either way. It stands in for
+    ``kinematics.arm_points`` (shoulder, elbow, tool tip) so this module does not depend on it.
     """
+    h1 = float(arm.shoulder_height)
+    h2 = h1 + arm.elbow_rise
+    elbow_x, elbow_y = arm.l1 * ops.cos(theta1), arm.l1 * ops.sin(theta1)
+    tool_x = elbow_x + arm.l2 * ops.cos(theta1 + theta2)
+    tool_y = elbow_y + arm.l2 * ops.sin(theta1 + theta2)
+    tip_z = h2 - d3
+    (r00, r01, r02, o0), (r10, r11, r12, o1), (r20, r21, r22, o2) = arm.base[:3].tolist()
+
+    def world(x, y, z):
+        return (r00 * x + r01 * y + r02 * z + o0, r10 * x + r11 * y + r12 * z + o1,
+                r20 * x + r21 * y + r22 * z + o2)
+
+    return [(world(0.0, 0.0, h1), world(elbow_x, elbow_y, h1)),
+            (world(elbow_x, elbow_y, h2), world(tool_x, tool_y, h2)),
+            (world(tool_x, tool_y, tip_z), world(tool_x, tool_y, tip_z + arm.quill_length))]
+
+
+def _vector_capsules(arm: ArmModel, q: ArrayLike):
+    """Return :func:`_capsules` of (..., 3) states as arrays: ``(start, end)``, (..., 3, 3)."""
     q = np.asarray(q, dtype=float)
     if q.shape[-1:] != (3,):
         raise ValueError(f'joint states must have shape (..., 3), got {q.shape}')
-    theta1, theta2, d3 = q[..., 0], q[..., 1], q[..., 2]
-    h1 = float(arm.shoulder_height)
-    h2 = h1 + arm.elbow_rise
-    elbow_x = arm.l1 * np.cos(theta1)
-    elbow_y = arm.l1 * np.sin(theta1)
-    tool_x = elbow_x + arm.l2 * np.cos(theta1 + theta2)
-    tool_y = elbow_y + arm.l2 * np.sin(theta1 + theta2)
-    tip_z = h2 - d3
-    # Base frame, [..., capsule, coordinate]; capsules: link 1, link 2, quill.
-    start = np.empty(q.shape[:-1] + (3, 3))
-    end = np.empty_like(start)
-    start[..., 0, :2] = 0.0
-    start[..., 0, 2] = h1
-    start[..., 1, 0] = end[..., 0, 0] = elbow_x
-    start[..., 1, 1] = end[..., 0, 1] = elbow_y
-    end[..., 0, 2] = h1
-    start[..., 1, 2] = end[..., 1, 2] = h2
-    start[..., 2, 0] = end[..., 1, 0] = end[..., 2, 0] = tool_x
-    start[..., 2, 1] = end[..., 1, 1] = end[..., 2, 1] = tool_y
-    start[..., 2, 2] = tip_z
-    end[..., 2, 2] = tip_z + arm.quill_length
-    # One (N x 3) @ (3 x 3) product per array rather than N stacked 3 x 3 products.
-    rot_t, origin = arm.base[:3, :3].T, arm.base[:3, 3]
-    start = (start.reshape(-1, 3) @ rot_t).reshape(start.shape) + origin
-    end = (end.reshape(-1, 3) @ rot_t).reshape(end.shape) + origin
-    radii = np.array([arm.link_radius, arm.link_radius, arm.quill_radius])
-    return start, end, radii
+    caps = _capsules(_VectorOps, arm, *_coords(q))
+    shape = q.shape[:-1]
+    start, end = (np.stack([np.stack([np.broadcast_to(c, shape) for c in cap[k]], -1)
+                            for cap in caps], -2) for k in (0, 1))
+    return start, end
 
 
 def arm_capsules(arm: ArmModel, q: ArrayLike) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -194,75 +240,16 @@ def arm_capsules(arm: ArmModel, q: ArrayLike) -> Tuple[np.ndarray, np.ndarray, n
     :return: ``(start, end, radii)``: start and end points (..., 3, 3) in ``world`` (m), one row
         per capsule, and the capsule radii (3,) in m.
     """
-    return _capsule_segments(arm, q)
-
-
-def _segment_distance_float(p0, p1, q0, q1) -> float:
-    """Return :func:`segment_distance` of one pair of segments given as float 3-tuples.
-
-    The same formulas in the same order, on plain floats (no numpy per-call overhead).
-    """
-    d1 = (p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2])
-    d2 = (q1[0] - q0[0], q1[1] - q0[1], q1[2] - q0[2])
-    r = (p0[0] - q0[0], p0[1] - q0[1], p0[2] - q0[2])
-    a = d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2]
-    e = d2[0] * d2[0] + d2[1] * d2[1] + d2[2] * d2[2]
-    b = d1[0] * d2[0] + d1[1] * d2[1] + d1[2] * d2[2]
-    c = d1[0] * r[0] + d1[1] * r[1] + d1[2] * r[2]
-    f = d2[0] * r[0] + d2[1] * r[1] + d2[2] * r[2]
-    point_p, point_q = a <= _DEGENERATE_SQ, e <= _DEGENERATE_SQ
-    safe_a, safe_e = (1.0 if point_p else a), (1.0 if point_q else e)
-    n0 = d1[1] * d2[2] - d1[2] * d2[1]
-    n1 = d1[2] * d2[0] - d1[0] * d2[2]
-    n2 = d1[0] * d2[1] - d1[1] * d2[0]
-    denom = n0 * n0 + n1 * n1 + n2 * n2
-    if point_p:
-        s = 0.0
-    elif point_q:
-        s = min(max(-c / safe_a, 0.0), 1.0)
-    elif denom <= _PARALLEL_SIN_SQ * a * e:  # parallel: any s will do
-        s = 0.0
-    else:  # (-r x d2) . normal / |normal|^2
-        m0 = -r[1] * d2[2] + r[2] * d2[1]
-        m1 = -r[2] * d2[0] + r[0] * d2[2]
-        m2 = -r[0] * d2[1] + r[1] * d2[0]
-        s = min(max((m0 * n0 + m1 * n1 + m2 * n2) / denom, 0.0), 1.0)
-    t_free = 0.0 if point_q else (b * s + f) / safe_e
-    t = min(max(t_free, 0.0), 1.0)
-    if not (point_p or t == t_free):
-        s = min(max((b * t - c) / safe_a, 0.0), 1.0)
-    g0 = r[0] + s * d1[0] - t * d2[0]
-    g1 = r[1] + s * d1[1] - t * d2[1]
-    g2 = r[2] + s * d1[2] - t * d2[2]
-    return math.sqrt(g0 * g0 + g1 * g1 + g2 * g2)
-
-
-def _capsules_float(arm: ArmModel, q) -> list:
-    """Return :func:`arm_capsules` of one state as ``[(start, end, radius)] * 3`` in floats."""
-    t1, t2, d3 = (float(v) for v in q)
-    h1 = float(arm.shoulder_height)
-    h2 = h1 + arm.elbow_rise
-    ex, ey = arm.l1 * math.cos(t1), arm.l1 * math.sin(t1)
-    tx, ty = ex + arm.l2 * math.cos(t1 + t2), ey + arm.l2 * math.sin(t1 + t2)
-    tip = h2 - d3
-    (r00, r01, r02, o0), (r10, r11, r12, o1), (r20, r21, r22, o2) = arm.base[:3].tolist()
-
-    def world(x, y, z):
-        return (r00 * x + r01 * y + r02 * z + o0, r10 * x + r11 * y + r12 * z + o1,
-                r20 * x + r21 * y + r22 * z + o2)
-    elbow1, elbow2, tool2 = world(ex, ey, h1), world(ex, ey, h2), world(tx, ty, h2)
-    return [(world(0.0, 0.0, h1), elbow1, arm.link_radius),
-            (elbow2, tool2, arm.link_radius),
-            (world(tx, ty, tip), world(tx, ty, tip + arm.quill_length), arm.quill_radius)]
+    start, end = _vector_capsules(arm, q)
+    return start, end, np.array(_radii(arm))
 
 
 def arm_pair_distances(arm_a: ArmModel, q_a: ArrayLike, arm_b: ArmModel,
                        q_b: ArrayLike) -> np.ndarray:
     """Surface distance of every capsule of arm a to every capsule of arm b.
 
-    One state of each arm (the collision monitor's 100 Hz check, single-state queries) takes
-    a plain-float path, the same formulas as the vectorised one without numpy's per-call
-    overhead on 3-vectors (about a fifth of its cost; equal to rounding, tested).
+    One state of each arm (the collision monitor's 100 Hz check, single-state queries) is
+    computed on plain floats, N on arrays, by the same formulas.
 
     :param arm_a: the first arm.
     :param q_a: (..., 3) its joint states.
@@ -272,15 +259,17 @@ def arm_pair_distances(arm_a: ArmModel, q_a: ArrayLike, arm_b: ArmModel,
         quill) to capsule j of b; negative = overlap.
     """
     if np.shape(q_a) == (3,) and np.shape(q_b) == (3,):
-        caps_b = _capsules_float(arm_b, q_b)
-        return np.array([[_segment_distance_float(p0, p1, q0, q1) - rp - rq
-                          for q0, q1, rq in caps_b]
-                         for p0, p1, rp in _capsules_float(arm_a, q_a)])
-    start_a, end_a, radii_a = arm_capsules(arm_a, q_a)
-    start_b, end_b, radii_b = arm_capsules(arm_b, q_b)
-    dist, _, _ = segment_distance(start_a[..., :, None, :], end_a[..., :, None, :],
-                                  start_b[..., None, :, :], end_b[..., None, :, :])
-    return dist - radii_a[:, None] - radii_b[None, :]
+        caps_a = _capsules(_ScalarOps, arm_a, *np.asarray(q_a, dtype=float).tolist())
+        caps_b = _capsules(_ScalarOps, arm_b, *np.asarray(q_b, dtype=float).tolist())
+        return np.array([[_segments(_ScalarOps, p0, p1, q0, q1)[0] - rp - rq
+                          for (q0, q1), rq in zip(caps_b, _radii(arm_b))]
+                         for (p0, p1), rp in zip(caps_a, _radii(arm_a))])
+    start_a, end_a = _vector_capsules(arm_a, q_a)
+    start_b, end_b = _vector_capsules(arm_b, q_b)
+    dist, _, _ = _segments(_VectorOps, _coords(start_a[..., :, None, :]),
+                           _coords(end_a[..., :, None, :]), _coords(start_b[..., None, :, :]),
+                           _coords(end_b[..., None, :, :]))
+    return dist - np.array(_radii(arm_a))[:, None] - np.array(_radii(arm_b))[None, :]
 
 
 def closest_points(arm_a: ArmModel, q_a: ArrayLike, arm_b: ArmModel, q_b: ArrayLike):
@@ -399,8 +388,7 @@ def _pair_bounds(arm_a: ArmModel, q_a: np.ndarray, arm_b: ArmModel,
         np.maximum(gap, other, out=gap)
         np.maximum(gap, 0.0, out=gap)
         gap_sq += np.square(gap, out=gap)
-    radii_a = np.array([arm_a.link_radius, arm_a.link_radius, arm_a.quill_radius])
-    radii_b = np.array([arm_b.link_radius, arm_b.link_radius, arm_b.quill_radius])
+    radii_a, radii_b = np.array(_radii(arm_a)), np.array(_radii(arm_b))
     lower = np.sqrt(gap_sq, out=gap_sq)
     lower -= (radii_a[:, None] + radii_b[None, :] + _BOUND_SLACK)[:, :, None]
     return lower
@@ -414,10 +402,11 @@ def _exact_pairs(arm_a: ArmModel, q_a: np.ndarray, arm_b: ArmModel, q_b: np.ndar
     pair), so the values are those of the full (N, 3, 3) computation, bit for bit.
     """
     rows, n = np.unique(n, return_inverse=True)
-    start_a, end_a, radii_a = _capsule_segments(arm_a, q_a[rows])
-    start_b, end_b, radii_b = _capsule_segments(arm_b, q_b[rows])
-    dist, _, _ = segment_distance(start_a[n, i], end_a[n, i], start_b[n, j], end_b[n, j])
-    return dist - radii_a[i] - radii_b[j]
+    start_a, end_a = _vector_capsules(arm_a, q_a[rows])
+    start_b, end_b = _vector_capsules(arm_b, q_b[rows])
+    dist, _, _ = _segments(_VectorOps, _coords(start_a[n, i]), _coords(end_a[n, i]),
+                           _coords(start_b[n, j]), _coords(end_b[n, j]))
+    return dist - np.array(_radii(arm_a))[i] - np.array(_radii(arm_b))[j]
 
 
 def _grid_min_distance(arm_a: ArmModel, q_a: np.ndarray, arm_b: ArmModel,
