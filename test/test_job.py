@@ -787,34 +787,6 @@ def test_every_item_in_reach_is_ranked_not_only_the_most_urgent(cell):
     assert sorted(it.id for _, it in order) == sorted(it.id for it in items)
 
 
-def test_a_move_is_planned_once_per_tick_and_a_refusal_remembered(cell):
-    """The job's plan memo: the same move in one tick is planned once; refusals repeat."""
-    calls = []
-
-    def plan(robot, q0, target):
-        calls.append((robot, tuple(q0), tuple(target)))
-        if target[0] > 100.0:
-            raise ValueError('unreachable: beyond the outer reach')
-        return plan_path(cell.arm(robot), q0, target, mode='line_or_joint')
-
-    settings = JobSettings.from_config(cell, load_config('automation'), 'collaborative')
-    job = SortingJob(cell, settings, plan)
-    robot = cell.leader.name
-    target = drop_point(cell, robot, cell.item_classes[0], 0.1)
-    first = job.plan(robot, HOME, target)
-    assert job.plan(robot, HOME.copy(), np.array(target)) is first
-    assert len(calls) == 1
-    for _ in range(2):
-        with pytest.raises(ValueError, match='outer reach'):
-            job.plan(robot, HOME, [200.0, 0.0, 0.3])
-    assert len(calls) == 2
-    job.plan(robot, HOME + [0.1, 0.0, 0.0], target)  # another start: another plan
-    assert len(calls) == 3
-    job.plan.forget()
-    assert job.plan(robot, HOME, target) is not first
-    assert len(calls) == 4
-
-
 def test_a_missed_item_says_what_the_job_last_did_with_it(cell):
     """The job logs why an item got away: its last note (ranked, chased, given up) or none."""
     job = make_job(cell)

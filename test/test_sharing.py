@@ -1,0 +1,172 @@
+"""The job's belt sharing alone (no job, no ROS): bookings, held moves, unblocking, chases."""
+import numpy as np
+import pytest
+
+from scara_collab.core import planning, sorting
+from scara_collab.core.config import load_config
+from scara_collab.core.job_settings import JobSettings
+from scara_collab.core.kinematics import ik
+from scara_collab.core.lanes import Lane, LaneProtocol, MoveTrack, PlanMemo
+from scara_collab.core.mirror import mirror_joints
+from scara_collab.core.planning import plan_path
+from scara_collab.core.sharing import SharedBelt, SoloBelt
+
+HOME = np.array([0.0, 1.5708, 0.0])
+
+
+def shared(cell, solo=False):
+    """Return ``(belt, protocol, leader lane, follower lane)`` on the collaborative settings."""
+    settings = JobSettings.from_config(cell, load_config('automation'), 'collaborative')
+    lanes = [Lane(cell.leader.name, (cell.leader.name,)),
+             Lane(cell.follower.name, (cell.follower.name,))]
+    plan = PlanMemo(lambda robot, q0, target: plan_path(cell.arm(robot), q0, target,
+                                                        mode='line_or_joint'))
+    proto = LaneProtocol(cell, settings, lanes, plan)
+    for arm, q in zip(cell.arms, (HOME, mirror_joints(HOME))):
+        proto.on_arm_state(arm.name, q)
+    belt = (SoloBelt if solo else SharedBelt)(cell, settings, lanes, plan)
+    return belt, proto, lanes[0], lanes[1]
+
+
+def park_point(cell, robot):
+    """Return the point above ``robot``'s first bin."""
+    return sorting.drop_point(cell, robot, cell.item_classes[0], 0.1)
+
+
+def item(cell, item_id, x, y):
+    """Return an item resting on the belt at ``(x, y)``, seen at t = 0."""
+    return sorting.SeenItem(item_id, cell.item_classes[0],
+                            np.array([x, y, cell.belt.top_z + cell.item_size / 2]), 0.0)
+
+
+def waiting(lane, since=0.0, holding=False):
+    """Put ``lane`` in a move its planner holds back for the other arm since ``since``."""
+    lane.phase, lane.holding, lane.request = ('to_bin' if holding else 'to_item'), holding, 7
+    lane.moves = {lane.robot: MoveTrack(state='waiting', since=since)}
+
+
+def test_a_solo_belt_books_holds_and_unblocks_nothing(cell):
+    """One lane: the commands go out as they are, a chase is not re-timed, nothing booked."""
+    belt, proto, lead, foll = shared(cell, solo=True)
+    out = [proto.move(foll, 'to_park', park_point(cell, foll.robot), 0.1, 0.0)]
+    assert belt.in_turn(out, 0.0) is out
+    belt.asked(foll)
+    assert foll.moves[foll.robot].timeline is None
+    belt.on_trajectory(foll.robot, out[0].request, foll.moves[foll.robot], np.zeros(2),
+                       np.zeros((2, 3)))
+    assert foll.moves[foll.robot].timeline is None
+    waiting(lead)
+    waiting(foll)
+    assert belt.unblock(10.0, proto.q) is None
+    hit = object()
+    assert belt.unhindered(lead, None, hit, 0.0, proto.q, 0.0) is hit
+
+
+def test_a_move_is_booked_as_asked_then_as_the_planner_published_it(cell):
+    """Asked: the job's plan from the requested start; then the planner's, shifted to its start."""
+    belt, proto, lead, _ = shared(cell)
+    cmd = proto.move(lead, 'to_park', park_point(cell, lead.robot), 0.5, 0.0)
+    assert belt.committed(lead.robot, 0.0, proto.q).end == 0.0  # not booked yet: it holds
+    belt.asked(lead)
+    asked = belt.committed(lead.robot, 0.0, proto.q)
+    assert asked.start == pytest.approx(0.5)
+    assert asked.end == pytest.approx(0.5 + cmd.plan.duration)
+    track = lead.moves[lead.robot]
+    t, q = cmd.plan.t + 0.6, cmd.plan.q + 1e-3  # the planner's own, published
+    belt.on_trajectory(lead.robot, cmd.request, track, t, q)
+    np.testing.assert_allclose(belt.committed(lead.robot, 0.0, proto.q).q, q)
+    timed = proto.on_execution(lead.robot, cmd.request, 'accepted', 0.8, 0.8 + cmd.plan.duration)
+    belt.timed(lead.robot, cmd.request, timed, proto.q)
+    np.testing.assert_allclose(belt.committed(lead.robot, 0.0, proto.q).t, t + 0.2)
+    proto.on_execution(lead.robot, cmd.request, 'finished', None, None)
+    assert belt.committed(lead.robot, 0.0, proto.q).end == 0.0  # over: the arm holds
+    # a move timed before any trajectory came is planned from where the arm is
+    cmd = proto.move(lead, 'to_park', [1.5, -1.0, 0.4], 2.0, 1.0)
+    timed = proto.on_planner(lead.robot, cmd.request, 'planned', 2.0, 3.0)
+    belt.timed(lead.robot, cmd.request, timed, proto.q)
+    np.testing.assert_allclose(timed.timeline.t, 2.0 + cmd.plan.t)
+
+
+def test_the_followers_moves_wait_for_the_leaders_planner(cell):
+    """Held while the leader's move awaits its first answer; released after it or the timeout."""
+    belt, proto, lead, foll = shared(cell)
+    first = proto.move(lead, 'to_park', park_point(cell, lead.robot), 0.1, 0.0)
+    second = proto.move(foll, 'to_park', park_point(cell, foll.robot), 0.1, 0.0)
+    assert belt.in_turn([first, second], 0.0) == [first]
+    assert belt.in_turn([], 0.02) == []
+    proto.on_planner(lead.robot, first.request, 'planned', 0.1, 1.0)
+    assert belt.in_turn([], 0.04) == [second]
+    assert belt.in_turn([], 0.06) == []  # sent once
+    again = proto.move(lead, 'to_park', [1.5, -1.0, 0.4], 2.0, 1.0)
+    belt.in_turn([again, second], 1.0)
+    timeout = load_config('automation')['answer_timeout']
+    assert belt.in_turn([], 1.0 + timeout - 0.01) == []
+    assert belt.in_turn([], 1.0 + timeout) == [second]  # the leader's answer was lost
+    belt.in_turn([second], 1.0 + timeout)
+    belt.drop_held()  # a stop: nothing held survives it
+    proto.on_planner(lead.robot, again.request, 'planned', 2.0, 3.0)
+    assert belt.in_turn([], 1.0 + timeout + 0.02) == []
+
+
+def test_an_arm_that_waits_for_the_other_is_unblocked(cell):
+    """Park an idle arm in the way; re-aim a waiting chase; the follower gives way."""
+    belt, proto, lead, foll = shared(cell)
+    after = load_config('automation')['unblock_after']
+    waiting(lead)
+    assert belt.unblock(after - 0.01, proto.q) is None  # waiting is normal at first
+    how = belt.unblock(after + 0.01, proto.q)
+    assert (how.action, how.lane, how.other) == ('park', foll, lead)
+    foll.phase = 'to_bin'  # busy, not waiting: the leader re-aims at its item meanwhile
+    how = belt.unblock(after + 0.01, proto.q)
+    assert (how.action, how.lane, how.other) == ('reaim', lead, foll)
+    lead.holding = True  # an arm that holds an item has no item to re-aim at
+    assert belt.unblock(after + 0.01, proto.q) is None
+    lead.holding = False
+    waiting(foll)
+    how = belt.unblock(after + 0.01, proto.q)
+    assert (how.action, how.lane) == ('give_way', foll) and how.why.endswith(
+        f'{foll.robot} gives way')
+    waiting(foll, holding=True)  # the one not holding an item gives way
+    how = belt.unblock(after + 0.01, proto.q)
+    assert (how.action, how.lane) == ('give_way', lead)
+
+
+def test_two_arms_holding_items_are_untangled_by_the_follower_backing_out(cell):
+    """Both hold items and wait for each other: the follower backs out on its own side."""
+    belt, proto, lead, foll = shared(cell)
+    for robot, tool in ((lead.robot, [1.34, -0.26, 0.34]), (foll.robot, [0.83, 0.05, 0.34])):
+        proto.on_arm_state(robot, ik(cell.arm(robot), tool).unwrap())
+    waiting(lead, holding=True)
+    waiting(foll, holding=True)
+    how = belt.unblock(1.0, proto.q)
+    assert (how.action, how.lane) == ('back_out', foll)
+    assert how.via[1] >= cell.belt.centre_y + 0.6  # out on the right arm's side
+    foll.phase = 'via'  # already backing out: the leader is next, if it can
+    how = belt.unblock(1.0, proto.q)
+    assert how is None or (how.action, how.lane) == ('back_out', lead)
+
+
+def test_a_chase_is_timed_around_the_other_arms_booking(cell):
+    """Unknown or out of the way, the other arm changes nothing; booked in the way, it does."""
+    belt, proto, lead, foll = shared(cell)
+    near, ours = item(cell, 98, 1.07, 0.27), item(cell, 97, 1.12, 0.01)
+    settings = JobSettings.from_config(cell, load_config('automation'), 'collaborative')
+
+    def hit_for(lane, it):
+        return sorting.intercept(cell, cell.arm(lane.robot), proto.q[lane.robot], it,
+                                 settings.decision_lead, settings.pick_z,
+                                 lambda q, p: belt.plan(lane.robot, q, p))
+
+    mine = hit_for(foll, ours)
+    assert belt.unhindered(foll, ours, mine, 0.0, {foll.robot: proto.q[foll.robot]}, 0.0) is mine
+    assert belt.unhindered(foll, ours, mine, 0.0, proto.q, 0.0) is mine  # the leader stands clear
+    theirs = hit_for(lead, near)
+    proto.move(lead, 'to_item', theirs.target, theirs.start, 0.0, theirs.traj)
+    belt.asked(lead)  # the leader goes for the item beside it first
+    timed = belt.unhindered(foll, ours, mine, 0.0, proto.q, 0.0)
+    assert timed is None or timed.start > mine.start
+    if timed is not None:  # met later, when the way is clear
+        held = planning.schedule(cell.follower, timed.traj, timed.start, cell.leader,
+                                 belt.committed(lead.robot, 0.0, proto.q),
+                                 settings.pair_margin, leader=False)
+        assert held is not None and held.delay <= 0.5 * settings.grasp_reach / cell.belt.speed
