@@ -1,18 +1,21 @@
 #!/usr/bin/env python3
 """Measure every result the design documents claim, on this machine; write docs/RESULTS.md.
 
-One command, seven sections (path deviation, solver speed, payload response,
-synchronisation, singularity, collision foresight, capacity and real-time factor), each with
-the seeds' claimed figure beside the measured one, a progress line per section with the
-elapsed time, PNG figures under ``<out>/figures/``. The full run takes about 20 minutes on
-2 cores (the capacity runs are most of it); ``--smoke`` is a seconds-long version with tiny
-sizes (CI runs it).
+Sections (``--only KEY``, repeatable or a comma list; default: the seven numbered ones):
 
-Usage: benchmark.py [--smoke] [--out DIR] [--only SECTION ...] [--json FILE] [--no-readme]
+- numbered sections of ``RESULTS.md`` (:data:`scara_collab.bench.report.SECTIONS`): paths,
+  solvers (with the collision distance, one pair and N), payload, sync, singularity,
+  foresight, throughput: about 20 minutes on 2 cores; ``--smoke`` is a seconds-long version
+  with tiny sizes (CI runs it);
+- through the launcher, each run in its own ROS domain: ``protocol`` (the job protocol, 20-25
+  min), ``faults`` (the fault matrix, ``--cases``), ``soak`` (an hour of sim time,
+  ``--duration``, ``--warm``): blocks of ``RESULTS.md``; ``realtime`` (the cell in real time
+  without lockstep, ``--duration --seeds --conditions --capacity-duration``) writes
+  ``REALTIME.md``.
 
-By default the results go to ``docs/`` and the summary block of ``README.md`` (between its
-``benchmark:summary`` markers) is refreshed; with ``--smoke`` they go to a temporary folder
-unless ``--out`` is given, and the README is left alone. Exit status 1 if a section failed.
+Every section prints its Markdown and writes it as its block of the page (``--out``: the
+folder, default ``docs/``, a temporary one with ``--smoke``; a ``.md`` path names the
+real-time page). Exit status 1 if a section failed or missed its targets.
 """
 import argparse
 import os
@@ -21,55 +24,86 @@ import shlex
 import sys
 import tempfile
 
-from scara_collab.bench import report, suite
-from scara_collab.bench.sections import SECTIONS
+from scara_collab.bench import faults, protocol, realtime, report, soak
 from scara_collab.bench.util import Progress
 
 ROOT = Path(__file__).resolve().parents[1]
+LAUNCHER = {'protocol': protocol, 'faults': faults, 'soak': soak, 'realtime': realtime}
+KEYS = [s.key for s in report.SECTIONS] + list(LAUNCHER)
+
+
+def keys(text: str) -> list:
+    """Parse one ``--only`` value: a key or a comma list of keys."""
+    out = [k.strip() for k in text.split(',') if k.strip()]
+    bad = [k for k in out if k not in KEYS]
+    if bad:
+        raise argparse.ArgumentTypeError(f'unknown section {bad}; one of {", ".join(KEYS)}')
+    return out
+
+
+def parse(argv=None) -> argparse.Namespace:
+    """Return the parsed command line."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument('--only', type=keys, action='append', metavar='SECTION',
+                   help=f'run only these sections: {", ".join(KEYS)}')
+    p.add_argument('--smoke', action='store_true', help='tiny sizes: seconds, not minutes')
+    p.add_argument('--out', type=Path, default=None,
+                   help='folder for RESULTS.md, REALTIME.md and figures/ (default docs/); '
+                   'a .md path is the real-time page')
+    p.add_argument('--json', type=Path, default=None,
+                   help='also write every measured value of the numbered sections here')
+    p.add_argument('--duration', type=float, default=None,
+                   help='sim s per run: realtime (600), soak (3600)')
+    p.add_argument('--seeds', type=int, nargs='+', default=None,
+                   help='seeds: realtime (1 2 3), protocol mirrored runs (11 12 13)')
+    p.add_argument('--conditions', nargs='+', default=None, choices=list(realtime.CONDITIONS),
+                   help='realtime conditions (default all)')
+    p.add_argument('--capacity-duration', type=float, default=None,
+                   help='realtime: sim s per capacity run (240; 0: none)')
+    p.add_argument('--warm', type=float, default=None, help='soak: sim s left out (300)')
+    p.add_argument('--cases', type=int, nargs='+', default=None,
+                   help='faults: case numbers, 1-based (default all)')
+    p.add_argument('--runs', type=int, default=None, help='protocol: demo runs with hogs (5)')
+    p.add_argument('--hogs', type=int, default=None, help='protocol: CPU hogs (2)')
+    return p.parse_args(argv)
 
 
 def main(argv=None) -> int:
-    """Run the sections and write RESULTS.md, the figures and README's block.
+    """Run the sections and write their blocks.
 
     :param argv: the command-line arguments (default ``sys.argv[1:]``).
-    :return: 1 if a section failed, else 0.
+    :return: 1 if a section failed or missed its targets, else 0.
     """
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--smoke', action='store_true',
-                        help='tiny sizes, one short job: seconds, not minutes (CI)')
-    parser.add_argument('--out', type=Path, default=None,
-                        help='folder for RESULTS.md and figures/ (default: docs/, or a '
-                        'temporary folder with --smoke)')
-    keys = [s.key for s in SECTIONS]
-    parser.add_argument('--only', nargs='+', choices=keys, default=None, metavar='SECTION',
-                        help=f'run only these sections ({", ".join(keys)})')
-    parser.add_argument('--json', type=Path, default=None,
-                        help='also write every measured value here')
-    parser.add_argument('--no-readme', action='store_true',
-                        help='do not refresh the summary block of README.md')
-    args = parser.parse_args(argv)
+    args = parse(argv)
+    only = [k for group in args.only or [] for k in group] or [s.key for s in report.SECTIONS]
     # The in-process graphs must not hear another ROS graph on this machine (a demo, a test):
     # a domain of our own unless the caller chose one, and discovery on this host only.
     os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     out = args.out
     if out is None:
-        out = Path(tempfile.mkdtemp(prefix='scara_bench_smoke_')) if args.smoke \
-            else ROOT / 'docs'
+        out = Path(tempfile.mkdtemp(prefix='scara_bench_')) if args.smoke else ROOT / 'docs'
+    page = out if out.suffix == '.md' else out / 'REALTIME.md'
+    out = out.parent if out.suffix == '.md' else out
+    out.mkdir(parents=True, exist_ok=True)
     given = list(sys.argv[1:] if argv is None else argv)
     command = ' '.join(['scripts/benchmark.py'] + ([shlex.join(given)] if given else []))
     progress = Progress()
-    progress.note(f'writing {out / "RESULTS.md"} and {out / "figures"}/'
-                  + (' (smoke run)' if args.smoke else ''))
-    results = suite.run(out, smoke=args.smoke, only=args.only, progress=progress,
-                        json_path=args.json, command=command)
-    readme = ROOT / 'README.md'
-    if not (args.smoke or args.only or args.no_readme) and out.resolve() == (ROOT / 'docs'):
-        if report.update_readme(readme, results):
-            progress.note(f'refreshed the summary block of {readme}')
-    bad = suite.failed(results)
-    print(f'{out / "RESULTS.md"} written in {progress.elapsed():.0f} s'
-          + (f'; FAILED sections: {", ".join(bad)}' if bad else ''))
+    bad = []
+    numbered = [k for k in only if k not in LAUNCHER]
+    if numbered:
+        progress.note(f'writing {out / "RESULTS.md"} and {out / "figures"}/'
+                      + (' (smoke run)' if args.smoke else ''))
+        results = report.run(out, smoke=args.smoke, only=numbered, progress=progress,
+                             json_path=args.json, command=command)
+        bad += report.failed(results)
+    for key in (k for k in only if k in LAUNCHER):
+        with progress.section(key):
+            target = page if key == 'realtime' else out / 'RESULTS.md'
+            if not LAUNCHER[key].section(args, target, command, progress.note):
+                bad.append(key)
+    print(f'{out} written in {progress.elapsed():.0f} s'
+          + (f'; FAILED or targets missed: {", ".join(bad)}' if bad else ''))
     return 1 if bad else 0
 
 

@@ -1,4 +1,5 @@
-"""The core benchmark runs (quick mode) and measures what it claims to measure."""
+"""The solver section runs alone (``--only solvers --smoke``) and times the one formula."""
+import json
 from pathlib import Path
 import subprocess
 import sys
@@ -6,17 +7,23 @@ import sys
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_bench_core_quick_run(tmp_path):
-    """``bench_core.py --quick`` runs, compares with Pinocchio and writes its JSON rows.
+def test_the_solver_section_runs_alone_and_compares_the_collision_formula(tmp_path):
+    """``benchmark.py --smoke --only solvers`` writes its block, its figure and its rows.
 
-    The planned line deviation meets its target.
+    The collision row sets the one formula's single-pair time beside the branchy float
+    formula's, and both give the same distances.
     """
-    out = tmp_path / 'bench.json'
-    proc = subprocess.run([sys.executable, str(ROOT / 'scripts' / 'bench_core.py'), '--quick',
-                           '--json', str(out)], capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    assert 'IK, one target' in proc.stdout and 'Pinocchio' in proc.stdout
-    import json
-    rows = {r['what']: r for r in json.loads(out.read_text())['rows']}
-    assert rows['line deviation (planned)']['met'] is True
-    assert float(rows['IK, one target']['ours'].split()[0]) > 0
+    proc = subprocess.run([sys.executable, str(ROOT / 'scripts' / 'benchmark.py'), '--smoke',
+                           '--only', 'solvers', '--out', str(tmp_path), '--json',
+                           str(tmp_path / 'results.json')],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert 'the branchy float formula' in proc.stderr
+    rows = {r['what']: r for r in json.loads((tmp_path / 'results.json').read_text())
+            ['solvers']['rows']}
+    one = rows['capsule distances, one state pair (the one formula)']
+    assert one['ours'] > 0 and one['reference'] > 0 and 'max diff' in one['note']
+    assert float(one['note'].split()[-2]) <= 1e-15
+    page = (tmp_path / 'RESULTS.md').read_text()
+    assert '<!-- benchmark:solvers:begin -->' in page and '<!-- benchmark:paths:' not in page
+    assert (tmp_path / 'figures' / 'solvers.png').is_file()

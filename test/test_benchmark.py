@@ -9,9 +9,8 @@ import pytest
 
 from scara_collab.bench import report
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.markdown import md_table
-from scara_collab.bench.sections import SECTIONS, SUMMARY_ORDER
-from scara_collab.bench.util import fmt_seconds, spread
+from scara_collab.bench.report import SECTIONS, SUMMARY_ORDER
+from scara_collab.bench.util import fmt_seconds, md_table, spread
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = ROOT.parent / 'shared' / 'seeds'
@@ -102,19 +101,30 @@ def test_numbers_come_from_the_run(smoke):
             assert p['foresight_s'] >= results['foresight']['lead']
 
 
-def test_update_readme_replaces_only_the_marked_block(tmp_path, smoke):
-    """``update_readme`` replaces only the marked block; a README without markers is kept."""
+def test_a_run_replaces_only_its_blocks_of_the_page(tmp_path, smoke):
+    """A section's block replaces its old text; hand-written text and other blocks stay.
+
+    A page without markers has the text under each heading replaced; the next run finds the
+    markers.
+    """
     _, _, results = smoke
-    readme = tmp_path / 'README.md'
-    readme.write_text(f'# x\n\nbefore\n{report.README_BEGIN}\nold\n{report.README_END}\nafter\n')
-    assert report.update_readme(readme, results)
-    text = readme.read_text()
-    assert text.startswith('# x\n\nbefore\n') and text.endswith('\nafter\n')
-    assert 'old' not in text and 'docs/RESULTS.md' in text and '| IK latency |' in text
-    unmarked = tmp_path / 'OTHER.md'
-    unmarked.write_text('no markers\n')
-    assert not report.update_readme(unmarked, results)
-    assert unmarked.read_text() == 'no markers\n'
+    page = ('# Results, measured\n\nold run\n\n## Summary\n\nold table\n\n'
+            '## 1. Path deviation: straight line vs joint interpolation\n\nold paths\n\n'
+            '## Notes\n\nhand-written\n\n<!-- faults:begin -->\nfaults\n<!-- faults:end -->\n')
+    only_paths = dict(results, **{s.key: {'skipped': True} for s in SECTIONS[1:]})
+    text = report.render(only_paths, page)
+    assert 'old paths' not in text and 'old run' not in text
+    assert '<!-- benchmark:paths:begin -->' in text and '<!-- benchmark:solvers:' not in text
+    assert 'hand-written' in text and '<!-- faults:begin -->\nfaults\n' in text
+    again = report.render(results, text)
+    sections = _sections(again)
+    assert again.count('<!-- benchmark:paths:begin -->') == 1
+    assert '| IK latency |' in sections['Summary'] and 'hand-written' in sections['Notes']
+    written = tmp_path / 'RESULTS.md'
+    report.write_block(written, 'soak', 'Soak', 'first')
+    report.write_block(written, 'soak', 'Soak', 'second')
+    assert written.read_text() == ('# Results, measured\n\n## Soak\n\n<!-- soak:begin -->\n'
+                                   'second\n<!-- soak:end -->\n')
 
 
 def test_sections_are_registered_once_each():
@@ -126,17 +136,15 @@ def test_sections_are_registered_once_each():
         assert type(s.sizes(smoke=True)) is type(s.sizes(smoke=False)), s.key
 
 
-def test_render_reports_failed_and_skipped_sections_and_keeps_other_blocks(smoke):
-    """A failed section shows its error, a skipped one says so; other scripts' blocks stay."""
-    _, _, results = smoke
+def test_render_reports_a_failed_section_and_keeps_a_skipped_ones_block(smoke):
+    """A failed section shows its error; a skipped one keeps its block; other blocks stay."""
+    out, _, results = smoke
+    previous = (out / 'RESULTS.md').read_text()
     results = dict(results, paths={'error': 'RuntimeError: boom'}, solvers={'skipped': True})
-    block = '<!-- faults:begin -->\n| case |\n<!-- faults:end -->'
-    sections = _sections(report.render(results, f'# old\n\n{block}\n'))
+    sections = _sections(report.render(results, previous))
     first, second = report.headings()[:2]
-    assert sections[first].strip() == '**This section failed:** `RuntimeError: boom`'
-    assert sections[second].strip() == '*Not run in this invocation (`--only`).*'
-    assert sections['Faults against the launcher'].strip() == block
-    assert '| IK latency |' not in sections['Summary']
+    assert '**This section failed:** `RuntimeError: boom`' in sections[first]
+    assert sections[second] == _sections(previous)[second]
 
 
 def test_helpers():

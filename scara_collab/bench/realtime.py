@@ -18,6 +18,7 @@ separation, the stops (protective ones caused by the job's own moves are the pre
 an item every 0.9 s (the feed faster than the arms) with and without lockstep.
 """
 from pathlib import Path
+import tempfile
 from typing import Dict, List, Optional, Sequence
 
 from scara_collab.bench.job import run_launcher
@@ -127,3 +128,38 @@ def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]]
                   f'{cap["lockstep_items_per_minute"]} items/min, real time '
                   f'{cap["realtime_items_per_minute"]} items/min, ratio {cap["ratio"]}.']
     return '\n'.join(lines) + '\n'
+
+
+def _bad(r) -> bool:
+    sep = r.get('min_separation_m')
+    broken = sep is None or sep < 0.10
+    if r['condition'] == 'two_hogs':
+        return broken or bool(r.get('emergency'))
+    return broken or bool(r.get('missed')) or bool(r.get('dropped')) or bool(r.get('own_moves'))
+
+
+def section(args, page: Path, command: str, log: Log) -> bool:
+    """Run the conditions and the capacity; print the page and write it to ``page``.
+
+    Every run takes its duration in wall time (``--rtf 1``). ``args``: ``duration`` (sim s per
+    run, default 600), ``seeds`` (default 1 2 3), ``conditions`` (default all),
+    ``capacity_duration`` (sim s per capacity run, default 240; 0: none).
+
+    :return: False if a run broke the margin, missed or dropped an item, or stopped for the
+        job's own moves (``two_hogs`` may stop, protectively), or the capacity ratio < 0.95.
+    """
+    duration = args.duration or 600.0
+    seeds = args.seeds or [1, 2, 3]
+    runs = Path(tempfile.mkdtemp(prefix='scara_realtime_'))
+    log(f'run folders in {runs}')
+    rows = matrix(runs, args.conditions or list(CONDITIONS), seeds, duration, log=log)
+    cap_s = 240.0 if args.capacity_duration is None else args.capacity_duration
+    cap = capacity(runs, seeds, cap_s, log=log) if cap_s > 0 else None
+    text = markdown(rows, cap, command, duration)
+    print(text)
+    page.write_text(text, encoding='utf-8')
+    bad = [f'{r["condition"]} seed {r["seed"]}' for r in rows if _bad(r)]
+    if cap and cap['ratio'] is not None and cap['ratio'] < 0.95:
+        bad.append(f'capacity ratio {cap["ratio"]} < 0.95')
+    log(f'written {page}' + (f'; not met: {", ".join(bad)}' if bad else '; all met'))
+    return not bad

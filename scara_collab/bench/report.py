@@ -1,143 +1,190 @@
-"""``RESULTS.md`` from the benchmark's results: the page, the summary, the generated blocks.
+"""The benchmark's sections, their run, and ``RESULTS.md`` made of generated blocks.
 
-Every number printed comes from the results dict of one run
-(:func:`scara_collab.bench.suite.run`); each section's text, summary rows and figure are its
-own (:mod:`scara_collab.bench.sections`). Here is what they share: the page around them
-(head, machine, numbered headings, a failed or skipped section), the summary table, the
-README's copy of it, and the blocks between ``<!-- name:begin -->`` / ``<!-- name:end -->``
-markers that other scripts write into the page.
+:data:`SECTIONS` are the numbered sections of ``RESULTS.md``, one module each (its sizes, its
+measurement, its summary rows, its Markdown and its figure: a
+:class:`~scara_collab.bench.util.Section`). :func:`run` measures those asked for, draws their
+figures and writes their blocks into the page. Every generated part of the page lies between
+``<!-- benchmark:NAME:begin -->`` / ``<!-- benchmark:NAME:end -->`` markers (or, for the
+launcher's sections, ``<!-- NAME:begin -->`` / ``<!-- NAME:end -->``): a run replaces the
+blocks it measured and keeps everything else, hand-written text included.
 """
+from dataclasses import asdict
 from pathlib import Path
-from typing import List, Tuple
+import re
+import resource
+import tempfile
+import time
+import traceback
+from typing import Dict, List, Optional, Sequence, Tuple
 
-from scara_collab.bench.markdown import figure_link, md_table, num
-from scara_collab.bench.sections import SECTIONS, SUMMARY_ORDER
-from scara_collab.bench.sections.base import Rows, usable
+from scara_collab.bench import foresight, paths, payload, singularity, solvers, sync, throughput
+from scara_collab.bench.util import (figure_link, machine, md_table, num, Progress, Rows,
+                                     Section, usable, write_json)
 
-#: generated blocks of RESULTS.md written by other scripts, with their section titles:
-#: scripts/bench_job_protocol.py, scripts/bench_faults.py, scripts/bench_soak.py
-KEPT_BLOCKS = (('job-protocol', 'The job protocol through the launcher'),
-               ('faults', 'Faults against the launcher'),
-               ('soak', 'Soak: an hour of sim time through the launcher'))
+SECTIONS: Tuple[Section, ...] = (
+    paths.SECTION, solvers.SECTION, payload.SECTION, sync.SECTION, singularity.SECTION,
+    foresight.SECTION, throughput.SECTION)
+"""Every numbered section, in the order they run and appear in ``RESULTS.md``."""
 
+SUMMARY_ORDER: Tuple[str, ...] = (
+    'solvers', 'paths', 'sync', 'payload', 'singularity', 'foresight', 'throughput')
+"""The keys of the sections whose rows make the summary table, in its order (IK first)."""
 
-# --- the summary -----------------------------------------------------------------------------
-def headline(results: dict) -> Rows:
-    """Return the summary rows: what, seeds' claim, measured here, SPEC target, met."""
-    by_key = {s.key: s for s in SECTIONS}
-    rows: Rows = []
-    for key in SUMMARY_ORDER:
-        if usable(results.get(key)):
-            rows += by_key[key].summary(results[key])
-    return rows
-
-
-def summary_table(results: dict) -> str:
-    """Return the summary table, as in ``RESULTS.md`` and the README."""
-    return md_table(('what', "seeds' claim", 'measured here', 'SPEC target', 'target'),
-                    headline(results))
+TITLE = '# Results, measured'
 
 
-# --- the page --------------------------------------------------------------------------------
 def headings() -> List[str]:
     """Return the sections' headings in ``RESULTS.md``, numbered: ``'1. Path deviation: …'``."""
     return [f'{n}. {s.heading}' for n, s in enumerate(SECTIONS, 1)]
 
 
-def _not_measured(data) -> str:
-    if isinstance(data, dict) and data.get('skipped'):
-        return '*Not run in this invocation (`--only`).*'
-    err = data.get('error') if isinstance(data, dict) else 'no data'
-    return f'**This section failed:** `{err}`'
+def summary_table(results: dict) -> str:
+    """Return the summary table: what, seeds' claim, measured here, SPEC target, met."""
+    by_key = {s.key: s for s in SECTIONS}
+    rows: Rows = []
+    for key in SUMMARY_ORDER:
+        if usable(results.get(key)):
+            rows += by_key[key].summary(results[key])
+    return md_table(('what', "seeds' claim", 'measured here', 'SPEC target', 'target'), rows)
 
 
-def render(results: dict, previous: str = '') -> str:
-    """Return ``RESULTS.md`` for one run's results.
-
-    :param previous: the page this one replaces: its blocks written by other scripts
-        (:data:`KEPT_BLOCKS`) are kept, after the sections.
-    """
+def head(results: dict) -> str:
+    """Return the paragraph on the run: command, date, machine, wall and CPU time."""
     meta = results['meta']
-    sections = ', '.join(f'{k} {v:.0f} s' for k, v in meta['sections_s'].items()
-                         if v is not None)
-    head = [
-        '# Results, measured',
-        '',
+    took = ', '.join(f'{k} {v:.0f} s' for k, v in meta['sections_s'].items() if v is not None)
+    return (
         f'Generated by `{meta["command"] or "scripts/benchmark.py"}` on {meta["date"]}'
         + (' — **smoke run: tiny sizes, the figures are rough**' if meta['smoke'] else '')
         + f'. Machine: {meta["cpu"]}, {meta["cores"]} cores (load {num(meta["load_1min"], 2)} '
         f'at the start), {meta["system"]}, Python {meta["python"]}, numpy {meta["numpy"]}. '
-        f'Wall time {meta["wall_s"]:.0f} s ({sections}); CPU time {meta["cpu_s"]:.0f} s '
-        '(this process and the launcher run: on a quiet machine the wall time is close to it).',
-        '',
+        f'Wall time {meta["wall_s"]:.0f} s ({took}); CPU time {meta["cpu_s"]:.0f} s.\n\n'
         'The design documents (`../shared/seeds/`) print results that were never measured. '
         'Every "seeds\' claim" below is a quote from them, with the section it comes from; '
-        'every other figure was measured by this run, on this machine. SPEC targets are from '
-        '`../shared/SPEC.md` §5. Regenerate with `.venv/bin/python scripts/benchmark.py`.',
-        '',
-        '## Summary',
-        '',
-        summary_table(results),
-    ]
-    body = []
-    for heading, section in zip(headings(), SECTIONS):
-        data = results.get(section.key)
-        text = _not_measured(data)
-        if usable(data):
-            text = '\n\n'.join([section.markdown(data, results),
-                                figure_link(results, section.key, section.figure_alt)])
-        body += ['', f'## {heading}', '', text]
-    kept = ''.join(f'\n## {title}\n\n{block}\n' for name, title in KEPT_BLOCKS
-                   for block in [kept_block(previous, name)] if block)
-    return '\n'.join(head + body) + '\n' + kept
+        'every other figure was measured on the machine named here. SPEC targets are from '
+        '`../shared/SPEC.md` §5. Regenerate with `.venv/bin/python scripts/benchmark.py` '
+        '(one section: `--only KEY`).')
 
 
-# --- generated blocks ------------------------------------------------------------------------
 def block_markers(name: str) -> Tuple[str, str]:
     """Return the ``<!-- name:begin -->`` / ``<!-- name:end -->`` markers of a block."""
     return f'<!-- {name}:begin -->', f'<!-- {name}:end -->'
 
 
-def replace_block(path, name: str, text: str) -> bool:
-    """Replace the text between a generated block's markers; False if the file has none."""
+def put_block(page: str, name: str, heading: str, body: str) -> str:
+    """Return ``page`` with ``body`` as its block ``name`` under the heading ``## heading``.
+
+    The block replaces the one between the page's markers; without markers, the text under
+    the heading (numbered or not) up to the next ``## `` heading; without either, it is
+    appended under a new heading.
+    """
+    begin, end = block_markers(name)
+    block = f'{begin}\n{body.strip()}\n{end}'
+    if begin in page and end in page:
+        before, rest = page.split(begin, 1)
+        return before + block + rest.split(end, 1)[1]
+    bare = re.sub(r'^\d+\. ', '', heading)
+    found = re.search(rf'^## (\d+\. )?{re.escape(bare)}\n', page, re.M)
+    if found:
+        after = re.search(r'^## ', page[found.end():], re.M)
+        stop = found.end() + after.start() if after else len(page)
+        return f'{page[:found.end()]}\n{block}\n\n{page[stop:]}'
+    return f'{page.rstrip()}\n\n## {heading}\n\n{block}\n'.lstrip()
+
+
+def write_block(path: Path, name: str, heading: str, body: str) -> None:
+    """Write ``body`` as the block ``name`` of the page at ``path`` (made if missing)."""
     path = Path(path)
-    begin, end = block_markers(name)
-    old = path.read_text()
-    if begin not in old or end not in old:
-        return False
-    before, rest = old.split(begin, 1)
-    _, after = rest.split(end, 1)
-    path.write_text(f'{before}{begin}\n{text.rstrip()}\n{end}{after}')
-    return True
+    page = path.read_text() if path.is_file() else f'{TITLE}\n'
+    path.write_text(put_block(page, name, heading, body))
 
 
-def kept_block(text: str, name: str) -> str:
-    """Return a generated block of ``text`` with its markers ('' if none)."""
-    begin, end = block_markers(name)
-    if begin not in text or end not in text:
-        return ''
-    return begin + text.split(begin, 1)[1].split(end, 1)[0] + end
+def render(results: dict, previous: str = '') -> str:
+    """Return ``RESULTS.md``: ``previous`` with the blocks of this run's sections replaced.
+
+    The run's paragraph and every section that ran are replaced; the summary too when every
+    section of it has data (or the page has none yet); a section that failed says so.
+    """
+    page = previous or f'{TITLE}\n'
+    if block_markers('benchmark:run')[0] not in page:  # the paragraph under the title
+        title, _, rest = page.partition('\n')
+        after = re.search(r'^## ', rest, re.M)
+        page = f'{title}\n\n{block_markers("benchmark:run")[0]}\n' \
+            f'{block_markers("benchmark:run")[1]}\n\n' + (rest[after.start():] if after else '')
+    page = put_block(page, 'benchmark:run', '', head(results))
+    if all(usable(results.get(k)) for k in SUMMARY_ORDER) or 'benchmark:summary' not in page:
+        page = put_block(page, 'benchmark:summary', 'Summary', summary_table(results))
+    for heading, section in zip(headings(), SECTIONS):
+        data = results.get(section.key)
+        if isinstance(data, dict) and data.get('skipped'):
+            continue
+        text = f'**This section failed:** `{data.get("error") if data else "no data"}`'
+        if usable(data):
+            text = '\n\n'.join([section.markdown(data, results),
+                                figure_link(results, section.key, section.figure_alt)])
+        page = put_block(page, f'benchmark:{section.key}', heading, text)
+    return page
 
 
-README_BEGIN, README_END = block_markers('benchmark:summary')
+def cpu_seconds() -> float:
+    """CPU seconds (user + system) of this process and its finished children so far."""
+    own = resource.getrusage(resource.RUSAGE_SELF)
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def readme_block(results: dict) -> str:
-    """Return the README's generated block: the summary table and where it comes from."""
-    meta = results['meta']
-    return '\n'.join([
-        README_BEGIN,
-        f'*Generated by `scripts/benchmark.py` on {meta["date"]} ({meta["cpu"]}, '
-        f'{meta["cores"]} cores, load {num(meta["load_1min"], 2)} at the start, '
-        f'{meta["wall_s"] / 60:.1f} min wall, {meta["cpu_s"] / 60:.1f} min CPU); the full '
-        "tables, the seeds' quotes and the figures are in [docs/RESULTS.md](docs/RESULTS.md).*",
-        '',
-        summary_table(results),
-        README_END])
+def run(out: Path, smoke: bool = False, only: Optional[Sequence[str]] = None,
+        progress: Optional[Progress] = None, json_path: Optional[Path] = None,
+        command: str = '') -> Dict[str, object]:
+    """Measure the sections, write their blocks into ``out/RESULTS.md``, figures beside.
+
+    A section that fails is reported as failed (with the error) and the others still run.
+
+    :param smoke: the sections' smoke sizes (seconds, not minutes) instead of the full ones.
+    :param only: section keys to run (default all); the others keep their blocks.
+    :param json_path: also write every measured value here.
+    :param command: the command line, quoted in the page.
+    :return: ``{'meta': ..., <section key>: data or {'error': ...}, 'figures': ...}``.
+    """
+    progress = progress or Progress()
+    out = Path(out)
+    (out / 'figures').mkdir(parents=True, exist_ok=True)
+    sizes = {s.key: asdict(s.sizes(smoke)) for s in SECTIONS if s.sizes(smoke) is not None}
+    results: Dict[str, object] = {
+        'meta': {**machine(), 'smoke': smoke, 'sizes': sizes, 'command': command,
+                 'date': time.strftime('%Y-%m-%d %H:%M %Z'), 'sections_s': {}},
+        'figures': {}}
+    with tempfile.TemporaryDirectory(prefix='scara_bench_') as scratch:
+        for section in SECTIONS:
+            if only and section.key not in only:
+                results[section.key] = {'skipped': True}
+                continue
+            try:
+                with progress.section(section.title):
+                    results[section.key] = section.measure(section.sizes(smoke), progress,
+                                                           Path(scratch))
+            except Exception as exc:  # noqa: B902 - one broken section must not hide the rest
+                results[section.key] = {'error': f'{type(exc).__name__}: {exc}',
+                                        'traceback': traceback.format_exc()}
+            results['meta']['sections_s'][section.key] = progress.sections.get(section.title)
+    with progress.section('figures and report'):
+        for section in SECTIONS:
+            if usable(results.get(section.key)):
+                name = f'{section.key}.png'
+                try:
+                    section.figure(results[section.key], out / 'figures' / name)
+                except Exception as exc:  # noqa: B902 - a figure must not lose the report
+                    name = f'error: {type(exc).__name__}: {exc}'
+                results['figures'][section.key] = name
+        results['meta']['wall_s'] = progress.elapsed()
+        results['meta']['cpu_s'] = cpu_seconds()
+        target = out / 'RESULTS.md'
+        target.write_text(render(results, target.read_text() if target.is_file() else ''))
+    if json_path:
+        write_json(json_path, results, indent=1)
+    return results
 
 
-def update_readme(path, results: dict) -> bool:
-    """Replace the block between the README markers; return False if there are none."""
-    block = readme_block(results)
-    inner = block[len(README_BEGIN):-len(README_END)].strip('\n')
-    return replace_block(path, 'benchmark:summary', inner + '\n')
+def failed(results: Dict[str, object]) -> List[str]:
+    """Return the keys of the sections that failed."""
+    return [s.key for s in SECTIONS
+            if isinstance(results.get(s.key), dict) and 'error' in results[s.key]]

@@ -1,14 +1,19 @@
 """Shared helpers of the benchmarks: the machine, timing, progress lines, number formats, JSON."""
+from dataclasses import dataclass
 import json
 import math
 import os
+from pathlib import Path
 import platform
 import sys
 import time
 import timeit
-from typing import Callable, Dict, Iterable, Optional, TextIO
+from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, TextIO
 
 import numpy as np
+
+from scara_collab.bench.claims import CLAIMS
+
 
 Log = Callable[[str], None]
 
@@ -151,3 +156,125 @@ def write_json(path, data, indent: int = 2) -> None:
     """
     with open(path, 'w') as f:
         json.dump(data, f, indent=indent, default=_plain)
+
+
+def _ok(x) -> bool:
+    return x is not None and not (isinstance(x, float) and math.isnan(x))
+
+
+def mm(x: Optional[float], digits: int = 3) -> str:
+    """Format metres as millimetres (``'n/a'`` for None)."""
+    return f'{x * 1e3:.{digits}g} mm' if _ok(x) else 'n/a'
+
+
+def m(x: Optional[float], digits: int = 3) -> str:
+    """Format metres."""
+    return f'{x:.{digits}g} m' if _ok(x) else 'n/a'
+
+
+def num(x: Optional[float], digits: int = 3, unit: str = '') -> str:
+    """Format a number with ``digits`` significant digits and an optional unit."""
+    if not _ok(x):
+        return 'n/a'
+    return f'{x:.{digits}g}' + (f' {unit}' if unit else '')
+
+
+def plural(n: int, word: str) -> str:
+    """Return ``'1 move'``, ``'3 moves'``."""
+    return f'{n} {word}' + ('' if n == 1 else 's')
+
+
+def met(flag: Optional[bool]) -> str:
+    """Format a target check."""
+    return '' if flag is None else ('**met**' if flag else '**not met**')
+
+
+def quote(*keys: str) -> str:
+    """Blockquote the seeds' claims ``keys`` with their sources."""
+    return '\n'.join(f'> {CLAIMS[k].quote} — *{CLAIMS[k].source}*\n>' for k in keys).rstrip('>\n')
+
+
+def md_table(head: Sequence[str], rows: Iterable[Sequence[object]],
+             align: Optional[str] = None) -> str:
+    """Return a Markdown table; ``align`` is one of ``l r c`` per column (default left)."""
+    align = align or 'l' * len(head)
+    marks = {'l': '---', 'r': '---:', 'c': ':---:'}
+    lines = ['| ' + ' | '.join(head) + ' |',
+             '|' + '|'.join(marks[a] for a in align) + '|']
+    for row in rows:
+        lines.append('| ' + ' | '.join(str(c) for c in row) + ' |')
+    return '\n'.join(lines)
+
+
+def figure_link(results: dict, key: str, alt: str) -> str:
+    """Return the image link of section ``key``'s figure, or why it was not drawn."""
+    name = (results.get('figures') or {}).get(key, '')
+    if name.endswith('.png'):
+        return f'![{alt}](figures/{name})'
+    return f'*(figure not drawn: {name or "no data"})*'
+
+
+DPI = 90
+
+
+def canvas(width: float, height: float, ncols: int = 1):
+    """Return ``(figure, axes)``: a constrained-layout Agg figure with ``ncols`` axes.
+
+    :param width: inches.
+    :param height: inches.
+    """
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(width, height), layout='constrained')
+    axes = fig.subplots(1, ncols)
+    return fig, axes
+
+
+def save(fig, path: Path) -> None:
+    """Save ``fig`` as a PNG at the benchmark's resolution."""
+    fig.savefig(path, dpi=DPI)
+
+
+Rows = List[Sequence[str]]
+
+
+@dataclass(frozen=True)
+class Section:
+    """One section of the benchmark and of ``RESULTS.md``, everything about it in one module.
+
+    :ivar key: the results key, the ``--only`` name and the figure's file name (``<key>.png``).
+    :ivar title: the name on the progress lines.
+    :ivar heading: the heading in ``RESULTS.md``, without its number (the place in
+        :data:`~scara_collab.bench.report.SECTIONS` numbers it).
+    :ivar measure: ``measure(sizes, progress, scratch) -> data``: run the section with its
+        sizes (:attr:`full` or :attr:`smoke`), notes on ``progress``, files under the
+        ``scratch`` folder; return plain data (dicts, lists, floats, strings, arrays).
+    :ivar markdown: ``markdown(data, results) -> text``: the section's body (the claims quoted,
+        the tables, the prose; not the figure's link); ``results`` holds every section's data,
+        for the figures one section quotes from another.
+    :ivar summary: ``summary(data) -> rows`` of the summary table (what, seeds' claim,
+        measured here, SPEC target, target met).
+    :ivar figure: ``figure(data, path)``: draw the section's figure and save it as ``path``.
+    :ivar figure_alt: the figure's alternative text in ``RESULTS.md``.
+    :ivar full: the sizes of the full run, a frozen dataclass (None: the section has none).
+    :ivar smoke: the sizes of the seconds-long smoke run.
+    """
+
+    key: str
+    title: str
+    heading: str
+    measure: Callable[[Any, Progress, Path], dict]
+    markdown: Callable[[dict, dict], str]
+    summary: Callable[[dict], Rows]
+    figure: Callable[[dict, Path], None]
+    figure_alt: str
+    full: Optional[Any] = None
+    smoke: Optional[Any] = None
+
+    def sizes(self, smoke: bool = False) -> Optional[Any]:
+        """Return the sizes of the smoke run if ``smoke``, else of the full run."""
+        return self.smoke if smoke else self.full
+
+
+def usable(data) -> bool:
+    """Return True if a section's results are data: it ran and did not fail."""
+    return isinstance(data, dict) and 'error' not in data and not data.get('skipped')

@@ -14,10 +14,9 @@ import numpy as np
 
 from scara_collab.bench import capacity, job
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.figures import canvas, save
-from scara_collab.bench.markdown import m, md_table, met, num, plural, quote
-from scara_collab.bench.sections.base import Rows, Section, usable
-from scara_collab.bench.util import Progress, spread
+from scara_collab.bench.util import (canvas, m, md_table, met, num, plural, Progress, quote, Rows,
+                                     save, Section, spread, usable)
+
 
 TARGETS = {
     'pair_ratio': 1.9,             # pair / single items per minute
