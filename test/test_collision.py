@@ -1,6 +1,5 @@
 """Collision geometry: segment distance against brute force and coal, capsule arms, delays."""
 import dataclasses
-from pathlib import Path
 
 import coal
 from hypothesis import given, settings
@@ -571,30 +570,3 @@ def test_one_state_pair_is_the_batch_formula(cell):
         one = arm_pair_distances(left, q_l[k], right, q_r[k])
         assert one.shape == (3, 3)
         assert np.array_equal(one, batch[k])
-
-
-REFERENCE = Path(__file__).parent / 'data' / 'collision_reference.npz'
-
-
-def test_results_match_the_reference_values_to_1e_15(cell):
-    """Segment and arm distances equal stored reference values to 1e-15 m.
-
-    ``collision_reference.npz`` holds 300 random segment quadruples (points, parallel, nearly
-    parallel and coplanar ones among them) with their ``(dist, s, t)``, and 300 random state
-    pairs of the cell's arms with their 3 x 3 capsule distances, computed one pair at a time
-    (``pairs_one``) and all at once (``pairs_many``) by a separate scalar and vectorised
-    implementation. Both are met by the one formula, for one pair and for N.
-    """
-    ref = np.load(REFERENCE)
-    left, right = cell.arms
-    seg = ref['segments']
-    many = np.stack(segment_distance(seg[:, 0], seg[:, 1], seg[:, 2], seg[:, 3]), -1)
-    one = np.array([np.array(segment_distance(*s)) for s in seg])
-    for got in (many, one):
-        assert_allclose(got, ref['segment_dst'], rtol=0, atol=1e-15)
-    q_a, q_b = ref['q_a'], ref['q_b']
-    many = arm_pair_distances(left, q_a, right, q_b)
-    one = np.array([arm_pair_distances(left, a, right, b) for a, b in zip(q_a, q_b)])
-    for want in (ref['pairs_one'], ref['pairs_many']):
-        assert_allclose(many, want, rtol=0, atol=1e-15)
-        assert_allclose(one, want, rtol=0, atol=1e-15)
