@@ -537,7 +537,7 @@ def test_the_lockstep_watch_is_off_in_one_process():
         off.close()
         on = Liveness(['collision_monitor'], 10.0, ctx)
         topics = on._node.get_subscriber_names_and_types_by_node('launch_cell_watch', '/')
-        assert [t for t, _ in topics] == [lockstep.TOPIC]
+        assert [t for t, _ in topics] == ['/' + lockstep.TOPIC]
         on.close()
     finally:
         rclpy.try_shutdown(context=ctx)
