@@ -1,4 +1,4 @@
-"""Two cells on one ROS domain, under ``/cell_0`` and ``/cell_1``: each sorts, neither hears the other.
+"""Two cells on one ROS domain, under /cell_0 and /cell_1: each sorts, neither hears the other.
 
 Both graphs run in this process, each in its own context and executor (the nodes of
 :mod:`scara_collab.graph` built with the cell's namespace and remaps, as the launcher starts
@@ -133,7 +133,7 @@ def test_two_cells_on_one_domain_each_sort_and_hear_nothing_of_the_other(cells):
 
 
 def test_the_time_source_honours_the_clock_remap():
-    """rclpy's time source (``use_sim_time``) subscribes ``/clock``: the remap moves it."""
+    """The time source of rclpy (``use_sim_time``) subscribes ``/clock``: the remap moves it."""
     from builtin_interfaces.msg import Time
     from rosgraph_msgs.msg import Clock
     g = Graph('/cell_7')
