@@ -64,9 +64,10 @@ def test_an_exception_does_not_escape_and_the_next_call_comes(g):
 def test_created_before_joining_the_lockstep_it_runs_before_the_answer(g):
     """The node answers a /clock only after its tick for that instant has run."""
     node = sim_node(g, 'job')
-    answered_at_tick = []
-    every(node, 0.02, lambda: answered_at_tick.append(node.lockstep.answered))
+    answered_at_tick, parts = [], []
+    every(node, 0.02, lambda: answered_at_tick.append(parts[0].answered))
     part = lockstep.join(node)
+    parts.append(part)
     run_clock(g, node, [0.02, 0.04, 0.06])
     assert answered_at_tick == [0, 1, 2]  # the answer to the same clock comes after
     assert part.answered == 3
