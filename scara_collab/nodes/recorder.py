@@ -69,7 +69,7 @@ class RunRecorder(Node, RunRecord):
         self.stamps = conv.StampGate()  # states must carry the sim clock's time
         self._index: Dict[tuple, np.ndarray] = {}
         self._names = list(self.cell.leader.joint_names) + list(self.cell.follower.joint_names)
-        # no exception escapes a callback (runner.guarded: logged, the recording goes on)
+        # no exception escapes a callback (nodes.guarded: logged, the recording goes on)
         for name, callback in (('joint_states', self.on_joint_state),
                                ('conveyor/events', self.on_event),
                                ('automation_manager/stats', self.on_stats),

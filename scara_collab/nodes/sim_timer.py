@@ -58,7 +58,7 @@ def every(node: Node, period: float, callback: Callable[[], None]):
     """Run ``callback`` every ``period`` s of the node's time; return the timer.
 
     On sim time (``use_sim_time``) a :class:`SimTimer`, else ``node.create_timer``. The
-    callback is guarded (:func:`scara_collab.nodes.runner.guarded`) either way.
+    callback is guarded (:func:`scara_collab.nodes.guarded.guarded`) either way.
     """
     if node.get_parameter('use_sim_time').value:
         return SimTimer(node, period, callback)
