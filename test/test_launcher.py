@@ -584,3 +584,25 @@ def test_the_job_start_is_asked_again_while_the_manager_is_not_connected(tmp_pat
     finally:
         run.close()
         console.close()
+
+
+def test_the_namespace_flag_moves_every_stage_into_the_cell():
+    """``--namespace /cell_1``: every node's command line puts it there, with the clock remap.
+
+    Without it the commands are the root cell's (no ``-r``); a bad namespace is a usage error.
+    """
+    from scara_collab.run import launcher
+    from scara_collab.run.stages import command, one_process, stages
+    config = Path('/cfg')
+    plain = stages(launcher.parse_args([]), True)
+    assert all('-r' not in command(s, config) for s in plain)
+    moved = stages(launcher.parse_args(['--namespace', 'cell_1']), True)
+    for stage in moved:
+        cmd = command(stage, config)
+        assert ['-r', '__ns:=/cell_1', '-r', '/clock:=/cell_1/clock'] == cmd[
+            cmd.index('-r'):cmd.index('-r') + 4], stage.name
+    assert 'service /cell_1/sim/resume' == moved[0].ready
+    container = command(one_process(moved), config)
+    assert container.count('__ns:=/cell_1') == len(moved)
+    with pytest.raises(SystemExit):
+        launcher.parse_args(['--namespace', 'cell 1'])
