@@ -3,19 +3,15 @@
 
 Sections (``--only KEY``, repeatable or a comma list; default: the seven numbered ones):
 
-- numbered sections of ``RESULTS.md`` (:data:`scara_collab.bench.report.SECTIONS`): paths,
-  solvers (with the collision distance, one pair and N), payload, sync, singularity,
-  foresight, throughput: about 20 minutes on 2 cores; ``--smoke`` is a seconds-long version
-  with tiny sizes (CI runs it);
-- through the launcher, each run in its own ROS domain: ``protocol`` (the job protocol, 20-25
-  min), ``faults`` (the fault matrix, ``--cases``), ``soak`` (an hour of sim time,
-  ``--duration``, ``--warm``): blocks of ``RESULTS.md``; ``realtime`` (the cell in real time
-  without lockstep, ``--duration --seeds --conditions --capacity-duration``) writes
-  ``REALTIME.md``.
+- the numbered sections of ``RESULTS.md``: paths, solvers, payload, sync, singularity,
+  foresight, throughput (about 20 minutes on 2 cores; ``--smoke``: seconds, tiny sizes);
+- through the launcher, each run in its own ROS domain: ``protocol`` (20-25 min; ``--seeds
+  --runs --hogs``), ``faults`` (``--cases``), ``soak`` (``--duration --warm``), blocks of
+  ``RESULTS.md``; ``realtime`` (``--duration --seeds --conditions --capacity-duration``)
+  writes ``REALTIME.md``.
 
-Every section prints its Markdown and writes it as its block of the page (``--out``: the
-folder, default ``docs/``, a temporary one with ``--smoke``; a ``.md`` path names the
-real-time page). Exit status 1 if a section failed or missed its targets.
+``--out``: the folder (default ``docs/``, a temporary one with ``--smoke``); a ``.md`` path
+names the real-time page. Exit status 1 if a section failed or missed its targets.
 """
 import argparse
 import os
@@ -69,11 +65,7 @@ def parse(argv=None) -> argparse.Namespace:
 
 
 def main(argv=None) -> int:
-    """Run the sections and write their blocks.
-
-    :param argv: the command-line arguments (default ``sys.argv[1:]``).
-    :return: 1 if a section failed or missed its targets, else 0.
-    """
+    """Run the sections and write their blocks; return 1 if one failed or missed its targets."""
     args = parse(argv)
     only = [k for group in args.only or [] for k in group] or [s.key for s in report.SECTIONS]
     # The in-process graphs must not hear another ROS graph on this machine (a demo, a test):
@@ -86,16 +78,14 @@ def main(argv=None) -> int:
     page = out if out.suffix == '.md' else out / 'REALTIME.md'
     out = out.parent if out.suffix == '.md' else out
     out.mkdir(parents=True, exist_ok=True)
-    given = list(sys.argv[1:] if argv is None else argv)
-    command = ' '.join(['scripts/benchmark.py'] + ([shlex.join(given)] if given else []))
+    given = sys.argv[1:] if argv is None else list(argv)
+    command = shlex.join(['scripts/benchmark.py', *given])
     progress = Progress()
     bad = []
     numbered = [k for k in only if k not in LAUNCHER]
     if numbered:
-        progress.note(f'writing {out / "RESULTS.md"} and {out / "figures"}/'
-                      + (' (smoke run)' if args.smoke else ''))
-        results = report.run(out, smoke=args.smoke, only=numbered, progress=progress,
-                             json_path=args.json, command=command)
+        progress.note(f'writing {out / "RESULTS.md"} and {out / "figures"}/')
+        results = report.run(out, args.smoke, numbered, progress, args.json, command)
         bad += report.failed(results)
     for key in (k for k in only if k in LAUNCHER):
         with progress.section(key):

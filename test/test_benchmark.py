@@ -10,7 +10,7 @@ import pytest
 from scara_collab.bench import report
 from scara_collab.bench.claims import CLAIMS
 from scara_collab.bench.report import SECTIONS, SUMMARY_ORDER
-from scara_collab.bench.util import fmt_seconds, md_table, spread
+from scara_collab.bench.util import fmt_seconds, spread, table
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = ROOT.parent / 'shared' / 'seeds'
@@ -152,7 +152,7 @@ def test_helpers():
     assert fmt_seconds(3.5e-6) == '3.5 µs' and fmt_seconds(0.0147) == '14.7 ms'
     s = spread([1.0, 2.0, 3.0, None, float('nan')])
     assert s['n'] == 3 and s['mean'] == 2.0 and s['std'] == 1.0
-    assert md_table(('a', 'b'), [(1, 2)], 'lr') == '| a | b |\n|---|---:|\n| 1 | 2 |'
+    assert table([{'a': 1, 'b': 2}], 'lr') == '| a | b |\n|---|---:|\n| 1 | 2 |'
 
 
 @pytest.mark.skipif(not SEEDS.is_dir(), reason='the design documents are not beside the repo')

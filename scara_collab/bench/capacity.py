@@ -1,28 +1,23 @@
 """What bounds the sorting capacity: a single arm's cycle at the joint limits, line timing.
 
-:func:`cycle_bound` times the single arm's cycle with the planners' own moves: from above
-a bin down to an item on the belt, and back, over a grid of pick points and both bins. Its
-best is the most items per minute a single arm could sort if every item were met where the
-cycle is shortest and grasping took no time; the job's capacity is measured against it.
-
-:func:`topp_ratios` times random straight lines with the motion core and with TOPP-RA
-(``toppra``, an independent reference) on the same path and limits: the ratio is how far the
-core's timing is from time-optimal.
+:func:`cycle_bound` times the single arm's cycle with the planners' own moves (from above a
+bin down to an item on the belt and back); :func:`topp_ratios` times random straight lines
+with the motion core and with TOPP-RA (``toppra``, an independent reference).
 """
 import logging
-from typing import Dict, List, Optional
+from typing import Dict, List
 
 import numpy as np
 
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik, IKError
-from scara_collab.core.model import CellModel, load_cell
+from scara_collab.core.model import load_cell
 from scara_collab.core.planning import plan_path
 from scara_collab.core.sorting import drop_point, pick_height
 from scara_collab.core.trajectory import line_move, Trajectory
 
 
-def cycle_bound(cell: Optional[CellModel] = None, step: float = 0.1) -> Dict[str, object]:
+def cycle_bound(step: float = 0.1) -> Dict[str, object]:
     """Time the leader's bin -> pick -> bin cycle over a grid of pick points.
 
     Pick points: the belt length in ``step`` (m) steps, across the items' lateral spread
@@ -33,7 +28,7 @@ def cycle_bound(cell: Optional[CellModel] = None, step: float = 0.1) -> Dict[str
     :return: ``{'best_s', 'median_s', 'cases', 'items_per_min_best', 'items_per_min_median',
         'best_pick'}``: the cycle's motion time (no grasp, no release).
     """
-    cell = cell or load_cell()
+    cell = load_cell()
     arm = cell.leader
     auto, sim = load_config('automation'), load_config('simulation')
     z = pick_height(cell, float(auto['pick_clearance']))
@@ -58,8 +53,6 @@ def cycle_bound(cell: Optional[CellModel] = None, step: float = 0.1) -> Dict[str
                 times.append(t)
                 if t < best[0]:
                     best = (t, pick)
-    if not times:
-        raise ValueError('no pick point in reach')
     med = float(np.median(times))
     return {'best_s': float(best[0]), 'median_s': med, 'cases': len(times),
             'items_per_min_best': 60.0 / best[0], 'items_per_min_median': 60.0 / med,
@@ -81,13 +74,9 @@ def toppra_duration(arm, traj: Trajectory) -> float:
     return inst.compute_trajectory().duration
 
 
-def topp_ratios(n: int = 100, seed: int = 1, cell: Optional[CellModel] = None) -> np.ndarray:
-    """Line time / TOPP-RA time over ``n`` random lines (seeded) of at least 0.2 s.
-
-    :raises ImportError: ``toppra`` is not installed (it is a test requirement).
-    """
-    import toppra  # noqa: F401 - fail early, before any planning
-    arm = (cell or load_cell()).leader
+def topp_ratios(n: int = 100, seed: int = 1) -> np.ndarray:
+    """Line time / TOPP-RA time over ``n`` random lines (seeded) of at least 0.2 s."""
+    arm = load_cell().leader
     rng = np.random.default_rng(seed)
     ratios: List[float] = []
     while len(ratios) < n:

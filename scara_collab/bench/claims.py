@@ -1,22 +1,14 @@
-"""The design documents' result claims, quoted: the figures every benchmark is set beside.
+"""The design documents' result claims, quoted once: the figures the benchmarks are set beside.
 
-None of these was ever measured (``../shared/SPEC.md``): they are quotes, kept here once so
-every table and report cites the same words and section. Markdown emphasis (``**``) is
-dropped from the quotes; the words are the documents' own. ``seeds/000`` is the full paper,
-``seeds/001`` the phase-I report.
+None of these was ever measured (``../shared/SPEC.md``). Markdown emphasis is dropped from the
+quotes; the words are the documents' own. ``seeds/000`` is the paper, ``seeds/001`` the
+phase-I report.
 """
-from dataclasses import dataclass
-from typing import Dict
+from typing import Dict, NamedTuple
 
 
-@dataclass(frozen=True)
-class Claim:
-    """One claimed result.
-
-    :ivar figure: the claimed figure, as printed (short).
-    :ivar source: document and section, e.g. ``'seeds/000 §9.3'``.
-    :ivar quote: the sentence or table row that makes the claim, verbatim.
-    """
+class Claim(NamedTuple):
+    """One claimed result: the figure as printed (short), its source, the verbatim quote."""
 
     figure: str
     source: str
@@ -35,10 +27,6 @@ CLAIMS: Dict[str, Claim] = {
     'path_length': Claim(
         '14 % shorter', 'seeds/000 §10.1, appendix C',
         'This optimization directly led to a 14% reduction in path length'),
-    'jerk': Claim(
-        'joint: high (non-linear); line: low', 'seeds/000 §9.1.1',
-        'Path Smoothness (Jerk): Joint Interpolation High (Non-linear); Lagrange Optimizer '
-        'Low (Curvature → 0)'),
     'ik_latency': Claim(
         '0.32 ms', 'seeds/000 §9.2',
         'The analytical IK solver exhibits a mean execution time of 0.32 ms on a '
@@ -49,16 +37,13 @@ CLAIMS: Dict[str, Claim] = {
         'modern middleware, paired with robust physics engines like Gazebo, can support '
         'complex multi-robot synchronization with sub-millisecond solver latencies'),
     'payload': Claim(
-        '0 / 1.0 / 2.5 kg: settle 0.45 / 0.72 / 1.15 s, peak torque 12.5 / 34.2 / 88.7 N·m, '
-        'overshoot 0.2 / 1.5 / 4.8 %', 'seeds/000 §9.3',
+        '0.45 / 0.72 / 1.15 s', 'seeds/000 §9.3',
         'Payload | Settling Time (s) | Peak Torque (Nm) | Overshoot (%): 0.0 kg | 0.45 | '
         '12.5 | 0.2%; 1.0 kg | 0.72 | 34.2 | 1.5%; 2.5 kg | 1.15 | 88.7 | 4.8%. [...] the PID '
         'gains (K_p=15.0) might benefit from adaptive tuning for heavier objects'),
-    'mirror_error': Claim(
-        '4 mm (average)', 'seeds/000 §9.4', 'Average Mirroring Error: 0.004 m.'),
-    'lag': Claim(
-        '15 ms (maximum)', 'seeds/000 §9.4',
-        'Maximum Lag: 15 ms (approx. 1.5 control cycles).'),
+    'mirror_error': Claim('4 mm (average)', 'seeds/000 §9.4', 'Average Mirroring Error: 0.004 m.'),
+    'lag': Claim('15 ms (maximum)', 'seeds/000 §9.4',
+                 'Maximum Lag: 15 ms (approx. 1.5 control cycles).'),
     'singularity': Claim(
         '≤ 2.0 rad/s near θ2 ≈ 180°', 'seeds/000 §9.5',
         'Near the inner singularity (θ2 ≈ 180°), the Damped Least Squares controller '
@@ -69,10 +54,6 @@ CLAIMS: Dict[str, Claim] = {
         'The robot was commanded to points exactly 3.0m away (beyond its 2.5m limit). '
         'Result: The IK solver correctly identified the complex roots in the cosine law and '
         'rejected the command immediately.'),
-    'peak_velocity': Claim(
-        '1.85 / 2.15 rad/s', 'seeds/000 appendix C',
-        'Peak Velocity | 1.85 rad/s | 2.15 rad/s (Joint 1, Joint 2, "during a 5-meter '
-        'collaborative move")'),
     'foresight': Claim(
         '200 ms before impact', 'seeds/001 §4.3',
         'In forced collision scenarios, the detection algorithm successfully identified the '

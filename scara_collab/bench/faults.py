@@ -3,10 +3,8 @@
 Each case starts the launcher (one process per node, its own ROS domain), waits for the job,
 injects one fault from a probe node in this process (or a launcher flag, or a signal), waits
 for the run to end and judges it from the run's own files (``summary.json``, the node logs).
-A case passes when what was expected happened: no node died unless killed, no arm moved
-into the margin, the exit code and the summary say what happened.
-``scripts/benchmark.py --only faults`` prints the table and writes it into ``docs/RESULTS.md``.
 """
+from contextlib import suppress
 from dataclasses import dataclass
 import json
 import os
@@ -15,56 +13,42 @@ import queue
 import re
 import signal
 import subprocess
-import sys
 import tempfile
 import threading
 import time
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PointStamped
 import numpy as np
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
 
+from scara_collab.bench.job import launcher_cmd
+from scara_collab.bench.probe import Probe
+from scara_collab.bench.protocol import stops, use_domain
 from scara_collab.bench.report import write_block
-from scara_collab.bench.util import Log
-from scara_collab.nodes.probe import Probe
+from scara_collab.bench.util import Log, table
+from scara_collab.core.kinematics import fk, ik
+from scara_collab.core.model import load_cell
+from scara_collab.core.trajectory import joint_move
+from scara_collab.nodes import conversions as conv
 
 Summary = Dict[str, object]
-
-
-@dataclass
-class Case:
-    """One fault: how to inject it, what is expected and how the run's files are judged."""
-
-    name: str
-    expected: str
-    duration: float
-    judge: Callable[[Summary, Path], Tuple[bool, str]]
-    inject: Optional[Callable[['Run'], None]] = None
-    flags: Tuple[str, ...] = ()
-    mode: str = 'collaborative'
+#: the readers of joint_states in a collaborative run: both planners, the collision monitor,
+#: the automation manager and the launcher's recorder
+STATE_READERS = 5
 
 
 class Run:
-    """The launcher as a subprocess, its output lines collected, plus a probe node."""
+    """The launcher as a subprocess at real time, its output lines collected in a thread."""
 
-    def __init__(self, out: Path, duration: float, flags: Sequence[str], domain: int,
-                 mode: str = 'collaborative'):
-        """Start the launcher for ``duration`` sim seconds and collect its output in a thread.
-
-        :param out: the run folder (``--output``).
-        :param duration: sim seconds of the run.
-        :param flags: more launcher arguments (``--fault ...``, ``--feed-interval ...``).
-        :param domain: ``ROS_DOMAIN_ID`` of the launched graph (this process joins it too).
-        :param mode: the launcher's ``--mode``.
-        """
-        env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
-                   ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-        os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-        self.out = out
-        cmd = [sys.executable, '-c', 'import sys; from scara_collab.run.launcher import main; '
-               'sys.exit(main(sys.argv[1:]))', '--mode', mode, '--duration',
-               f'{duration:g}', '--rtf', '1', '--output', str(out), '--no-plots', *flags]
-        self.proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, text=True)
+    def __init__(self, out: Path, duration: float, flags, mode: str):
+        """Start the launcher for ``duration`` sim seconds in this process's ROS domain."""
+        self.out, self.resume = out, None
+        cmd = launcher_cmd(mode, duration, out, 1.0, flags, quiet=False)
+        self.proc = subprocess.Popen(cmd, env=dict(os.environ, PYTHONUNBUFFERED='1'),
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.lines: List[str] = []
         self._queue: 'queue.Queue[str]' = queue.Queue()
         threading.Thread(target=self._read, daemon=True).start()
@@ -79,75 +63,53 @@ class Run:
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             try:
-                line = self._queue.get(timeout=0.2)
+                if re.search(pattern, self._queue.get(timeout=0.2)):
+                    return True
             except queue.Empty:
                 if self.proc.poll() is not None:
                     return False
-                continue
-            if re.search(pattern, line):
-                return True
         return False
 
     def pid(self, node: str) -> int:
         """Return the pid of a launched node."""
         return int(json.loads((self.out / 'pids.json').read_text())[node])
 
-    def finish(self, timeout: float) -> int:
+    def finish(self, timeout: float) -> None:
         """Wait for the launcher to end (SIGINT, then SIGKILL, after ``timeout`` wall s)."""
-        try:
-            return self.proc.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.send_signal(signal.SIGINT)
+        for stop in (None, signal.SIGINT, signal.SIGKILL):
+            if stop is not None:
+                self.proc.send_signal(stop)
             try:
-                return self.proc.wait(timeout=60)
+                self.proc.wait(timeout=timeout if stop is None else 60)
+                return
             except subprocess.TimeoutExpired:
-                self.proc.kill()
-                return self.proc.wait()
+                pass
 
 
 # --- injections -------------------------------------------------------------------------------
-#: the readers of /joint_states in a collaborative run: both planners, the collision monitor,
-#: the automation manager and the launcher's recorder (the replication manager listens only
-#: while mirroring)
-STATE_READERS = 5
-
-
 def _names() -> List[str]:
-    from scara_collab.core.model import load_cell
     return [n for arm in load_cell().arms for n in arm.joint_names]
 
 
-def _stamp(probe: Probe) -> float:
-    from scara_collab.nodes import conversions as conv
-    return conv.to_sec(probe.state.header.stamp) if probe.state is not None else 0.0
-
-
 def nan_state_then_target(run: Run) -> None:
-    """Publish a NaN /joint_states (on sim time) five times, then a target for the left arm."""
-    from geometry_msgs.msg import PointStamped
-    from sensor_msgs.msg import JointState
-    from scara_collab.nodes import conversions as conv
+    """Publish a NaN joint state (on sim time) five times, then a target for the left arm."""
     with Probe() as probe:
-        pub = probe.publisher(JointState, '/joint_states', STATE_READERS)
+        pub = probe.publisher(JointState, 'joint_states', STATE_READERS)
         probe.wait_state()
         for _ in range(5):
-            probe.spin(0.1)  # take the newest state
-            # stamped a little ahead of the newest state the probe heard (which may lag the
-            # graph): in order and on the clock, only not finite
-            pub.publish(conv.joint_state(_stamp(probe) + 0.1, _names(), [float('nan')] * 6,
-                                         [0.0] * 6, [0.0] * 6))
+            probe.spin(0.1)  # take the newest state, stamp a little ahead of it: only not finite
+            pub.publish(conv.joint_state(conv.to_sec(probe.state.header.stamp) + 0.1, _names(),
+                                         [float('nan')] * 6, [0.0] * 6, [0.0] * 6))
             probe.spin(0.05)
-        target = probe.publisher(PointStamped, '/scara_left/target')
+        target = probe.publisher(PointStamped, 'scara_left/target')
         target.publish(conv.make_point_stamped([2.4, -0.6, 0.5], 'world', 0.0))
         probe.spin(1.0)
 
 
 def wall_clock_states(run: Run) -> None:
     """Publish states stamped with wall time (1.79e9 s) for 3 s."""
-    from sensor_msgs.msg import JointState
-    from scara_collab.nodes import conversions as conv
     with Probe() as probe:
-        pub = probe.publisher(JointState, '/joint_states', STATE_READERS)
+        pub = probe.publisher(JointState, 'joint_states', STATE_READERS)
         for _ in range(60):
             pub.publish(conv.joint_state(1.79e9, _names(), [0.0] * 6, [0.0] * 6, [0.0] * 6))
             probe.spin(0.05)
@@ -155,19 +117,13 @@ def wall_clock_states(run: Run) -> None:
 
 def raw_crossing(run: Run) -> None:
     """Park the left arm over the belt, then send the right arm a raw move through it."""
-    from geometry_msgs.msg import PointStamped
-    from trajectory_msgs.msg import JointTrajectory
-    from scara_collab.core.kinematics import fk, ik
-    from scara_collab.core.model import load_cell
-    from scara_collab.core.trajectory import joint_move
-    from scara_collab.nodes import conversions as conv
     cell = load_cell()
     left, right = cell.leader, cell.follower
+    goal = np.array([1.8, -0.2, 0.4])  # over the belt, in both arms' reach
     with Probe() as probe:
-        goal = np.array([1.8, -0.2, 0.4])  # over the belt, in both arms' reach
-        target = probe.publisher(PointStamped, '/scara_left/target')
-        target.publish(conv.make_point_stamped(goal, 'world', 0.0))
-        pub = probe.publisher(JointTrajectory, '/scara_right/joint_trajectory')
+        probe.publisher(PointStamped, 'scara_left/target').publish(
+            conv.make_point_stamped(goal, 'world', 0.0))
+        pub = probe.publisher(JointTrajectory, 'scara_right/joint_trajectory')
         end = time.monotonic() + 30.0
         while time.monotonic() < end:  # until the left arm is there
             probe.spin(0.1)
@@ -183,30 +139,24 @@ def raw_crossing(run: Run) -> None:
 
 def rogue_input(run: Run) -> None:
     """Publish 200 bad targets in 2 s, a malformed trajectory and an oversized one."""
-    from diagnostic_msgs.msg import DiagnosticStatus
-    from geometry_msgs.msg import PointStamped
-    from trajectory_msgs.msg import JointTrajectory
-    from scara_collab.nodes import conversions as conv
+    joints = ['scara_left_joint_1', 'scara_left_joint_2', 'scara_left_gripper_joint']
     with Probe() as probe:
-        target = probe.publisher(PointStamped, '/scara_left/target')
-        traj = probe.publisher(JointTrajectory, '/scara_left/joint_trajectory')
+        target = probe.publisher(PointStamped, 'scara_left/target')
+        traj = probe.publisher(JointTrajectory, 'scara_left/joint_trajectory')
         probe.wait_state()
         bad = [[float('nan'), -1.0, 0.4], [9.0, -2.0, 0.4], [2.0, -2.0, 0.4], [3.0, -1.0, 1.5]]
         for k in range(200):
-            frame = 'map' if k % 7 == 0 else 'world'
-            target.publish(conv.make_point_stamped(bad[k % len(bad)], frame, 0.0))
+            target.publish(conv.make_point_stamped(bad[k % len(bad)],
+                                                   'map' if k % 7 == 0 else 'world', 0.0))
             probe.spin(0.01)
-        names = ['scara_left_joint_1', 'nope', 'scara_left_gripper_joint']
-        traj.publish(conv.trajectory_msg(names, np.array([0.5]), np.zeros((1, 3))))
-        big = np.linspace(0.01, 1000.0, 100_001)
-        ql = conv.joint_state_arrays(probe.state, ['scara_left_joint_1', 'scara_left_joint_2',
-                                                   'scara_left_gripper_joint'])[0]
+        traj.publish(conv.trajectory_msg([joints[0], 'nope', joints[2]], np.array([0.5]),
+                                         np.zeros((1, 3))))
         heard = []
-        probe.node.create_subscription(DiagnosticStatus, '/scara_left/execution_status',
+        probe.node.create_subscription(DiagnosticStatus, 'scara_left/execution_status',
                                        heard.append, 100)
-        traj.publish(conv.trajectory_msg(['scara_left_joint_1', 'scara_left_joint_2',
-                                          'scara_left_gripper_joint'], big,
-                                         np.tile(ql, (big.size, 1))))
+        big = np.linspace(0.01, 1000.0, 100_001)
+        ql = conv.joint_state_arrays(probe.state, joints)[0]
+        traj.publish(conv.trajectory_msg(joints, big, np.tile(ql, (big.size, 1))))
         end = time.monotonic() + 60.0  # 100,001 points take a while to arrive: stay till then
         while time.monotonic() < end and not any('points' in m.message for m in heard):
             probe.spin(0.1)
@@ -214,9 +164,8 @@ def rogue_input(run: Run) -> None:
 
 def sigstop_monitor(run: Run) -> None:
     """Freeze the collision monitor (SIGSTOP) until the run ends; SIGCONT afterwards."""
-    pid = run.pid('collision_monitor')
-    os.kill(pid, signal.SIGSTOP)
-    run.resume = pid
+    run.resume = run.pid('collision_monitor')
+    os.kill(run.resume, signal.SIGSTOP)
 
 
 def sigkill_planner(run: Run) -> None:
@@ -224,7 +173,7 @@ def sigkill_planner(run: Run) -> None:
     os.kill(run.pid('left_planner'), signal.SIGKILL)
 
 
-# --- judges ------------------------------------------------------------------------------------
+# --- judges: (passed, what was observed) from the summary and the run folder ------------------
 def _log(out: Path, node: str) -> str:
     path = out / 'logs' / f'{node}.log'
     return path.read_text(errors='replace') if path.is_file() else ''
@@ -236,43 +185,37 @@ def _died(s: Summary) -> List[str]:
 
 
 def _sep(s: Summary) -> float:
-    v = s.get('min_separation_m')
-    return float('nan') if v is None else float(v)
-
-
-def _stops(s: Summary, kind: str) -> List[Dict]:
-    value = s.get(f'{kind}_stops')
-    return list(value) if isinstance(value, list) else []
+    return float('nan') if s.get('min_separation_m') is None else float(s['min_separation_m'])
 
 
 def judge_nan(s: Summary, out: Path) -> Tuple[bool, str]:
     """Pass if a NaN state made a protective stop that ended by itself, exit 0, none died."""
-    stops = [st for st in _stops(s, 'protective')
+    on_it = [st for st in stops(s, 'protective')
              if 'unusable joint state' in str(st.get('cause'))]
-    ok = (s.get('exit_code') == 0 and bool(stops) and not any(st.get('standing') for st in stops)
-          and not _stops(s, 'emergency') and not _died(s))
-    return ok, (f'exit {s.get("exit_code")}, protective stops on it: {len(stops)} ('
-                + ', '.join(f'{float(st.get("lost") or 0):.2f} s' for st in stops)
+    ok = (s.get('exit_code') == 0 and bool(on_it) and not any(st.get('standing') for st in on_it)
+          and not stops(s, 'emergency') and not _died(s))
+    return ok, (f'exit {s.get("exit_code")}, protective stops on it: {len(on_it)} ('
+                + ', '.join(f'{float(st.get("lost") or 0):.2f} s' for st in on_it)
                 + f'), died: {_died(s) or "none"}')
 
 
 def judge_wall_clock(s: Summary, out: Path) -> Tuple[bool, str]:
     """Pass if the run went its full length, states were refused and no e-stop was raised."""
     ok = s.get('exit_code') == 0 and s.get('exit_reason') == 'duration reached' \
-        and (s.get('joint_states_refused') or 0) > 0 and not _stops(s, 'emergency')
+        and (s.get('joint_states_refused') or 0) > 0 and not stops(s, 'emergency')
     return ok, (f'exit {s.get("exit_code")} ({s.get("exit_reason")}), sim '
                 f'{s.get("sim_seconds")} s, {s.get("joint_states_refused")} states refused, '
-                f'{len(_stops(s, "emergency"))} e-stops')
+                f'{len(stops(s, "emergency"))} e-stops')
 
 
 def judge_crossing(s: Summary, out: Path) -> Tuple[bool, str]:
     """Pass if the bridge refused the crossing at the door: exit 0, no stop, arms 0.1 m apart."""
     refused = 'would bring scara_right within' in _log(out, 'pybullet_bridge')
-    ok = (s.get('exit_code') == 0 and refused and _sep(s) >= 0.1
-          and not _stops(s, 'emergency') and not _stops(s, 'protective'))
+    n_stops = [len(stops(s, kind)) for kind in ('protective', 'emergency')]
+    ok = s.get('exit_code') == 0 and refused and _sep(s) >= 0.1 and not any(n_stops)
     return ok, (f'exit {s.get("exit_code")}, refused at the door: {refused}, stops: '
-                f'{len(_stops(s, "protective"))} protective / {len(_stops(s, "emergency"))} '
-                f'emergency, min separation {_sep(s):.3f} m')
+                f'{n_stops[0]} protective / {n_stops[1]} emergency, min separation '
+                f'{_sep(s):.3f} m')
 
 
 def judge_rogue(s: Summary, out: Path) -> Tuple[bool, str]:
@@ -292,26 +235,38 @@ def judge_lost(s: Summary, out: Path) -> Tuple[bool, str]:
 
 def judge_saturated(s: Summary, out: Path) -> Tuple[bool, str]:
     """Pass if the overfed run kept the arms 0.1 m apart without an e-stop."""
-    ok = s.get('exit_code') == 0 and _sep(s) >= 0.1 and not _stops(s, 'emergency')
+    ok = s.get('exit_code') == 0 and _sep(s) >= 0.1 and not stops(s, 'emergency')
     return ok, (f'exit {s.get("exit_code")}, sorted {s.get("sorted")} ({s.get("missed")} '
                 f'missed: feed beyond capacity), min separation {_sep(s):.3f} m, '
-                f'{len(_stops(s, "emergency"))} e-stops')
+                f'{len(stops(s, "emergency"))} e-stops')
 
 
 def judge_sigstop(s: Summary, out: Path) -> Tuple[bool, str]:
     """Pass if the run ended non-zero naming the frozen monitor while the bridge held."""
     reason = str(s.get('exit_reason') or '')
-    bridge = _log(out, 'pybullet_bridge')
     ok = s.get('exit_code') not in (0, None) and 'collision_monitor' in reason \
-        and 'holding' in bridge
+        and 'holding' in _log(out, 'pybullet_bridge')
     return ok, f'exit {s.get("exit_code")}: {reason[:80]}'
 
 
 def judge_sigkill(s: Summary, out: Path) -> Tuple[bool, str]:
     """Pass if the run ended with exit 1 naming the killed left planner."""
     reason = str(s.get('exit_reason') or '')
-    ok = s.get('exit_code') == 1 and 'left_planner' in reason
-    return ok, f'exit {s.get("exit_code")}: {reason[:80]}'
+    return s.get('exit_code') == 1 and 'left_planner' in reason, \
+        f'exit {s.get("exit_code")}: {reason[:80]}'
+
+
+@dataclass
+class Case:
+    """One fault: what is expected, how long the run is, how it is judged and injected."""
+
+    name: str
+    expected: str
+    duration: float
+    judge: Callable[[Summary, Path], Tuple[bool, str]]
+    inject: Optional[Callable[[Run], None]] = None
+    flags: Tuple[str, ...] = ()
+    mode: str = 'collaborative'
 
 
 CASES = (
@@ -322,8 +277,7 @@ CASES = (
     Case('raw trajectory through the other arm (no job)', 'refused at the door; no stop, the '
          'margin kept', 20.0, judge_crossing, raw_crossing, mode='idle'),
     Case('rogue publisher: 200 bad targets, malformed and 100,001-point trajectories',
-         'all refused with reasons, no node dies, margin kept', 60.0, judge_rogue,
-         rogue_input),
+         'all refused with reasons, no node dies, margin kept', 60.0, judge_rogue, rogue_input),
     Case('lost start and gripper answers', 'a retry each; the job completes, 0 missed', 30.0,
          judge_lost, flags=('--fault', 'drop:/automation_manager/start:1', '--fault',
                             'drop:/scara_left/gripper:2', '--fault',
@@ -337,48 +291,34 @@ CASES = (
 )
 
 
-def run_case(case: Case, out: Path, domain: int, log: Optional[Log] = None) -> Dict:
-    """Run one case; return its row: case, expected, observed, passed."""
-    run = Run(out, case.duration, case.flags, domain, case.mode)
-    run.resume = None
-    observed, passed = '', False
+def run_case(case: Case, out: Path, domain: int, log: Log) -> Dict:
+    """Run one case in ROS domain ``domain``; return its row: case, expected, observed, pass."""
+    use_domain(domain)
+    run = Run(out, case.duration, case.flags, case.mode)
     try:
         if not run.wait_for(r'(job started|graph idle) at sim t='):
-            observed = 'the job did not start: ' + ' / '.join(run.lines[-3:])
+            passed, observed = False, 'the job did not start: ' + ' / '.join(run.lines[-3:])
         else:
-            if case.inject is not None:
-                try:
+            try:
+                if case.inject is not None:
                     case.inject(run)
-                except Exception as exc:  # noqa: B902 - a failed injection is a failed case
-                    observed = f'the injection failed: {type(exc).__name__}: {exc}'
-                    return _row(case, observed, False, log)
-            run.finish(case.duration * 3 + 120)
-            summary_path = out / 'summary.json'
-            summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
-            summary.setdefault('exit_code', run.proc.returncode)
-            passed, observed = case.judge(summary, out)
+                run.finish(case.duration * 3 + 120)
+                path = out / 'summary.json'
+                summary = json.loads(path.read_text()) if path.is_file() else {}
+                summary.setdefault('exit_code', run.proc.returncode)
+                passed, observed = case.judge(summary, out)
+            except Exception as exc:  # noqa: B902 - a failed injection is a failed case
+                passed, observed = False, f'the injection failed: {type(exc).__name__}: {exc}'
     finally:
         if run.resume is not None:
-            try:
+            with suppress(ProcessLookupError):  # unless the launcher has ended it
                 os.kill(run.resume, signal.SIGCONT)
-            except ProcessLookupError:
-                pass
         if run.proc.poll() is None:
             run.proc.kill()
             run.proc.wait()
-    return _row(case, observed, passed, log)
-
-
-def _row(case: Case, observed: str, passed: bool, log: Optional[Log]) -> Dict:
-    if log:
-        log(f'{case.name}: {"pass" if passed else "FAIL"} ({observed})')
-    return {'case': case.name, 'expected': case.expected, 'observed': observed,
-            'passed': passed}
-
-
-def matrix(out: Path, cases: Sequence[Case] = CASES, log: Optional[Log] = None) -> List[Dict]:
-    """Run every case, each in its own ROS domain and run folder."""
-    return [run_case(c, out / f'case_{k + 1}', 150 + k, log) for k, c in enumerate(cases)]
+    log(f'{case.name}: {"pass" if passed else "FAIL"} ({observed})')
+    return {'case': case.name, 'expected': case.expected,
+            'observed': observed.replace('|', '/'), 'pass': 'yes' if passed else '**no**'}
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
@@ -389,19 +329,15 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     :return: True if every case passed.
     """
     out = Path(tempfile.mkdtemp(prefix='scara_faults_'))
-    cases = [c for k, c in enumerate(CASES) if not args.cases or k + 1 in args.cases]
     start = time.monotonic()
-    rows = matrix(out, cases, log=log)
-    passed = sum(r['passed'] for r in rows)
-    lines = [f'*Generated by `{command}` on {time.strftime("%Y-%m-%d %H:%M %Z")} '
-             f'({(time.monotonic() - start) / 60:.1f} min wall): each case is one run of the '
-             'launcher (real time; the collaborative job unless the case says no job), the '
-             "fault injected once the job runs, judged from the run's `summary.json` and node "
-             f'logs. {passed} of {len(rows)} cases pass.*', '',
-             '| case | expected | observed | pass |', '|---|---|---|---|']
-    lines += [f'| {r["case"]} | {r["expected"]} | {r["observed"].replace("|", "/")} | '
-              f'{"yes" if r["passed"] else "**no**"} |' for r in rows]
-    text = '\n'.join(lines)
+    rows = [run_case(c, out / f'case_{k}', 50 + k, log) for k, c in enumerate(CASES, 1)
+            if not args.cases or k in args.cases]
+    passed = sum(r['pass'] == 'yes' for r in rows)
+    text = (f'*Generated by `{command}` on {time.strftime("%Y-%m-%d %H:%M %Z")} '
+            f'({(time.monotonic() - start) / 60:.1f} min wall): each case is one run of the '
+            'launcher (real time; the collaborative job unless the case says no job), the '
+            "fault injected once the job runs, judged from the run's `summary.json` and node "
+            f'logs. {passed} of {len(rows)} cases pass.*\n\n' + table(rows))
     print(text)
     if not args.cases:
         write_block(page, 'faults', 'Faults against the launcher', text)

@@ -1,15 +1,8 @@
-"""The job protocol under load and faults, through the launcher (separate processes).
+"""The job protocol under load, through the launcher (separate processes).
 
-Three measurements (``scripts/benchmark.py --only protocol`` runs them and writes the tables):
-
-- :func:`long_run`: the collaborative job at the default feed for a long run (600 sim s):
-  missed, dropped, give-ups, wrong bin, the margin;
-- :func:`mirrored_runs`: mirrored mode over several seeds: the in-step mirror error (the
-  replication manager's), pairs not in step, missed;
-- :func:`robustness`: the demo's run repeated while CPU hogs compete: how many complete.
-
-Each launcher run has its own ROS domain and run folder; every figure is read from the run's
-``summary.json`` (one source per figure, see :mod:`scara_collab.records.record`).
+A long collaborative run, mirrored runs over several seeds (the replication manager's in-step
+mirror error), and the demo repeated while CPU hogs compete. Each launcher run has its own
+ROS domain and run folder; every figure is read from the run's ``summary.json``.
 """
 from contextlib import contextmanager
 import os
@@ -18,11 +11,11 @@ import subprocess
 import sys
 import tempfile
 import time
-from typing import Dict, Iterator, List, Optional, Sequence
+from typing import Dict, Iterator, List
 
 from scara_collab.bench.job import run_launcher
 from scara_collab.bench.report import write_block
-from scara_collab.bench.util import Log
+from scara_collab.bench.util import Log, num, table
 
 HOG = 'import time\nend = time.monotonic() + {limit}\nwhile time.monotonic() < end: pass\n'
 
@@ -30,8 +23,7 @@ HOG = 'import time\nend = time.monotonic() + {limit}\nwhile time.monotonic() < e
 @contextmanager
 def cpu_hogs(n: int, limit: float) -> Iterator[None]:
     """Run ``n`` busy-looping processes (each ends by itself after ``limit`` s) meanwhile."""
-    hogs = [subprocess.Popen([sys.executable, '-c', HOG.format(limit=limit)])
-            for _ in range(n)]
+    hogs = [subprocess.Popen([sys.executable, '-c', HOG.format(limit=limit)]) for _ in range(n)]
     try:
         yield
     finally:
@@ -40,126 +32,43 @@ def cpu_hogs(n: int, limit: float) -> Iterator[None]:
             h.wait()
 
 
+def use_domain(k: int) -> None:
+    """Put this process and the launchers it starts in ROS domain ``140 + k % 90``, this host."""
+    os.environ.update(ROS_DOMAIN_ID=str(140 + k % 90), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+
+
+def stops(summary: Dict[str, object], kind: str) -> List[Dict[str, object]]:
+    """Return the ``kind`` (``'protective'``, ``'emergency'``) stops of a run's summary."""
+    value = summary.get(f'{kind}_stops')
+    return list(value) if isinstance(value, list) else []
+
+
 def row(summary: Dict[str, object]) -> Dict[str, object]:
     """Return the figures of one launcher run, from its summary."""
     job = summary.get('job') or {}
-    return {
-        'exit_code': summary.get('exit_code'), 'exit_reason': summary.get('exit_reason'),
-        'error': summary.get('error'),
-        **{k: summary.get(k) for k in ('sorted', 'missed', 'dropped', 'wrong_bin', 'spawned',
-                                       'in_progress', 'items_per_minute', 'min_separation_m',
-                                       'mirror_error_max_m',
-                                       'mirror_in_step_moves', 'mirror_not_in_step',
-                                       'real_time_factor', 'sim_seconds')},
-        **{k: len(summary[k]) if isinstance(summary.get(k), list) else 0
-           for k in ('emergency_stops', 'protective_stops')},
-        'give_ups': job.get('give_ups'), 'retries': job.get('retries'),
-        'last_give_up': job.get('last_give_up'),
-    }
+    keys = ('exit_code', 'exit_reason', 'error', 'sorted', 'missed', 'dropped', 'wrong_bin',
+            'items_per_minute', 'min_separation_m', 'mirror_error_max_m', 'mirror_in_step_moves',
+            'mirror_not_in_step', 'real_time_factor', 'sim_seconds')
+    return {**{k: summary.get(k) for k in keys},
+            'emergency_stops': len(stops(summary, 'emergency')),
+            'protective_stops': len(stops(summary, 'protective')),
+            'give_ups': job.get('give_ups'), 'retries': job.get('retries'),
+            'last_give_up': job.get('last_give_up')}
 
 
-def _env_domain(k: int) -> None:
-    os.environ['ROS_DOMAIN_ID'] = str(140 + k % 90)
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-
-
-def long_run(out: Path, duration: float = 600.0, seed: Optional[int] = None,
-             log: Optional[Log] = None) -> Dict[str, object]:
-    """Run the collaborative job for ``duration`` sim s through the launcher."""
-    _env_domain(0)
-    if log:
-        log(f'collaborative, {duration:g} sim s through the launcher ...')
-    r = row(run_launcher('collaborative', duration, out / 'long', seed=seed,
-                         timeout=duration * 3 + 300))
-    if log:
-        log(f'  sorted {r["sorted"]}, missed {r["missed"]}, dropped {r["dropped"]}, '
-            f'give-ups {r["give_ups"]}, min separation {r["min_separation_m"]}')
+def _launch(log: Log, domain: int, what: str, *args, **kwargs) -> Dict[str, object]:
+    """Run the launcher in ``domain``; return and log its :func:`row`."""
+    use_domain(domain)
+    r = row(run_launcher(*args, **kwargs))
+    log(f'{what}: exit {r["exit_code"]}, sorted {r["sorted"]}, missed {r["missed"]}, dropped '
+        f'{r["dropped"]}, give-ups {r["give_ups"]}, min separation {r["min_separation_m"]}')
     return r
 
 
-def mirrored_runs(out: Path, seeds: Sequence[int] = (11, 12, 13), duration: float = 90.0,
-                  log: Optional[Log] = None) -> List[Dict[str, object]]:
-    """Run the mirrored job once per seed through the launcher."""
-    rows = []
-    for k, seed in enumerate(seeds):
-        _env_domain(1 + k)
-        r = row(run_launcher('mirrored', duration, out / f'mirrored_{seed}', seed=seed,
-                             timeout=duration * 4 + 300))
-        r['seed'] = seed
-        rows.append(r)
-        if log:
-            err = r['mirror_error_max_m']
-            log(f'mirrored seed {seed}: sorted {r["sorted"]}, missed {r["missed"]}, in-step '
-                f'error {"n/a" if err is None else f"{err * 1e3:.3f} mm"} over '
-                f'{r["mirror_in_step_moves"]} pairs, {r["mirror_not_in_step"]} not in step')
-    return rows
-
-
-def robustness(out: Path, runs: int = 5, hogs: int = 2, duration: float = 60.0,
-               extra: Sequence[str] = (), log: Optional[Log] = None) -> List[Dict[str, object]]:
-    """Run the demo's job ``runs`` times while ``hogs`` CPU hogs compete.
-
-    A run *completes* when the launcher exits 0 with items sorted and none missed.
-    """
-    rows = []
-    with cpu_hogs(hogs, runs * (duration * 4 + 200)):
-        for k in range(runs):
-            _env_domain(10 + k)
-            r = row(run_launcher('collaborative', duration, out / f'hogs_{k + 1}',
-                                 timeout=duration * 6 + 300, extra=list(extra)))
-            r['completed'] = bool(r['exit_code'] == 0 and (r['sorted'] or 0) > 0
-                                  and r['missed'] == 0)
-            rows.append(r)
-            if log:
-                log(f'run {k + 1}/{runs} with {hogs} hogs: exit {r["exit_code"]}, sorted '
-                    f'{r["sorted"]}, missed {r["missed"]}, dropped {r["dropped"]}, give-ups '
-                    f'{r["give_ups"]}, retries {r["retries"]}: '
-                    f'{"completed" if r["completed"] else "FAILED " + str(r["exit_reason"])}')
-    return rows
-
-
-def _fmt(v, scale: float = 1.0, unit: str = ' m', digits: int = 3) -> str:
-    return 'n/a' if v is None else f'{v * scale:.{digits}f}{unit}'
-
-
-def render(long, mirrored, hogs, sizes: Dict[str, object], command: str, wall: float) -> str:
-    """Return the Markdown tables of the three measurements, headed by date and wall time."""
-    lines = [f'*Generated by `{command}` on {time.strftime("%Y-%m-%d %H:%M %Z")} '
-             f'({wall / 60:.1f} min wall); each row is one launcher run (separate processes, '
-             'unthrottled, lockstep on), its figures from its `summary.json`.*', '']
-    if long is not None:
-        r = long
-        lines += [f'**Collaborative, default feed, {sizes["long"]:g} sim s through the '
-                  'launcher**', '', '| sorted | missed | dropped | wrong bin | give-ups | '
-                  'retries | items/min | min separation | e-stops | RTF |', '|---' * 10 + '|',
-                  f'| {r["sorted"]} | {r["missed"]} | {r["dropped"]} | {r["wrong_bin"]} | '
-                  f'{r["give_ups"]} | {r["retries"]} | {r["items_per_minute"] or 0:.1f} | '
-                  f'{_fmt(r["min_separation_m"])} | {r["emergency_stops"]} | '
-                  f'{_fmt(r["real_time_factor"], unit="×", digits=2)} |', '']
-        if r.get('last_give_up'):
-            lines += [f'Last give-up: {r["last_give_up"]}', '']
-    if mirrored:
-        lines += [f'**Mirrored, {sizes["mirrored"]:g} sim s per seed** (in-step error: the '
-                  "replication manager's, over pairs the bridge started at the same instant "
-                  'from mirrored poses)', '', '| seed | sorted | missed | dropped | in-step '
-                  'error max | in-step pairs | not in step | give-ups | RTF |', '|---' * 9 + '|']
-        lines += [f'| {r["seed"]} | {r["sorted"]} | {r["missed"]} | {r["dropped"]} | '
-                  f'{_fmt(r["mirror_error_max_m"], 1e3, " mm")} | {r["mirror_in_step_moves"]} '
-                  f'| {r["mirror_not_in_step"]} | {r["give_ups"]} | '
-                  f'{_fmt(r["real_time_factor"], unit="×", digits=2)} |' for r in mirrored]
-        lines.append('')
-    if hogs:
-        done = sum(r['completed'] for r in hogs)
-        lines += [f'**The demo ({sizes["hog_duration"]:g} sim s) with {sizes["hogs"]} CPU '
-                  f'hogs: {done} of {len(hogs)} runs completed** (exit 0, items sorted, none '
-                  'missed)', '', '| run | exit | sorted | missed | dropped | give-ups | '
-                  'retries | min separation | RTF |', '|---' * 9 + '|']
-        lines += [f'| {k + 1} | {r["exit_code"]} | {r["sorted"]} | {r["missed"]} | '
-                  f'{r["dropped"]} | {r["give_ups"]} | {r["retries"]} | '
-                  f'{_fmt(r["min_separation_m"])} | '
-                  f'{_fmt(r["real_time_factor"], unit="×", digits=2)} |'
-                  for k, r in enumerate(hogs)]
-    return '\n'.join(lines).rstrip() + '\n'
+def _cells(r: dict, *keys: str) -> dict:
+    fmt = {'min_separation_m': lambda v: num(v, 3, 'm'), 'real_time_factor': lambda v: num(v, 3),
+           'mirror_error_max_m': lambda v: num(None if v is None else v * 1e3, 3, 'mm')}
+    return {k.replace('_', ' '): fmt.get(k, str)(r[k]) for k in keys}
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
@@ -172,18 +81,41 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     :return: True if every demo run beside the hogs completed.
     """
     smoke = args.smoke
-    sizes = {'long': 60.0 if smoke else 600.0, 'mirrored': 30.0 if smoke else 90.0,
-             'hog_duration': 30.0 if smoke else 60.0, 'hogs': args.hogs or 2}
+    long_s, mirrored_s, hog_s = (60.0, 30.0, 30.0) if smoke else (600.0, 90.0, 60.0)
     seeds = (args.seeds or [11, 12, 13])[:1 if smoke else None]
+    runs, hogs = args.runs or (2 if smoke else 5), args.hogs or 2
     out = Path(tempfile.mkdtemp(prefix='scara_job_protocol_'))
     t0 = time.monotonic()
-    long = long_run(out, sizes['long'], log=log)
-    mirrored = mirrored_runs(out, seeds, sizes['mirrored'], log=log)
-    hogs = robustness(out, args.runs or (2 if smoke else 5), sizes['hogs'],
-                      sizes['hog_duration'], log=log)
-    text = render(long, mirrored, hogs, sizes, command, time.monotonic() - t0)
+    long = _launch(log, 0, 'collaborative', 'collaborative', long_s, out / 'long',
+                   timeout=long_s * 3 + 300)
+    mirrored = [dict(_launch(log, 1 + k, f'mirrored seed {seed}', 'mirrored', mirrored_s,
+                             out / f'mirrored_{seed}', seed=seed, timeout=mirrored_s * 4 + 300),
+                     seed=seed) for k, seed in enumerate(seeds)]
+    with cpu_hogs(hogs, runs * (hog_s * 4 + 200)):
+        demo = [_launch(log, 10 + k, f'run {k + 1} with {hogs} hogs', 'collaborative', hog_s,
+                        out / f'hogs_{k + 1}', timeout=hog_s * 6 + 300) for k in range(runs)]
+    done = [r['exit_code'] == 0 and (r['sorted'] or 0) > 0 and r['missed'] == 0 for r in demo]
+    text = '\n\n'.join([
+        f'*Generated by `{command}` on {time.strftime("%Y-%m-%d %H:%M %Z")} '
+        f'({(time.monotonic() - t0) / 60:.1f} min wall); each row is one launcher run (separate '
+        'processes, unthrottled, lockstep on), its figures from its `summary.json`.*',
+        f'**Collaborative, default feed, {long_s:g} sim s through the launcher**',
+        table([_cells(long, 'sorted', 'missed', 'dropped', 'wrong_bin', 'give_ups', 'retries',
+                      'items_per_minute', 'min_separation_m', 'emergency_stops',
+                      'real_time_factor')])
+        + (f'\n\nLast give-up: {long["last_give_up"]}' if long['last_give_up'] else ''),
+        f'**Mirrored, {mirrored_s:g} sim s per seed** (in-step error: the replication '
+        "manager's, over pairs the bridge started at the same instant from mirrored poses)",
+        table([_cells(r, 'seed', 'sorted', 'missed', 'dropped', 'mirror_error_max_m',
+                      'mirror_in_step_moves', 'mirror_not_in_step', 'give_ups',
+                      'real_time_factor') for r in mirrored]),
+        f'**The demo ({hog_s:g} sim s) with {hogs} CPU hogs: {sum(done)} of {len(demo)} runs '
+        'completed** (exit 0, items sorted, none missed)',
+        table([dict(run=k, **_cells(r, 'exit_code', 'sorted', 'missed', 'dropped', 'give_ups',
+                                    'retries', 'min_separation_m', 'real_time_factor'))
+               for k, r in enumerate(demo, 1)])])
     print(text)
     if not smoke:
         write_block(page, 'job-protocol', 'The job protocol through the launcher', text)
     log(f'run folders in {out}')
-    return all(r['completed'] for r in hogs)
+    return all(done)

@@ -19,17 +19,17 @@ an item every 0.9 s (the feed faster than the arms) with and without lockstep.
 """
 from pathlib import Path
 import tempfile
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, Optional, Sequence
 
+from scara_collab import graph
 from scara_collab.bench.job import run_launcher
-from scara_collab.bench.protocol import _env_domain, cpu_hogs, row
+from scara_collab.bench.protocol import cpu_hogs, row, stops, use_domain
 from scara_collab.bench.util import Log
 
-ROBOTS = ('scara_left', 'scara_right')
 #: 20 +- 10 ms on the joint states and on every status the job's timing hangs on
 LATENCY = (['latency:/joint_states:0.02:0.01']
-           + [f'latency:/{r}/planner_status:0.02:0.01' for r in ROBOTS]
-           + [f'latency:/{r}/execution_status:0.02:0.01' for r in ROBOTS])
+           + [f'latency:/{r}/planner_status:0.02:0.01' for r in graph.ROBOTS]
+           + [f'latency:/{r}/execution_status:0.02:0.01' for r in graph.ROBOTS])
 #: condition -> (lockstep on?, CPU hogs, faults)
 CONDITIONS = {
     'lockstep': (True, 0, ()),
@@ -40,16 +40,10 @@ CONDITIONS = {
 }
 
 
-def _stops(summary: Dict[str, object], key: str) -> List[Dict[str, object]]:
-    value = summary.get(key)
-    return list(value) if isinstance(value, list) else []
-
-
 def realtime_row(summary: Dict[str, object]) -> Dict[str, object]:
     """Return one run's figures (:func:`scara_collab.bench.protocol.row`) and its stops."""
     out = row(summary)
-    protective = _stops(summary, 'protective_stops')
-    emergency = _stops(summary, 'emergency_stops')
+    protective, emergency = stops(summary, 'protective'), stops(summary, 'emergency')
     out.update(
         protective=len(protective), emergency=len(emergency),
         own_moves=sum('predicted' in str(s.get('cause', '')) for s in protective + emergency),
@@ -68,7 +62,7 @@ def run(condition: str, out: Path, duration: float, seed: int, feed: Optional[fl
         extra += ['--fault', f]
     if feed is not None:
         extra += ['--feed-interval', f'{feed:g}']
-    _env_domain(seed * 7 + len(condition))
+    use_domain(seed * 7 + len(condition))
     with cpu_hogs(hogs, duration * 3 + 300):
         r = realtime_row(run_launcher('collaborative', duration, out / f'{condition}_{seed}',
                                       rtf=1.0, seed=seed, timeout=duration * 3 + 300,
@@ -80,12 +74,6 @@ def run(condition: str, out: Path, duration: float, seed: int, feed: Optional[fl
             f'stops {r["protective"]} protective / {r["emergency"]} emergency '
             f'({r["own_moves"]} by the job\'s own moves)')
     return r
-
-
-def matrix(out: Path, conditions: Sequence[str], seeds: Sequence[int], duration: float,
-           log: Optional[Log] = None) -> List[Dict[str, object]]:
-    """Run every condition on every seed; return the rows."""
-    return [run(c, out, duration, s, log=log) for s in seeds for c in conditions]
 
 
 def capacity(out: Path, seeds: Sequence[int], duration: float, feed: float = 0.9,
@@ -152,7 +140,8 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     seeds = args.seeds or [1, 2, 3]
     runs = Path(tempfile.mkdtemp(prefix='scara_realtime_'))
     log(f'run folders in {runs}')
-    rows = matrix(runs, args.conditions or list(CONDITIONS), seeds, duration, log=log)
+    rows = [run(c, runs, duration, s, log=log) for s in seeds
+            for c in args.conditions or list(CONDITIONS)]
     cap_s = 240.0 if args.capacity_duration is None else args.capacity_duration
     cap = capacity(runs, seeds, cap_s, log=log) if cap_s > 0 else None
     text = markdown(rows, cap, command, duration)

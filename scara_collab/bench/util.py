@@ -1,4 +1,4 @@
-"""Shared helpers of the benchmarks: the machine, timing, progress lines, number formats, JSON."""
+"""What the benchmarks share: the machine, timing, progress lines, Markdown tables, figures."""
 from dataclasses import dataclass
 import json
 import math
@@ -8,35 +8,24 @@ import platform
 import sys
 import time
 import timeit
-from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, TextIO
+from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
 
-
 Log = Callable[[str], None]
-
-
-def cpu_name() -> str:
-    """Return the CPU model name (``/proc/cpuinfo``), or what ``platform`` knows."""
-    try:
-        with open('/proc/cpuinfo') as f:
-            for line in f:
-                if line.startswith('model name'):
-                    return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
+Rows = List[Sequence[str]]
 
 
 def machine() -> Dict[str, object]:
     """Describe this machine: CPU, cores, load, Python and numpy versions."""
-    try:
-        load = os.getloadavg()[0]
-    except OSError:
-        load = None
-    return {'cpu': cpu_name(), 'cores': os.cpu_count(), 'load_1min': load,
+    cpu = platform.processor() or platform.machine()
+    if os.path.isfile('/proc/cpuinfo'):
+        with open('/proc/cpuinfo') as f:
+            cpu = next((ln.split(':', 1)[1].strip() for ln in f
+                        if ln.startswith('model name')), cpu)
+    return {'cpu': cpu, 'cores': os.cpu_count(), 'load_1min': os.getloadavg()[0],
             'python': platform.python_version(), 'numpy': np.__version__,
             'system': f'{platform.system()} {platform.release()}'}
 
@@ -46,28 +35,11 @@ def per_call(fn: Callable[[], object], number: int, repeat: int = 5) -> float:
     return float(np.median(timeit.repeat(fn, number=number, repeat=repeat))) / number
 
 
-def stderr_log(msg: str) -> None:
-    """Print a progress message to stderr at once."""
-    print(msg, file=sys.stderr, flush=True)
-
-
 class Progress:
-    """Progress lines with the elapsed wall time: one per section, plus notes inside it.
+    """Progress lines on stderr with the elapsed wall time: one per section, notes inside it."""
 
-    Example (on stdout here; the default stream is stderr)::
-
-        >>> import sys
-        >>> progress = Progress(sys.stdout)
-        >>> with progress.section('payload response'):
-        ...     progress.note('0 kg, PID')
-        [    ... s] payload response ...
-        [    ... s]    0 kg, PID
-        [    ... s] payload response done in ... s
-    """
-
-    def __init__(self, stream: Optional[TextIO] = None):
-        """Start the clock now; lines go to ``stream`` (default stderr)."""
-        self.stream = stream if stream is not None else sys.stderr
+    def __init__(self):
+        """Start the clock now."""
         self.start = time.monotonic()
         self.sections: Dict[str, float] = {}
 
@@ -75,12 +47,13 @@ class Progress:
         """Wall seconds since this object was made."""
         return time.monotonic() - self.start
 
-    def _line(self, text: str) -> None:
-        print(f'[{self.elapsed():7.1f} s] {text}', file=self.stream, flush=True)
+    def line(self, text: str) -> None:
+        """Print ``text`` after the elapsed time."""
+        print(f'[{self.elapsed():7.1f} s] {text}', file=sys.stderr, flush=True)
 
     def note(self, text: str) -> None:
         """Print one indented line (progress inside a section)."""
-        self._line(f'   {text}')
+        self.line(f'   {text}')
 
     def section(self, name: str) -> '_Section':
         """Return a context manager that prints the section's start and its duration."""
@@ -93,14 +66,14 @@ class _Section:
 
     def __enter__(self) -> Progress:
         self.t0 = time.monotonic()
-        self.progress._line(f'{self.name} ...')
+        self.progress.line(f'{self.name} ...')
         return self.progress
 
     def __exit__(self, exc_type, exc, tb) -> bool:
         took = time.monotonic() - self.t0
         self.progress.sections[self.name] = took
         status = 'done' if exc_type is None else f'FAILED ({exc_type.__name__}: {exc})'
-        self.progress._line(f'{self.name} {status} in {took:.1f} s')
+        self.progress.line(f'{self.name} {status} in {took:.1f} s')
         return False
 
 
@@ -108,80 +81,39 @@ def fmt_seconds(seconds: Optional[float], digits: int = 3) -> str:
     """Format a duration with a readable unit: ``'3.52 µs'``, ``'14.7 ms'``, ``'0.838 s'``."""
     if seconds is None or not math.isfinite(seconds):
         return 'n/a'
-    for unit, scale in (('s', 1.0), ('ms', 1e-3), ('µs', 1e-6), ('ns', 1e-9)):
-        if abs(seconds) >= scale or unit == 'ns':
+    for unit, scale in (('s', 1.0), ('ms', 1e-3), ('µs', 1e-6)):
+        if abs(seconds) >= scale:
             return f'{seconds / scale:.{digits}g} {unit}'
-    return f'{seconds:g} s'
+    return f'{seconds / 1e-9:.{digits}g} ns'
 
 
-def fmt_rate(per_second: float) -> str:
-    """Format a throughput: ``'6.3 M/s'``, ``'850 k/s'``."""
-    if per_second >= 1e6:
-        return f'{per_second / 1e6:.3g} M/s'
-    if per_second >= 1e3:
-        return f'{per_second / 1e3:.3g} k/s'
-    return f'{per_second:.3g} /s'
-
-
-def spread(values: Iterable[float]) -> Dict[str, float]:
-    """Return n, mean, sample standard deviation, min and max of the finite values."""
+def spread(values: Iterable[Optional[float]]) -> Dict[str, float]:
+    """Return n, mean, sample standard deviation, min, median and max of the finite values."""
     x = np.array([v for v in values if v is not None and math.isfinite(v)], dtype=float)
     if x.size == 0:
-        return {'n': 0, 'mean': float('nan'), 'std': float('nan'), 'min': float('nan'),
-                'max': float('nan')}
+        return dict.fromkeys(('mean', 'std', 'min', 'median', 'max'), math.nan) | {'n': 0}
     return {'n': int(x.size), 'mean': float(x.mean()),
-            'std': float(x.std(ddof=1)) if x.size > 1 else 0.0,
-            'min': float(x.min()), 'max': float(x.max())}
+            'std': float(x.std(ddof=1)) if x.size > 1 else 0.0, 'min': float(x.min()),
+            'median': float(np.median(x)), 'max': float(x.max())}
 
 
-def _plain(x):
-    """Return a numpy array as a list, a numpy scalar as a Python number (``json``'s hook)."""
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    if isinstance(x, np.generic):
-        return x.item()
-    raise TypeError(f'{type(x).__name__} is not JSON serialisable')
-
-
-def write_json(path, data, indent: int = 2) -> None:
-    """Write ``data`` to ``path`` as JSON, numpy arrays and scalars as lists and numbers.
-
-    Example::
-
-        >>> import json, tempfile
-        >>> with tempfile.NamedTemporaryFile('r', suffix='.json') as f:
-        ...     write_json(f.name, {'q': np.zeros(2), 'n': np.int64(3)}, indent=None)
-        ...     json.load(f)
-        {'q': [0.0, 0.0], 'n': 3}
-    """
-    with open(path, 'w') as f:
-        json.dump(data, f, indent=indent, default=_plain)
-
-
-def _ok(x) -> bool:
-    return x is not None and not (isinstance(x, float) and math.isnan(x))
-
-
-def mm(x: Optional[float], digits: int = 3) -> str:
-    """Format metres as millimetres (``'n/a'`` for None)."""
-    return f'{x * 1e3:.{digits}g} mm' if _ok(x) else 'n/a'
-
-
-def m(x: Optional[float], digits: int = 3) -> str:
-    """Format metres."""
-    return f'{x:.{digits}g} m' if _ok(x) else 'n/a'
+def write_json(path, data) -> None:
+    """Write ``data`` to ``path`` as JSON, numpy arrays and scalars as lists and numbers."""
+    def plain(x):
+        return x.tolist() if isinstance(x, (np.ndarray, np.generic)) else str(x)
+    Path(path).write_text(json.dumps(data, indent=1, default=plain))
 
 
 def num(x: Optional[float], digits: int = 3, unit: str = '') -> str:
-    """Format a number with ``digits`` significant digits and an optional unit."""
-    if not _ok(x):
+    """Format a number with ``digits`` significant digits and a unit (``'n/a'`` for none)."""
+    if x is None or (isinstance(x, float) and math.isnan(x)):
         return 'n/a'
     return f'{x:.{digits}g}' + (f' {unit}' if unit else '')
 
 
-def plural(n: int, word: str) -> str:
-    """Return ``'1 move'``, ``'3 moves'``."""
-    return f'{n} {word}' + ('' if n == 1 else 's')
+def mm(metres: Optional[float], digits: int = 3) -> str:
+    """Format metres as millimetres."""
+    return num(None if metres is None else metres * 1e3, digits, 'mm')
 
 
 def met(flag: Optional[bool]) -> str:
@@ -191,81 +123,72 @@ def met(flag: Optional[bool]) -> str:
 
 def quote(*keys: str) -> str:
     """Blockquote the seeds' claims ``keys`` with their sources."""
-    return '\n'.join(f'> {CLAIMS[k].quote} — *{CLAIMS[k].source}*\n>' for k in keys).rstrip('>\n')
+    return '\n>\n'.join(f'> {CLAIMS[k].quote} — *{CLAIMS[k].source}*' for k in keys)
 
 
-def md_table(head: Sequence[str], rows: Iterable[Sequence[object]],
-             align: Optional[str] = None) -> str:
-    """Return a Markdown table; ``align`` is one of ``l r c`` per column (default left)."""
-    align = align or 'l' * len(head)
-    marks = {'l': '---', 'r': '---:', 'c': ':---:'}
-    lines = ['| ' + ' | '.join(head) + ' |',
-             '|' + '|'.join(marks[a] for a in align) + '|']
-    for row in rows:
-        lines.append('| ' + ' | '.join(str(c) for c in row) + ' |')
-    return '\n'.join(lines)
+def table(rows: Sequence[Dict[str, object]], align: str = '') -> str:
+    """Return rows of dicts as a Markdown table, the first row's keys as the head.
 
+    :param align: one of ``l r`` per column (default left).
 
-def figure_link(results: dict, key: str, alt: str) -> str:
-    """Return the image link of section ``key``'s figure, or why it was not drawn."""
-    name = (results.get('figures') or {}).get(key, '')
-    if name.endswith('.png'):
-        return f'![{alt}](figures/{name})'
-    return f'*(figure not drawn: {name or "no data"})*'
-
-
-DPI = 90
-
-
-def canvas(width: float, height: float, ncols: int = 1):
-    """Return ``(figure, axes)``: a constrained-layout Agg figure with ``ncols`` axes.
-
-    :param width: inches.
-    :param height: inches.
+    >>> print(table([{'a': 1, 'b': 2}], 'lr'))
+    | a | b |
+    |---|---:|
+    | 1 | 2 |
     """
+    head = list(rows[0])
+    marks = ''.join('---:|' if a == 'r' else '---|' for a in align.ljust(len(head), 'l'))
+    body = ['| ' + ' | '.join(str(r.get(k, '')) for k in head) + ' |' for r in rows]
+    return '\n'.join(['| ' + ' | '.join(head) + ' |', '|' + marks] + body)
+
+
+def axes(width: float, height: float, ncols: int = 1) -> Tuple[Any, List[Any]]:
+    """Return ``(figure, [axes])``: a constrained-layout Agg figure, ``ncols`` axes in a row."""
     from matplotlib.figure import Figure
     fig = Figure(figsize=(width, height), layout='constrained')
-    axes = fig.subplots(1, ncols)
-    return fig, axes
+    return fig, list(np.atleast_1d(fig.subplots(1, ncols)))
 
 
-def save(fig, path: Path) -> None:
-    """Save ``fig`` as a PNG at the benchmark's resolution."""
-    fig.savefig(path, dpi=DPI)
-
-
-Rows = List[Sequence[str]]
+def finish(ax, xlabel: str, ylabel: str, title: str, hlines: Dict[float, str] = None) -> None:
+    """Label ``ax``, draw dotted reference lines ``{y: text}``, add the legend if it has one."""
+    for y, text in (hlines or {}).items():
+        ax.axhline(y, color='k', lw=0.8, ls=':')
+        ax.annotate(text, (0.01, y), xycoords=('axes fraction', 'data'), fontsize=7,
+                    textcoords='offset points', xytext=(0, 3))
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
 
 
 @dataclass(frozen=True)
 class Section:
-    """One section of the benchmark and of ``RESULTS.md``, everything about it in one module.
+    """One numbered section of the benchmark and of ``RESULTS.md``, all of it in one module.
 
-    :ivar key: the results key, the ``--only`` name and the figure's file name (``<key>.png``).
+    :ivar key: the results key, the ``--only`` name and the figure's name (``<key>.png``).
     :ivar title: the name on the progress lines.
-    :ivar heading: the heading in ``RESULTS.md``, without its number (the place in
-        :data:`~scara_collab.bench.report.SECTIONS` numbers it).
-    :ivar measure: ``measure(sizes, progress, scratch) -> data``: run the section with its
-        sizes (:attr:`full` or :attr:`smoke`), notes on ``progress``, files under the
-        ``scratch`` folder; return plain data (dicts, lists, floats, strings, arrays).
-    :ivar markdown: ``markdown(data, results) -> text``: the section's body (the claims quoted,
-        the tables, the prose; not the figure's link); ``results`` holds every section's data,
-        for the figures one section quotes from another.
-    :ivar summary: ``summary(data) -> rows`` of the summary table (what, seeds' claim,
-        measured here, SPEC target, target met).
-    :ivar figure: ``figure(data, path)``: draw the section's figure and save it as ``path``.
-    :ivar figure_alt: the figure's alternative text in ``RESULTS.md``.
-    :ivar full: the sizes of the full run, a frozen dataclass (None: the section has none).
+    :ivar heading: the heading in ``RESULTS.md``, without its number.
+    :ivar claims: the keys of the seeds' claims quoted at the top.
+    :ivar text: the fixed paragraph: what is measured, how, the target.
+    :ivar measure: ``measure(sizes, progress, scratch) -> data`` (plain data, arrays allowed).
+    :ivar tables: ``tables(data) -> [Markdown]``: the tables, each maybe with a short label.
+    :ivar summary: ``summary(data) -> rows`` of the summary table.
+    :ivar figure: ``figure(data) -> matplotlib figure``.
+    :ivar figure_alt: the figure's alternative text.
+    :ivar full: the sizes of the full run (a frozen dataclass; None: the section has none).
     :ivar smoke: the sizes of the seconds-long smoke run.
     """
 
     key: str
     title: str
     heading: str
+    claims: Tuple[str, ...]
+    text: str
     measure: Callable[[Any, Progress, Path], dict]
-    markdown: Callable[[dict, dict], str]
+    tables: Callable[[dict], List[str]]
     summary: Callable[[dict], Rows]
-    figure: Callable[[dict, Path], None]
+    figure: Callable[[dict], Any]
     figure_alt: str
     full: Optional[Any] = None
     smoke: Optional[Any] = None

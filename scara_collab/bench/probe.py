@@ -1,7 +1,7 @@
-"""A node in a benchmark's own process that talks to a launched graph (the fault matrix's).
+"""A measuring node in a benchmark's own process that talks to a launched graph.
 
-:mod:`scara_collab.bench.faults` injects its faults through it: publishes bad input, listens
-to ``/joint_states`` for the stamps it forges.
+The fault matrix (:mod:`scara_collab.bench.faults`) injects its faults through it: it
+publishes bad input and keeps the newest ``joint_states`` for the stamps it forges.
 """
 import time
 from typing import Optional
@@ -12,13 +12,10 @@ from sensor_msgs.msg import JointState
 
 
 class Probe:
-    """A node in this process that talks to the launched graph (publish, listen).
-
-    A context manager: ``with Probe() as probe:`` closes it however the block ends.
-    """
+    """A node of its own context in this process; ``with Probe() as probe:`` closes it."""
 
     def __init__(self):
-        """Join the graph with a node of its own context that keeps the newest /joint_states."""
+        """Join the graph with a node that keeps the newest ``joint_states``."""
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx)
         self.node = rclpy.create_node('fault_probe', context=self.ctx)
@@ -26,7 +23,7 @@ class Probe:
         self.executor.add_node(self.node)
         self.state: Optional[JointState] = None
         # depth 1: the newest state, never a backlog (a slow probe would lag the graph)
-        self.node.create_subscription(JointState, '/joint_states', self._on_state, 1)
+        self.node.create_subscription(JointState, 'joint_states', self._on_state, 1)
 
     def _on_state(self, msg) -> None:
         self.state = msg
@@ -37,46 +34,36 @@ class Probe:
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.01)
 
-    def wait_state(self, timeout: float = 15.0):
-        """Return the newest /joint_states once one has come (discovery takes a while)."""
+    def wait_state(self, timeout: float = 15.0) -> JointState:
+        """Return the newest ``joint_states`` once one has come (discovery takes a while)."""
         end = time.monotonic() + timeout
         while self.state is None and time.monotonic() < end:
             self.spin(0.05)
         if self.state is None:
-            raise RuntimeError('no /joint_states heard from the launched graph')
+            raise RuntimeError('no joint_states heard from the launched graph')
         return self.state
 
     def publisher(self, msg_type, topic: str, readers: int = 1, timeout: float = 10.0):
         """Return a publisher on ``topic`` once ``readers`` of the graph have matched it.
 
         A message published before a reader has matched is lost to that reader (DDS), so an
-        injection waits for the readers it means to reach (at most 10 s); the probe's own
-        subscription (``/joint_states``) does not count. After ``timeout`` wall seconds it is
-        returned anyway.
-
-        :param msg_type: the message class.
-        :param topic: the fully qualified topic name.
-        :param readers: how many subscriptions outside the probe to wait for.
-        :param timeout: wall seconds to wait at most.
+        injection waits for the readers it means to reach; the probe's own subscription does
+        not count. After ``timeout`` wall seconds it is returned anyway.
         """
         pub = self.node.create_publisher(msg_type, topic, 10)
-        own = sum(1 for sub in self.node.subscriptions if sub.topic_name == topic)
+        own = sum(1 for sub in self.node.subscriptions
+                  if sub.topic_name == pub.topic_name)
         end = time.monotonic() + timeout
         while pub.get_subscription_count() - own < readers and time.monotonic() < end:
             self.spin(0.05)
         return pub
 
-    def close(self) -> None:
-        """Shut down the probe's executor, node and context."""
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.ctx)
-
     def __enter__(self) -> 'Probe':
         """Return the probe; it is closed when the ``with`` block ends."""
         return self
 
-    def __exit__(self, exc_type, exc, tb) -> bool:
-        """Close the probe (:meth:`close`); an exception goes on."""
-        self.close()
-        return False
+    def __exit__(self, *exc) -> None:
+        """Shut down the probe's executor, node and context."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
