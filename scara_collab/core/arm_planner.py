@@ -1,0 +1,455 @@
+"""One arm's planner as a state machine, without ROS: observations in, commands out.
+
+:class:`ArmPlanner` decides everything a planner node does; the node only turns messages into
+the ``on_*`` observations and the returned :class:`SendMove`, :class:`HoldArm` and
+:class:`Status` commands into messages.
+
+**Requests.** A move is asked for as a target point (:meth:`ArmPlanner.on_target`) or as a
+plan of it (:meth:`ArmPlanner.on_offer`: the sorting job offers the trajectory it planned
+with the planners' settings, :func:`scara_collab.core.planning.offered_move`). Each is named
+by its request: the stamp in ns, or for a target stamped zero its receipt time
+(:meth:`Answers.request_of`). A request already answered is not planned again: its last status
+is sent again (:class:`Answers`).
+
+**Planning.** The move is planned from the arm's measured joints (a straight line, a joint
+move, or either, setting ``mode``); an offered plan that starts where the arm is (within
+``offer_tolerance``) is taken as is when the mode is ``line_or_joint`` (the job's). It starts
+at the requested time, but at least ``planning_lead`` plus the worst lateness the bridge
+measured on this arm's recent starts after now, and is scheduled against the other arm's
+committed motion (:class:`scara_collab.core.motion.Heard`, kept from the other arm's
+trajectories and the bridge's statuses of them) by the priority rule of
+:mod:`scara_collab.core.planning`, applied here, once.
+
+**Statuses** (:data:`STATES`): ``planned`` (the move is sent; also again when it is re-timed),
+``queued`` (behind the arm's running move: the bridge replaces a running trajectory, so it
+is sent when that move ends), ``waiting`` (the other arm's committed motion blocks it even
+after ``max_delay``: retried whenever that arm commits a new move, refused after
+``max_wait``), ``superseded`` (a queued or waiting request replaced by a newer one),
+``refused`` (with the reason; the arm stays where it is).
+
+**Follower re-timing.** The follower's committed move that has not started yet is scheduled
+again when a new leader move is heard: delayed if it would now conflict, or, if no delay
+helps, the arm is held (:class:`HoldArm`) and the move waits.
+
+**Start lateness.** When the bridge reports the arm's move started late, the move is re-based
+to its real start (its ``planned`` status is sent again with the new window) and the
+lateness joins the measured lead (:class:`scara_collab.core.motion.Lateness`).
+
+All times are absolute sim seconds from the ``clock`` given to :class:`ArmPlanner`.
+"""
+from collections import OrderedDict
+from dataclasses import dataclass, replace
+from typing import Callable, List, NamedTuple, Optional, Union
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from scara_collab.core.kinematics import fk, IKError
+from scara_collab.core.model import ArmModel
+from scara_collab.core.motion import Heard, Lateness
+from scara_collab.core.planning import (MODES, offered_move, path_options, Plan, plan_path,
+                                        schedule, starts_at)
+from scara_collab.core.trajectory import path_metrics, Trajectory
+
+#: the states of a request a planner reports
+STATES = ('planned', 'queued', 'waiting', 'refused', 'superseded')
+#: requests whose last status is kept, to answer a re-sent one
+HISTORY = 64
+#: m: a planned move whose tool leaves the straight line by less than this is a ``line``
+LINE_DEVIATION = 1e-4
+#: the execution states after which nothing of the arm's own move runs any more
+NOT_RUNNING = ('refused', 'preempted', 'held')
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """How an arm's planner plans and schedules (its parameters and the cell's margin).
+
+    :ivar mode: one of :data:`scara_collab.core.planning.MODES`.
+    :ivar planning_lead: s, the least time between planning a move and its start (the worst
+        start lateness measured lately is added).
+    :ivar max_delay: s, the most a move is delayed for the other arm's committed motion.
+    :ivar max_wait: s, how long a move blocked by the other arm waits before it is refused.
+    :ivar margin: m between the arms' capsules that a move keeps (the cell's safety margin
+        plus the planning buffer).
+    :ivar trajectory: ``controllers.yaml`` ``trajectory`` (sample period, DLS,
+        ``offer_tolerance``).
+    """
+
+    mode: str
+    planning_lead: float
+    max_delay: float
+    max_wait: float
+    margin: float
+    trajectory: dict
+
+    def __post_init__(self):
+        """Refuse a mode not in :data:`~scara_collab.core.planning.MODES` or a time <= 0."""
+        if self.mode not in MODES:
+            raise ValueError(f'mode must be one of {MODES}, got {self.mode!r}')
+        for key in ('planning_lead', 'max_delay', 'max_wait'):
+            if not float(getattr(self, key)) > 0.0:
+                raise ValueError(f'{key} must be > 0, got {getattr(self, key)!r}')
+
+
+class MoveRequest(NamedTuple):
+    """A move asked for: where to, in which frame, the plan offered with it, and its request.
+
+    :ivar target: ``(3,)`` the tool's goal, m.
+    :ivar frame: ``'world'`` or ``'base'`` (the arm's base).
+    :ivar wanted: s: the requested start while queued (0 = as soon as possible); once planned
+        or waiting, when it was first wanted (so a wait counts into its delay).
+    :ivar offer: the plan offered with it, or None.
+    :ivar request: its request id, ns.
+    """
+
+    target: np.ndarray
+    frame: str
+    wanted: float
+    offer: Optional[Trajectory]
+    request: int
+
+
+class CommittedMove(NamedTuple):
+    """The arm's own move as sent: its plan (start, delay) and the request it answers."""
+
+    plan: Plan
+    asked: MoveRequest
+
+    @property
+    def request(self) -> int:
+        """The request id, ns."""
+        return self.asked.request
+
+
+@dataclass(frozen=True)
+class Status:
+    """Report ``state`` of ``request`` (:data:`STATES`); ``repeated``: an answer sent again.
+
+    ``start``, ``end`` and ``delay`` (s) describe a planned move; ``kind`` is ``line`` or
+    ``joint move``.
+    """
+
+    state: str
+    request: int
+    reason: str = ''
+    start: Optional[float] = None
+    end: Optional[float] = None
+    delay: float = 0.0
+    kind: str = ''
+    repeated: bool = False
+
+
+@dataclass(frozen=True)
+class SendMove:
+    """Send the arm's move for ``request``: ``plan.traj`` stamped ``plan.start``, and its path."""
+
+    request: int
+    plan: Plan
+
+
+@dataclass(frozen=True)
+class HoldArm:
+    """Send a hold: the arm keeps ``q`` (``(3,)``), dropping its move that has not started."""
+
+    q: np.ndarray
+
+
+Command = Union[Status, SendMove, HoldArm]
+
+
+class Answers:
+    """The last status of each request, so a re-sent one is answered, not planned again.
+
+    Keeps the last :data:`HISTORY` requests; a target stamped zero gets its receipt time as
+    its request id (:meth:`request_of`), unique even for two in the same nanosecond.
+
+    >>> answers = Answers()
+    >>> answers.request_of(0, 1000), answers.request_of(0, 1000), answers.request_of(7, 1000)
+    (1000, 1001, 7)
+    >>> answers.keep(Status('queued', 7)); answers.last(7).state, answers.last(8)
+    ('queued', None)
+    """
+
+    def __init__(self, history: int = HISTORY):
+        """Remember nothing yet."""
+        self.history = int(history)
+        self._last: 'OrderedDict[int, Status]' = OrderedDict()
+        self._last_receipt = 0
+
+    def request_of(self, stamp_ns: int, now_ns: int) -> int:
+        """Return the request id of a target: its stamp, or (stamped zero) the receipt time."""
+        if stamp_ns:
+            return stamp_ns
+        self._last_receipt = max(now_ns, self._last_receipt + 1)
+        return self._last_receipt
+
+    def keep(self, status: Status) -> None:
+        """Keep ``status`` as its request's last answer."""
+        if status.request:
+            self._last[status.request] = status
+            self._last.move_to_end(status.request)
+            while len(self._last) > self.history:
+                self._last.popitem(last=False)
+
+    def last(self, request: int) -> Optional[Status]:
+        """Return the last status of ``request``, or None if it is new."""
+        return self._last.get(request)
+
+
+class ArmPlanner:
+    """The planner of one arm (see the module docstring): observations in, commands out.
+
+    Every ``on_*`` method returns the commands it decided, in the order they are to be sent.
+
+    :param arm: the arm it plans for; :param other_arm: the other arm of the cell.
+    :param leader: True for the arm with priority (:mod:`scara_collab.core.planning`).
+    :param settings: :class:`PlannerSettings` (may be replaced while it runs).
+    :param clock: returns the sim time now, s (read again after planning: it takes time).
+    :param dt: the physics step, s (the bridge's start rule, :class:`Heard`).
+    """
+
+    def __init__(self, arm: ArmModel, other_arm: ArmModel, leader: bool,
+                 settings: PlannerSettings, clock: Callable[[], float], dt: float):
+        """Nothing known yet: no joint state, nothing committed, the other arm idle."""
+        self.arm, self.other_arm, self.leader = arm, other_arm, bool(leader)
+        self.settings = settings
+        self.clock = clock
+        self.joints: Optional[np.ndarray] = None        # (3,) this arm's measured joints
+        self.other_joints: Optional[np.ndarray] = None  # (3,) the other arm's
+        self.joints_time = 0.0                          # s, when they were measured
+        self.committed: Optional[CommittedMove] = None  # this arm's move as sent
+        self.queued: Optional[MoveRequest] = None       # to plan when the committed one ends
+        self.blocked: Optional[MoveRequest] = None      # waiting for the other arm to move
+        self.start_lateness = Lateness()                # how late the bridge starts our moves
+        self.other_motion = Heard(other_arm.name, dt=dt)  # the other arm's commitments
+        self.answers = Answers()
+        self._out: List[Command] = []
+
+    # --- observations -------------------------------------------------------------------------
+    def on_joint_state(self, joints: ArrayLike, other_joints: ArrayLike,
+                       stamp: float) -> List[Command]:
+        """Take both arms' joints measured at ``stamp``; plan a queued move whose turn came."""
+        self.joints = np.asarray(joints, dtype=float)
+        self.other_joints = np.asarray(other_joints, dtype=float)
+        self.joints_time = float(stamp)
+        if self.queued is not None and (self.committed is None
+                                        or self.joints_time >= self.committed.plan.end):
+            queued, self.queued = self.queued, None
+            self._plan_and_schedule(queued)
+        return self._commands()
+
+    def on_target(self, stamp_ns: int, stamp: float, target: ArrayLike, frame: str,
+                  frame_error: str = '') -> List[Command]:
+        """Take a request to move the tool to ``target``.
+
+        :param stamp_ns: the request's stamp, ns (0: start as soon as possible).
+        :param stamp: the same in s (the requested start).
+        :param target: ``(3,)`` m, in ``frame`` (``'world'`` or ``'base'``).
+        :param frame_error: why the target's frame is not understood (``''`` if it is): the
+            request is refused with it.
+        """
+        request = self._request_of(stamp_ns)
+        if not self._answered(request):
+            self._take_request(request, np.asarray(target, dtype=float), frame, stamp,
+                               frame_error)
+        return self._commands()
+
+    def on_offer(self, stamp_ns: int, stamp: float, t: Optional[ArrayLike] = None,
+                 q: Optional[ArrayLike] = None, qd: Optional[ArrayLike] = None,
+                 qdd: Optional[ArrayLike] = None, error: str = '') -> List[Command]:
+        """Take a request offered as a plan: ``(N,)`` times from its start, ``(N, 3)`` arrays.
+
+        The target is its last point (world). A plan that is not one (no velocities, outside
+        the joint limits, ``error``: why the message could not be read) is refused.
+        """
+        request = self._request_of(stamp_ns)
+        if self._answered(request):
+            return self._commands()
+        if not error:
+            try:
+                offer = offered_move(self.arm, t, q, qd, qdd)
+            except ValueError as exc:
+                error = str(exc)
+        if error:
+            self._report('refused', request, f'offered trajectory: {error}')
+        else:
+            self._take_request(request, fk(self.arm, offer.q[-1]), 'world', stamp, offer=offer)
+        return self._commands()
+
+    def on_other_trajectory(self, move_id: str, stamp: float, t: ArrayLike,
+                            q: ArrayLike) -> List[Command]:
+        """Take a trajectory the other arm was sent; retry a blocked move, or re-time ours.
+
+        :param move_id: its id; :param stamp: its stamp, s (0: now); :param t: ``(N,)`` s
+            from its start; :param q: ``(N, 3)``.
+        """
+        now = self.clock()
+        if self.other_motion.trajectory(move_id, stamp, t, q, now, self.other_joints) is None:
+            return self._commands()  # it would have ended: the bridge refuses it
+        if self.blocked is not None:  # the other arm moves: maybe it clears the way
+            blocked = self.blocked
+            self._plan_and_schedule(blocked._replace(wanted=0.0), wanted=blocked.wanted)
+        elif (not self.leader and self.committed is not None
+              and self.committed.plan.start > now):
+            self._make_way(now)
+        return self._commands()
+
+    def on_other_execution(self, state: str, move_id: str,
+                           start: Optional[float] = None) -> List[Command]:
+        """Take the bridge's status of the other arm's move (:meth:`Heard.status`)."""
+        self.other_motion.status(state, move_id, self.clock(), start, self.other_joints)
+        return self._commands()
+
+    def on_own_execution(self, state: str, request: int, start: Optional[float] = None,
+                         stamped: bool = False, late: float = 0.0) -> List[Command]:
+        """Take the bridge's status of this arm's move for ``request``.
+
+        :param start: the start it reports, s; :param stamped: the move asked for a start;
+        :param late: s it started after that.
+
+        An ``accepted`` move adds its lateness to the measured lead and, if late, is re-based
+        to its real start; once refused, preempted or held nothing of it runs, so the next
+        request is planned at once.
+        """
+        if self.committed is None or request != self.committed.request:
+            return self._commands()  # not the arm's current move
+        if state == 'accepted' and stamped:
+            self.start_lateness.add(late)
+        if state == 'accepted' and late > 0:
+            plan = self.committed.plan
+            self.committed = self.committed._replace(plan=Plan(plan.traj, start,
+                                                               plan.delay + late))
+            last = self.answers.last(request)
+            self._report('planned', request, f'started {late:.3f} s late by the bridge',
+                         self.committed.plan, '' if last is None else last.kind)
+        elif state in NOT_RUNNING:
+            self.committed = None
+        return self._commands()
+
+    # --- decisions ----------------------------------------------------------------------------
+    def _take_request(self, request: int, target: np.ndarray, frame: str, stamp: float,
+                      frame_error: str = '', offer: Optional[Trajectory] = None) -> None:
+        """Plan, queue or refuse the move ``request`` to ``target`` (``offer``: a plan of it)."""
+        if self.joints is None or self.other_joints is None:
+            self._report('refused', request, 'no joint state yet (is the bridge up?)')
+            return
+        if not np.all(np.isfinite(target)):
+            self._report('refused', request, f'non-finite target {target.tolist()}')
+            return
+        if frame_error:
+            self._report('refused', request, frame_error)
+            return
+        for held in (self.blocked, self.queued):  # a new request supersedes them
+            if held is not None:
+                self._report('superseded', held.request, f'replaced by request {request}')
+        self.blocked = self.queued = None
+        asked = MoveRequest(target, frame, stamp, offer, request)
+        if self.committed is not None and self.committed.plan.end > self.clock():
+            # the bridge replaces a running trajectory: hold this one until ours has ended
+            self.queued = asked
+            self._report('queued', request, 'behind the running move (ends '
+                         f't={self.committed.plan.end:.3f} s)')
+            return
+        self._plan_and_schedule(asked)
+
+    def _plan_and_schedule(self, asked: MoveRequest, wanted: Optional[float] = None) -> None:
+        """Plan ``asked`` and schedule it against the other arm: send it, or wait, or refuse.
+
+        :param wanted: when it was first wanted (a retried move); None: its start now.
+        """
+        s = self.settings
+        lead = s.planning_lead + self.start_lateness.worst  # the bridge's starts, measured
+        now = self.clock()
+        start = max(asked.wanted, now + lead) if asked.wanted > 0 else now + lead
+        wanted = start if wanted is None else wanted
+        if (asked.offer is not None and s.mode == 'line_or_joint'
+                and starts_at(asked.offer, self.joints, s.trajectory['offer_tolerance'])):
+            traj = asked.offer  # the job's plan of this move: not planned again
+        else:
+            try:
+                traj = plan_path(self.arm, self.joints, asked.target, asked.frame, s.mode,
+                                 **path_options(s.trajectory))
+            except (IKError, ValueError) as exc:
+                self._report('refused', asked.request, str(exc))
+                return
+        now = self.clock()
+        start = max(start, now + lead)  # planning took (sim) time too
+        # from now on (the past is past); the leader leaves out a follower move that waits to
+        # start at or after its own start (the priority rule: that one yields)
+        other = self.other_motion.motion(now, self.other_joints,
+                                         before=start if self.leader else None)
+        plan = schedule(self.arm, traj, start, self.other_arm, other, s.margin, self.leader,
+                        s.max_delay)
+        asked = asked._replace(wanted=wanted)
+        if plan is None:
+            self._wait(asked)
+            return
+        if plan.start - wanted > 1e-9:  # count the time spent waiting, not just the last delay
+            plan = Plan(plan.traj, plan.start, plan.start - wanted)
+        self.blocked = None
+        self._send(plan, asked)
+
+    def _make_way(self, now: float) -> None:
+        """Re-time the follower's move that has not started for a new leader move.
+
+        Kept if it still keeps the margin, delayed if a delay does, else the arm is held and
+        the move waits for the leader.
+        """
+        s, move = self.settings, self.committed
+        plan = schedule(self.arm, move.plan.traj, move.plan.start, self.other_arm,
+                        self.other_motion.motion(now, self.other_joints), s.margin,
+                        leader=False, max_delay=s.max_delay)
+        if plan is None:
+            self.committed = None
+            self._out.append(HoldArm(self.joints.copy()))
+            self._wait(move.asked)
+        elif plan.delay > 0:
+            self._send(Plan(plan.traj, plan.start, plan.start - move.asked.wanted), move.asked,
+                       f're-timed for a new {self.other_arm.name} move')
+
+    def _wait(self, asked: MoveRequest) -> None:
+        """Wait for the other arm: it blocks ``asked`` even after its committed motion."""
+        s = self.settings
+        waited = self.clock() - asked.wanted
+        if waited > s.max_wait:
+            self.blocked = None
+            self._report('refused', asked.request, f'{self.other_arm.name} has blocked the '
+                         f'move for {waited:.1f} s')
+            return
+        first = self.blocked is None or self.blocked.request != asked.request
+        self.blocked = asked
+        if first:
+            self._report('waiting', asked.request, f'{self.other_arm.name} blocks it: no start '
+                         f'within {s.max_delay:.0f} s keeps {s.margin:.2f} m')
+
+    def _send(self, plan: Plan, asked: MoveRequest, note: str = '') -> None:
+        """Commit the arm to ``plan`` for ``asked``: send it and report it planned."""
+        self.committed = CommittedMove(plan, asked)
+        self._out.append(SendMove(asked.request, plan))
+        kind = 'line' if path_metrics(plan.traj).max_deviation < LINE_DEVIATION else 'joint move'
+        self._report('planned', asked.request, note, plan, kind)
+
+    # --- answers ------------------------------------------------------------------------------
+    def _request_of(self, stamp_ns: int) -> int:
+        # the receipt time in ns: the clock's s * 1e9 rounds back to the exact ns up to ~1e5 s
+        return self.answers.request_of(int(stamp_ns), round(self.clock() * 1e9))
+
+    def _answered(self, request: int) -> bool:
+        """Send the last status of ``request`` again; return False if it is new."""
+        last = self.answers.last(request)
+        if last is not None:
+            self._out.append(replace(last, repeated=True))
+        return last is not None
+
+    def _report(self, state: str, request: int, reason: str = '', plan: Optional[Plan] = None,
+                kind: str = '') -> None:
+        status = Status(state, request, reason, None if plan is None else plan.start,
+                        None if plan is None else plan.end,
+                        0.0 if plan is None else plan.delay, kind)
+        self.answers.keep(status)
+        self._out.append(status)
+
+    def _commands(self) -> List[Command]:
+        out, self._out = self._out, []
+        return out
