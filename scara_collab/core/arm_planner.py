@@ -206,7 +206,8 @@ class ArmPlanner:
     :param leader: True for the arm with priority (:mod:`scara_collab.core.planning`).
     :param settings: :class:`PlannerSettings` (may be replaced while it runs).
     :param clock: returns the sim time now, s (read again after planning: it takes time).
-    :param dt: the physics step, s (the bridge's start rule, :class:`Heard`).
+    :param dt: the physics step, s (the bridge's start rule, as
+        :class:`~scara_collab.core.motion.Heard` applies it).
     """
 
     def __init__(self, arm: ArmModel, other_arm: ArmModel, leader: bool,
@@ -297,7 +298,7 @@ class ArmPlanner:
 
     def on_other_execution(self, state: str, move_id: str,
                            start: Optional[float] = None) -> List[Command]:
-        """Take the bridge's status of the other arm's move (:meth:`Heard.status`)."""
+        """Take the bridge's status of the other arm's move (:meth:`.motion.Heard.status`)."""
         self.other_motion.status(state, move_id, self.clock(), start, self.other_joints)
         return self._commands()
 
