@@ -219,7 +219,8 @@ class AutomationManager(Node):
                 missing += [f'{sub.topic_name} (no publisher)'
                             for sub in self.status_subs[robot] if sub.get_publisher_count() == 0]
                 if not self.grippers[robot].service_is_ready():
-                    missing.append(f'{self.grippers[robot].srv_name} (no server)')
+                    missing.append(f'{self.resolve_service_name(self.grippers[robot].srv_name)}'
+                                   ' (no server)')
         missing += [f'{sub.topic_name} (no publisher)'
                     for sub in self.world_subs if sub.get_publisher_count() == 0]
         return missing

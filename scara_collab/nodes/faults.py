@@ -323,7 +323,7 @@ def call_with_faults(node: Node, plan: FaultPlan, client, request,
                      on_response: Callable[[object], None]) -> None:
     """``client.call_async(request)``; ``on_response(response)`` unless the plan loses it."""
     future = client.call_async(request)
-    name = client.srv_name
+    name = node.resolve_service_name(client.srv_name)  # a client keeps the name it was given
 
     def done(f) -> None:
         try:

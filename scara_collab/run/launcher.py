@@ -310,6 +310,10 @@ class Launcher:
             self.console.say(f'[launch] {self.signals[-1]} again: killing the nodes now',
                              error=True)
 
+    def name(self, relative: str) -> str:
+        """Return the cell's absolute name of ``relative`` (``sim/resume`` -> ``/sim/resume``)."""
+        return graph.resolve(relative, self.namespace)
+
     # --- supervision -----------------------------------------------------------------------
     def check(self) -> None:
         """Raise :class:`RunEnd` on a signal, a dead node process or a silent node."""
@@ -383,8 +387,9 @@ class Launcher:
             # refused while its endpoints are not matched yet (DDS discovery): ask again
             deadline = time.monotonic() + self.args.ready_timeout
             while True:
-                res = self.ros.call(Trigger, 'automation_manager/start', Trigger.Request(),
-                                    self.args.ready_timeout, 'automation_manager')
+                res = self.ros.call(Trigger, self.name('automation_manager/start'),
+                                    Trigger.Request(), self.args.ready_timeout,
+                                    'automation_manager')
                 if res.success:
                     break
                 if time.monotonic() > deadline:
@@ -404,8 +409,8 @@ class Launcher:
         if release:
             self.ros.set_bridge(**release)
             self.rtf_released = 'real_time_factor' in release
-        res = self.ros.call(Trigger, 'sim/resume', Trigger.Request(), self.args.ready_timeout,
-                            'pybullet_bridge')
+        res = self.ros.call(Trigger, self.name('sim/resume'), Trigger.Request(),
+                            self.args.ready_timeout, 'pybullet_bridge')
         if not res.success:
             raise RunEnd(f'pybullet_bridge refused to resume: {res.message}')
         self.liveness.expect(time.monotonic())  # a node that never answers is silent too
@@ -470,8 +475,8 @@ class Launcher:
             self.recorder.extra['job_stop'] = 'not stopped: automation_manager does not answer'
             return
         try:
-            res = self.ros.call(Trigger, 'automation_manager/stop', Trigger.Request(), 5.0,
-                                'automation_manager', supervise=False, attempts=2,
+            res = self.ros.call(Trigger, self.name('automation_manager/stop'), Trigger.Request(),
+                                5.0, 'automation_manager', supervise=False, attempts=2,
                                 attempt_timeout=2.0)
         except RunEnd as exc:
             self.recorder.extra['job_stop'] = f'not stopped: {exc.reason}'
