@@ -45,9 +45,10 @@ from scara_collab.core.planning import MODES
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.faults import declare_faults, FaultyPublisher
+from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import DEFAULT, EVENTS
-from scara_collab.nodes.runner import guarded, run_node
+from scara_collab.nodes.runner import run_node
 
 #: the planner's own time parameters and their defaults, s: a move starts at least
 #: ``planning_lead`` after it is planned (plus the most the bridge started one of this

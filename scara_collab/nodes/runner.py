@@ -15,7 +15,6 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from rclpy.node import Node
 
 from scara_collab.nodes import shutdown
-from scara_collab.nodes.guarded import guarded  # noqa: F401 - the nodes' import of it
 
 
 EXECUTORS = ('events', 'single')
