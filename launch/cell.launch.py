@@ -32,6 +32,11 @@ ARGUMENTS = {'mode': 'collaborative', 'tf': 'false', 'viewer': 'false', 'rviz': 
 
 def _typed(value: str):
     """Return a job-mode parameter (a ``-p`` string) as its typed value."""
+    for number in (int, float):
+        try:
+            return number(value)
+        except ValueError:
+            pass
     return {'true': True, 'false': False}.get(str(value).lower(), value)
 
 
@@ -40,13 +45,11 @@ def nodes(context):
     arg = {k: LaunchConfiguration(k).perform(context) for k in ARGUMENTS}
     share = get_package_share_directory(PACKAGE)
     rviz = arg['rviz'].lower() == 'true'
-    params = graph.job_params(arg['mode'])
-    if arg['mode'] != 'idle':
-        params['automation_manager']['auto_start'] = arg['auto_start']
     if arg['lockstep'].lower() not in ('true', 'false'):
         raise ValueError(f"lockstep must be true or false, got {arg['lockstep']!r}")
-    if arg['lockstep'].lower() == 'false':  # real time: the clock waits for nobody
-        params['pybullet_bridge']['lockstep_window'] = 0.0
+    params = graph.job_params(arg['mode'], lockstep=arg['lockstep'].lower() == 'true')
+    if arg['mode'] != 'idle':
+        params['automation_manager']['auto_start'] = arg['auto_start']
     namespace = graph.namespace_of(arg['namespace'])
     placed = {'namespace': namespace, 'remappings': list(graph.remaps(namespace).items())
               } if namespace else {}

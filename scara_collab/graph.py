@@ -335,12 +335,22 @@ def lockstep_expect(nodes: Sequence[NodeSpec]) -> List[str]:
     return [n.name for n in nodes if n.lockstep]
 
 
-def job_params(mode: str) -> Dict[str, Dict[str, str]]:
+#: s, the planners' ``send_margin`` in real time: a trajectory reaches the bridge within
+#: milliseconds, and the planners add how late the bridge's starts have come (measured)
+REALTIME_SEND_MARGIN = 0.01
+
+
+def job_params(mode: str, lockstep: bool = True) -> Dict[str, Dict[str, str]]:
     """Return the parameters a launch mode sets, per node name (string values).
 
     Mirrored mode feeds items in mirror pairs; the replication manager follows
     ``/joint_states`` only where mirrored moves are asked for (mirrored mode, and the idle
-    graph a user drives by hand); the automation manager runs the mode's job.
+    graph a user drives by hand); the automation manager runs the mode's job. Without
+    ``lockstep`` the clock waits for nobody (the bridge's ``lockstep_window`` 0), as on
+    hardware, and the planners send their moves :data:`REALTIME_SEND_MARGIN` ahead.
+
+    >>> job_params('collaborative', lockstep=False)['left_planner']
+    {'send_margin': '0.01'}
 
     :raises ValueError: for a mode not in :data:`LAUNCH_MODES`.
     """
@@ -352,6 +362,10 @@ def job_params(mode: str) -> Dict[str, Dict[str, str]]:
     out['replication_manager']['enabled'] = str(mode in ('mirrored', 'idle')).lower()
     if mode != 'idle':
         out['automation_manager']['mode'] = mode
+    if not lockstep:
+        out['pybullet_bridge']['lockstep_window'] = '0.0'
+        for planner in (n.name for n in NODES if n.component == _n('planner:Planner')):
+            out[planner]['send_margin'] = repr(REALTIME_SEND_MARGIN)
     return out
 
 

@@ -20,6 +20,8 @@ from scara_collab.core.planning import plan_path
 from scara_collab.core.trajectory import joint_move
 
 LEAD = 0.05
+#: s, the least time between sending a move and its start
+MARGIN = 0.02
 #: s between the physics steps
 DT = 0.001
 #: tool positions: each arm well out on its side, and reaching over the belt's centre line
@@ -44,7 +46,7 @@ def _settings(cell, **overrides) -> PlannerSettings:
     cfg = load_config('controllers')
     return replace(PlannerSettings('line_or_joint', LEAD, 30.0, 60.0,
                                    cell.safety_margin + float(cfg['planning_buffer']),
-                                   cfg['trajectory']), **overrides)
+                                   cfg['trajectory'], MARGIN), **overrides)
 
 
 def _pose(arm, xyz):
@@ -125,13 +127,24 @@ def test_a_target_is_planned_from_the_arm_and_sent_with_its_status(cell, clock, 
     assert leader.committed.plan == move.plan
 
 
-def test_a_requested_start_is_kept_and_a_past_one_starts_after_the_lead(cell, clock, leader):
-    """A stamp later than the lead is the start; an earlier one starts the lead after now."""
+def test_a_requested_start_is_kept_and_a_past_one_starts_after_the_send_margin(
+        cell, clock, leader):
+    """A stamp at least the send margin ahead is the start, a nearer one that margin later.
+
+    Planning took the time the lead was for; the measured start lateness comes on top.
+    """
     later = _sent(_target(leader, [3.0, -1.0, 0.3], stamp=12.5))
     assert later.request == _ns(12.5) and later.plan.start == 12.5
     clock.t = 20.0
-    soon = _sent(_target(leader, [2.8, -1.2, 0.4], stamp=20.01))
-    assert soon.plan.start == pytest.approx(20.0 + LEAD)
+    kept = _sent(_target(leader, [2.8, -1.2, 0.4], stamp=20.03))
+    assert kept.plan.start == pytest.approx(20.03)
+    clock.t = 30.0
+    soon = _sent(_target(leader, [3.0, -1.0, 0.3], stamp=29.99))
+    assert soon.plan.start == pytest.approx(30.0 + MARGIN)
+    leader.on_own_execution('accepted', soon.request, 30.1, stamped=True, late=0.08)
+    clock.t = 40.0
+    late = _sent(_target(leader, [2.8, -1.2, 0.4], stamp=40.01))
+    assert late.plan.start == pytest.approx(40.0 + MARGIN + 0.08)
 
 
 def test_a_line_the_arm_cannot_follow_becomes_a_joint_move_or_is_refused(cell, clock):
@@ -268,7 +281,7 @@ def test_a_target_during_a_move_is_queued_then_planned_when_it_ends(cell, clock,
     out = leader.on_joint_state(q_end, other, first.plan.end)
     move = _sent(out)
     assert move.request == st.request and _status(out).state == 'planned'
-    assert move.plan.start == pytest.approx(clock.t + LEAD)
+    assert move.plan.start == pytest.approx(clock.t + MARGIN)  # its stamp has passed
     assert_allclose(move.plan.traj.q[0], q_end)
 
 

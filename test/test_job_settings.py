@@ -19,7 +19,8 @@ def test_settings_come_from_the_config_with_the_mode_overridden(cell):
 def test_a_lifted_item_clears_the_items_on_the_belt_by_the_carry_clearance(cell):
     """``carry_z``: the pick height plus the item and the clearance; no lift: the pick height."""
     cfg = load_config('automation')
-    s = JobSettings.from_config(cell, dict(cfg, lift_after_grasp=True), planning_buffer=0.05)
+    controllers = dict(load_config('controllers'), planning_buffer=0.05)
+    s = JobSettings.from_config(cell, dict(cfg, lift_after_grasp=True), controllers=controllers)
     assert s.pick_z == pytest.approx(pick_height(cell, cfg['pick_clearance']))
     assert s.carry_z - s.pick_z == pytest.approx(cell.item_size + cfg['carry_clearance'])
     assert s.pair_margin == pytest.approx(cell.safety_margin + 0.05)

@@ -119,5 +119,8 @@ def test_lockstep_false_runs_the_bridge_without_a_window(monkeypatch):
     assert 'lockstep_window' not in bridge('true')
     assert bridge('false')['lockstep_window'] == 0.0
     assert bridge('False')['lockstep_window'] == 0.0
+    planner = next(n for n in opaque.kwargs['function'](dict(module.ARGUMENTS, lockstep='false'))
+                   if n.kwargs['name'] == 'left_planner').kwargs['parameters'][-1]
+    assert planner['send_margin'] == graph.REALTIME_SEND_MARGIN
     with pytest.raises(ValueError, match='lockstep must be true or false'):
         bridge('off')

@@ -33,7 +33,7 @@ def _planner(context, namespace='', **overrides):
 @pytest.mark.parametrize('overrides, message', [
     ({'mode': 'diagonal'}, "mode must be one of ('line', 'joint', 'line_or_joint'), got "
                            "'diagonal'"),
-    ({'planning_lead': '0.0'}, 'planning_lead must be a number > 0, got 0.0'),
+    ({'send_margin': '0.0'}, 'send_margin must be a number > 0, got 0.0'),
     ({'max_delay': '-1.0'}, 'max_delay must be a number > 0, got -1.0'),
     ({'max_wait': 'long'}, "max_wait must be a number > 0, got 'long'"),
     ({'robot': 'scara_middle'}, "robot must be one of ['scara_left', 'scara_right'], got "
@@ -51,7 +51,8 @@ def test_the_defaults_and_valid_overrides_are_taken(context):
     node = _planner(context, mode='joint', max_wait='5')
     settings = node.planner.settings
     assert node.arm.name == 'scara_left' and node.leader and settings.mode == 'joint'
-    assert (settings.planning_lead, settings.max_delay, settings.max_wait) == (0.05, 30.0, 5.0)
+    assert (settings.planning_lead, settings.send_margin, settings.max_delay,
+            settings.max_wait) == (0.05, 0.05, 30.0, 5.0)  # a lockstep's send margin
     assert settings.margin == pytest.approx(node.cell.safety_margin + 0.03)
     node.destroy_node()
 
@@ -70,8 +71,8 @@ def test_own_parameters_change_at_run_time_only_to_valid_values(context):
     assert node.get_parameter('max_delay').value == 5.0
     bad = node.set_parameters([Parameter('mode', value='diagonal')])[0]
     assert not bad.successful and node.planner.settings.mode == 'line'
-    assert node.set_parameters([Parameter('planning_lead', value=1)])[0].successful
-    assert node.planner.settings.planning_lead == 1.0
+    assert node.set_parameters([Parameter('send_margin', value=1)])[0].successful
+    assert node.planner.settings.send_margin == 1.0
     for name, value in (('robot', 'scara_right'), ('profile', 'slim')):
         assert not node.set_parameters([Parameter(name, value=value)])[0].successful
     assert node.arm.name == 'scara_left'

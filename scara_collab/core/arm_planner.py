@@ -14,8 +14,10 @@ is sent again (:class:`Answers`).
 **Planning.** The move is planned from the arm's measured joints (a straight line, a joint
 move, or either, setting ``mode``); an offered plan that starts where the arm is (within
 ``offer_tolerance``) is taken as is when the mode is ``line_or_joint`` (the job's). It starts
-at the requested time, but at least ``planning_lead`` plus the worst lateness the bridge
-measured on this arm's recent starts after now, and is scheduled against the other arm's
+at the requested time if it can still be sent ``send_margin`` ahead of it (a move asked for
+now, stamped 0: ``planning_lead`` after its receipt), else ``send_margin`` after it is sent;
+both margins grow by the worst lateness the bridge measured on this arm's recent starts. It
+is scheduled against the other arm's
 committed motion (:class:`scara_collab.core.motion.Heard`, kept from the other arm's
 trajectories and the bridge's statuses of them) by the priority rule of
 :mod:`scara_collab.core.planning`, applied here, once.
@@ -66,14 +68,17 @@ class PlannerSettings:
     """How an arm's planner plans and schedules (its parameters and the cell's margin).
 
     :ivar mode: one of :data:`scara_collab.core.planning.MODES`.
-    :ivar planning_lead: s, the least time between planning a move and its start (the worst
-        start lateness measured lately is added).
+    :ivar planning_lead: s, the least time between the receipt of a move asked for now
+        (stamped 0) and its start (the worst start lateness measured lately is added).
     :ivar max_delay: s, the most a move is delayed for the other arm's committed motion.
     :ivar max_wait: s, how long a move blocked by the other arm waits before it is refused.
     :ivar margin: m between the arms' capsules that a move keeps (the cell's safety margin
         plus the planning buffer).
     :ivar trajectory: ``controllers.yaml`` ``trajectory`` (sample period, DLS,
         ``offer_tolerance``).
+    :ivar send_margin: s, the least time between sending a move and its start (the worst
+        start lateness measured lately is added): a move asked for a start that planning
+        has already eaten into starts this much after it is sent.
     """
 
     mode: str
@@ -82,12 +87,13 @@ class PlannerSettings:
     max_wait: float
     margin: float
     trajectory: dict
+    send_margin: float
 
     def __post_init__(self):
         """Refuse a mode not in :data:`~scara_collab.core.planning.MODES` or a time <= 0."""
         if self.mode not in MODES:
             raise ValueError(f'mode must be one of {MODES}, got {self.mode!r}')
-        for key in ('planning_lead', 'max_delay', 'max_wait'):
+        for key in ('planning_lead', 'max_delay', 'max_wait', 'send_margin'):
             if not float(getattr(self, key)) > 0.0:
                 raise ValueError(f'{key} must be > 0, got {getattr(self, key)!r}')
 
@@ -360,9 +366,11 @@ class ArmPlanner:
         :param wanted: when it was first wanted (a retried move); None: its start now.
         """
         s = self.settings
-        lead = s.planning_lead + self.start_lateness.worst  # the bridge's starts, measured
+        late = self.start_lateness.worst  # how late the bridge's starts came, measured
         now = self.clock()
-        start = max(asked.wanted, now + lead) if asked.wanted > 0 else now + lead
+        # a start asked for is kept if the move can still reach the bridge in time; one asked
+        # for now gets the planning lead from its receipt
+        start = asked.wanted if asked.wanted > 0 else now + s.planning_lead + late
         wanted = start if wanted is None else wanted
         if (asked.offer is not None and s.mode == 'line_or_joint'
                 and starts_at(asked.offer, self.joints, s.trajectory['offer_tolerance'])):
@@ -375,7 +383,7 @@ class ArmPlanner:
                 self._report('refused', asked.request, str(exc))
                 return
         now = self.clock()
-        start = max(start, now + lead)  # planning took (sim) time too
+        start = max(start, now + s.send_margin + late)  # planning took (sim) time too
         # from now on (the past is past); the leader leaves out a follower move that waits to
         # start at or after its own start (the priority rule: that one yields)
         other = self.other_motion.motion(now, self.other_joints,

@@ -131,6 +131,7 @@ SCHEMAS = {
         *[Rule(f'computed_torque.{g}.{k}', 'positive')
           for g in ('planar', 'quill') for k in ('kp', 'kd')],
         Rule('planning_buffer', 'nonneg'),
+        Rule('planning_lead', 'positive'),
         Rule('admission_allowance', 'number'),
         Rule('trajectory.sample_period', 'positive', lambda v: v <= 0.1, 'must be <= 0.1 s'),
         Rule('trajectory.dls_threshold', 'positive'),

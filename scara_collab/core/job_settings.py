@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 from scara_collab.core import sorting
+from scara_collab.core.config import load_config
 from scara_collab.core.model import CellModel
 
 MODES = ('single', 'collaborative', 'mirrored')
@@ -36,16 +37,20 @@ class JobSettings:
     unblock_after: float = 0.5
     bin_retries: int = 3
     steal_cycle: float = 0.0
+    move_lead: float = 0.05
 
     @staticmethod
     def from_config(cell: CellModel, cfg: dict, mode: Optional[str] = None,
-                    planning_buffer: float = 0.03) -> 'JobSettings':
+                    controllers: Optional[dict] = None) -> 'JobSettings':
         """Build the settings from the ``automation`` config tree (``mode`` overrides).
 
-        :param planning_buffer: ``controllers.yaml`` ``planning_buffer``: mirrored pairs are
-            checked against the planners' margin (safety margin + this).
+        :param controllers: the ``controllers`` config tree (default ``controllers.yaml``), the
+            planners' settings: mirrored pairs are checked against the planners' margin
+            (safety margin + ``planning_buffer``), and a move asked for as soon as possible
+            is stamped ``planning_lead`` ahead (``move_lead``), as a planner would start it.
         :raises ValueError: a mode not in :data:`MODES`.
         """
+        controllers = load_config('controllers') if controllers is None else controllers
         mode = mode or cfg['mode']
         if mode not in MODES:
             raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
@@ -67,4 +72,5 @@ class JobSettings:
             pair_lead=float(cfg['mirror_start_lead']),
             unblock_after=float(cfg['unblock_after']),
             steal_cycle=float(cfg['steal_cycle']),
-            pair_margin=cell.safety_margin + float(planning_buffer))
+            pair_margin=cell.safety_margin + float(controllers['planning_buffer']),
+            move_lead=float(controllers['planning_lead']))

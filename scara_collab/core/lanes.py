@@ -361,10 +361,14 @@ class LaneProtocol:
     def soon(self, lane: Lane, now: float) -> float:
         """Return the start to ask for a move that should start as soon as possible.
 
-        One arm: now (its planner adds its own planning lead). A mirrored pair: ``pair_lead``
-        ahead, so both planners get a start that is still in the future and plan the same.
+        One arm: the planners' planning lead ahead (``move_lead``): the time the request, the
+        planning and the trajectory's way to the bridge may take. Asked for that start, a
+        planner keeps it while it can still send the move in time, so the time the job took
+        to decide counts into the lead instead of coming on top of it (real time; in lockstep
+        deciding takes no sim time). A mirrored pair: ``pair_lead`` ahead, so both planners
+        get a start that is still in the future and plan the same.
         """
-        return now + (self.settings.pair_lead if lane.mirrored else 1e-3)
+        return now + (self.settings.pair_lead if lane.mirrored else self.settings.move_lead)
 
     def _command(self, lane: Lane) -> MoveCommand:
         return MoveCommand(lane.robot, lane.target, lane.request, lane.mirrored, lane.phase,

@@ -74,8 +74,7 @@ class AutomationManager(Node):
                                   Rule('tick', 'positive')))
         self.cell = load_cell(params['profile'] or None)
         self.settings = JobSettings.from_config(self.cell, cfg['automation'],
-                                                planning_buffer=cfg['controllers']
-                                                ['planning_buffer'])
+                                                controllers=cfg['controllers'])
         self.mode = self.settings.mode
         options = path_options(cfg['controllers']['trajectory'])  # the planners' own
 

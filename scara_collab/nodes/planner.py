@@ -51,11 +51,15 @@ from scara_collab.nodes.qos import DEFAULT, EVENTS
 from scara_collab.nodes.runner import run_node
 
 #: the planner's own time parameters and their defaults, s: a move starts at least
-#: ``planning_lead`` after it is planned (plus the most the bridge started one of this
-#: planner's moves late among its last 20: the latency measured, not assumed), waits at most
-#: ``max_delay`` for the other arm's committed motion, and is refused after ``max_wait``
-#: blocked by its resting pose
-TIMES = {'planning_lead': 0.05, 'max_delay': 30.0, 'max_wait': 60.0}
+#: ``send_margin`` after it is sent (a move asked for now: ``controllers.yaml``
+#: ``planning_lead`` after its receipt; both plus the most the bridge started one of this
+#: planner's moves late among its last 20: the latency measured, not assumed); a move waits at
+#: most ``max_delay`` for the other arm's committed motion, and is refused after ``max_wait``
+#: blocked by its resting pose. In lockstep a trajectory is sent a few clock ticks ahead for
+#: the run to be repeatable (the default, the planning lead); in real time
+#: (``--lockstep off``) the launcher sets ``send_margin`` to
+#: :data:`scara_collab.graph.REALTIME_SEND_MARGIN`.
+TIMES = {'send_margin': 0.05, 'max_delay': 30.0, 'max_wait': 60.0}
 
 
 def _rules(robots: Sequence[str]) -> Tuple[Rule, ...]:
@@ -90,6 +94,7 @@ class Planner(Node):
         self.leader = self.arm is self.cell.leader
         self.trajectory_cfg = cfg['trajectory']
         self.margin = self.cell.safety_margin + float(cfg['planning_buffer'])
+        self.planning_lead = float(cfg['planning_lead'])
         self.planner = ArmPlanner(
             self.arm, self.other, self.leader, self._settings(params), self._now,
             dt=1.0 / float(load_config('simulation')['physics_rate']))
@@ -127,8 +132,9 @@ class Planner(Node):
         return conv.now(self)
 
     def _settings(self, params: dict) -> PlannerSettings:
-        return PlannerSettings(params['mode'], *(float(params[k]) for k in TIMES),
-                               margin=self.margin, trajectory=self.trajectory_cfg)
+        return PlannerSettings(params['mode'], planning_lead=self.planning_lead,
+                               margin=self.margin, trajectory=self.trajectory_cfg,
+                               **{k: float(params[k]) for k in TIMES})
 
     def _set_params(self, params: dict) -> None:
         """Take the values of the dynamic parameters (on a change)."""

@@ -34,7 +34,7 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
     """Return the graph for ``args``, in launch order (the nodes of :mod:`scara_collab.graph`)."""
     namespace = graph.namespace_of(getattr(args, 'namespace', None))
     common = {} if args.profile is None else {'profile': args.profile}
-    by_mode = graph.job_params(args.mode)
+    by_mode = graph.job_params(args.mode, getattr(args, 'lockstep', 'on') == 'on')
     port = getattr(args, 'viewer', None)
     specs = graph.job_nodes(automation=with_automation, viewer=port is not None,
                             transforms=bool(getattr(args, 'tf', False)))
@@ -55,8 +55,6 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
         bridge['gui'] = 'true'
     if args.seed is not None:
         bridge['item_seed'] = str(args.seed)
-    if getattr(args, 'lockstep', 'on') == 'off':  # real time: the clock waits for nobody
-        bridge['lockstep_window'] = '0.0'
     if port is not None:
         own['cell_viewer'] = {'port': str(port)}
     faults = getattr(args, 'fault', [])
