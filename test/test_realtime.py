@@ -1,5 +1,6 @@
 """The real-time benchmark's bookkeeping: its rows, its faults, its page (no launcher run)."""
 from scara_collab.bench import realtime
+from scara_collab.bench.launched import row
 from scara_collab.nodes.faults import parse_faults
 
 
@@ -18,11 +19,11 @@ def _summary(**over):
 
 def test_a_row_counts_the_stops_and_those_the_jobs_own_moves_caused():
     """Stops are counted by kind; the predicted ones are the job's own moves'."""
-    r = realtime.realtime_row(_summary())
+    r = row(_summary())
     assert (r['protective'], r['emergency'], r['own_moves']) == (2, 0, 1)
     assert r['lost_s'] == 1.1 and r['give_ups'] == 1
     assert 'no valid joint state' in r['causes']
-    bare = realtime.realtime_row(_summary(protective_stops=None, emergency_stops=3))
+    bare = row(_summary(protective_stops=None, emergency_stops=3))
     assert (bare['protective'], bare['emergency'], bare['own_moves']) == (0, 0, 0)
 
 
@@ -44,7 +45,7 @@ def test_every_condition_is_a_launcher_setting_that_parses():
 
 def test_the_page_has_a_row_per_run_and_the_capacity_ratio():
     """The Markdown page: one table row per run, the causes, the capacity line."""
-    rows = [dict(realtime.realtime_row(_summary()), condition=c, seed=1)
+    rows = [dict(row(_summary()), condition=c, seed=1)
             for c in ('lockstep', 'quiet')]
     cap = {'feed_interval': 0.9, 'duration': 240.0, 'seeds': [1],
            'lockstep_items_per_minute': 41.0, 'realtime_items_per_minute': 40.0,

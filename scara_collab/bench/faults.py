@@ -6,15 +6,10 @@ for the run to end and judges it from the run's own files (``summary.json``, the
 """
 from contextlib import suppress
 from dataclasses import dataclass
-import json
 import os
 from pathlib import Path
-import queue
-import re
 import signal
-import subprocess
 import tempfile
-import threading
 import time
 from typing import Callable, Dict, List, Optional, Tuple
 
@@ -24,9 +19,8 @@ import numpy as np
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from scara_collab.bench.job import launcher_cmd
+from scara_collab.bench.launched import Launch, stamp, stops, Summary, use_domain
 from scara_collab.bench.probe import Probe
-from scara_collab.bench.protocol import stops, use_domain
 from scara_collab.bench.report import write_block
 from scara_collab.bench.util import Log, table
 from scara_collab.core.kinematics import fk, ik
@@ -34,56 +28,9 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.trajectory import joint_move
 from scara_collab.nodes import conversions as conv
 
-Summary = Dict[str, object]
 #: the readers of joint_states in a collaborative run: both planners, the collision monitor,
 #: the automation manager and the launcher's recorder
 STATE_READERS = 5
-
-
-class Run:
-    """The launcher as a subprocess at real time, its output lines collected in a thread."""
-
-    def __init__(self, out: Path, duration: float, flags, mode: str):
-        """Start the launcher for ``duration`` sim seconds in this process's ROS domain."""
-        self.out, self.resume = out, None
-        cmd = launcher_cmd(mode, duration, out, 1.0, flags, quiet=False)
-        self.proc = subprocess.Popen(cmd, env=dict(os.environ, PYTHONUNBUFFERED='1'),
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        self.lines: List[str] = []
-        self._queue: 'queue.Queue[str]' = queue.Queue()
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        for line in self.proc.stdout:
-            self.lines.append(line.rstrip('\n'))
-            self._queue.put(line)
-
-    def wait_for(self, pattern: str, timeout: float = 180.0) -> bool:
-        """Return True once a line matches ``pattern`` (False on timeout or exit)."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            try:
-                if re.search(pattern, self._queue.get(timeout=0.2)):
-                    return True
-            except queue.Empty:
-                if self.proc.poll() is not None:
-                    return False
-        return False
-
-    def pid(self, node: str) -> int:
-        """Return the pid of a launched node."""
-        return int(json.loads((self.out / 'pids.json').read_text())[node])
-
-    def finish(self, timeout: float) -> None:
-        """Wait for the launcher to end (SIGINT, then SIGKILL, after ``timeout`` wall s)."""
-        for stop in (None, signal.SIGINT, signal.SIGKILL):
-            if stop is not None:
-                self.proc.send_signal(stop)
-            try:
-                self.proc.wait(timeout=timeout if stop is None else 60)
-                return
-            except subprocess.TimeoutExpired:
-                pass
 
 
 # --- injections -------------------------------------------------------------------------------
@@ -91,7 +38,7 @@ def _names() -> List[str]:
     return [n for arm in load_cell().arms for n in arm.joint_names]
 
 
-def nan_state_then_target(run: Run) -> None:
+def nan_state_then_target(run: Launch) -> None:
     """Publish a NaN joint state (on sim time) five times, then a target for the left arm."""
     with Probe() as probe:
         pub = probe.publisher(JointState, 'joint_states', STATE_READERS)
@@ -106,7 +53,7 @@ def nan_state_then_target(run: Run) -> None:
         probe.spin(1.0)
 
 
-def wall_clock_states(run: Run) -> None:
+def wall_clock_states(run: Launch) -> None:
     """Publish states stamped with wall time (1.79e9 s) for 3 s."""
     with Probe() as probe:
         pub = probe.publisher(JointState, 'joint_states', STATE_READERS)
@@ -115,7 +62,7 @@ def wall_clock_states(run: Run) -> None:
             probe.spin(0.05)
 
 
-def raw_crossing(run: Run) -> None:
+def raw_crossing(run: Launch) -> None:
     """Park the left arm over the belt, then send the right arm a raw move through it."""
     cell = load_cell()
     left, right = cell.leader, cell.follower
@@ -137,7 +84,7 @@ def raw_crossing(run: Run) -> None:
         probe.spin(2.0)
 
 
-def rogue_input(run: Run) -> None:
+def rogue_input(run: Launch) -> None:
     """Publish 200 bad targets in 2 s, a malformed trajectory and an oversized one."""
     joints = ['scara_left_joint_1', 'scara_left_joint_2', 'scara_left_gripper_joint']
     with Probe() as probe:
@@ -162,23 +109,19 @@ def rogue_input(run: Run) -> None:
             probe.spin(0.1)
 
 
-def sigstop_monitor(run: Run) -> None:
-    """Freeze the collision monitor (SIGSTOP) until the run ends; SIGCONT afterwards."""
-    run.resume = run.pid('collision_monitor')
-    os.kill(run.resume, signal.SIGSTOP)
+def sigstop_monitor(run: Launch) -> int:
+    """Freeze the collision monitor (SIGSTOP) until the run ends; return its pid to resume."""
+    pid = run.pid('collision_monitor')
+    os.kill(pid, signal.SIGSTOP)
+    return pid
 
 
-def sigkill_planner(run: Run) -> None:
+def sigkill_planner(run: Launch) -> None:
     """Kill the left planner (SIGKILL)."""
     os.kill(run.pid('left_planner'), signal.SIGKILL)
 
 
 # --- judges: (passed, what was observed) from the summary and the run folder ------------------
-def _log(out: Path, node: str) -> str:
-    path = out / 'logs' / f'{node}.log'
-    return path.read_text(errors='replace') if path.is_file() else ''
-
-
 def _died(s: Summary) -> List[str]:
     """Return the nodes that did not end with the run (died)."""
     return [n for n, v in (s.get('nodes') or {}).items() if v.get('exit_code') not in (0, None)]
@@ -188,7 +131,7 @@ def _sep(s: Summary) -> float:
     return float('nan') if s.get('min_separation_m') is None else float(s['min_separation_m'])
 
 
-def judge_nan(s: Summary, out: Path) -> Tuple[bool, str]:
+def judge_nan(s: Summary, run: Launch) -> Tuple[bool, str]:
     """Pass if a NaN state made a protective stop that ended by itself, exit 0, none died."""
     on_it = [st for st in stops(s, 'protective')
              if 'unusable joint state' in str(st.get('cause'))]
@@ -199,7 +142,7 @@ def judge_nan(s: Summary, out: Path) -> Tuple[bool, str]:
                 + f'), died: {_died(s) or "none"}')
 
 
-def judge_wall_clock(s: Summary, out: Path) -> Tuple[bool, str]:
+def judge_wall_clock(s: Summary, run: Launch) -> Tuple[bool, str]:
     """Pass if the run went its full length, states were refused and no e-stop was raised."""
     ok = s.get('exit_code') == 0 and s.get('exit_reason') == 'duration reached' \
         and (s.get('joint_states_refused') or 0) > 0 and not stops(s, 'emergency')
@@ -208,9 +151,9 @@ def judge_wall_clock(s: Summary, out: Path) -> Tuple[bool, str]:
                 f'{len(stops(s, "emergency"))} e-stops')
 
 
-def judge_crossing(s: Summary, out: Path) -> Tuple[bool, str]:
+def judge_crossing(s: Summary, run: Launch) -> Tuple[bool, str]:
     """Pass if the bridge refused the crossing at the door: exit 0, no stop, arms 0.1 m apart."""
-    refused = 'would bring scara_right within' in _log(out, 'pybullet_bridge')
+    refused = 'would bring scara_right within' in run.log('pybullet_bridge')
     n_stops = [len(stops(s, kind)) for kind in ('protective', 'emergency')]
     ok = s.get('exit_code') == 0 and refused and _sep(s) >= 0.1 and not any(n_stops)
     return ok, (f'exit {s.get("exit_code")}, refused at the door: {refused}, stops: '
@@ -218,22 +161,22 @@ def judge_crossing(s: Summary, out: Path) -> Tuple[bool, str]:
                 f'{_sep(s):.3f} m')
 
 
-def judge_rogue(s: Summary, out: Path) -> Tuple[bool, str]:
+def judge_rogue(s: Summary, run: Launch) -> Tuple[bool, str]:
     """Pass if the bridge refused both bad trajectories, no node died and the arms stayed apart."""
-    bridge = _log(out, 'pybullet_bridge')
+    bridge = run.log('pybullet_bridge')
     refused = 'do not match this arm' in bridge and '100001 points; at most' in bridge
     ok = s.get('exit_code') == 0 and not _died(s) and refused and _sep(s) >= 0.1
     return ok, (f'exit {s.get("exit_code")}, died: {_died(s) or "none"}, bridge refused the '
                 f'malformed and oversized trajectories: {refused}')
 
 
-def judge_lost(s: Summary, out: Path) -> Tuple[bool, str]:
+def judge_lost(s: Summary, run: Launch) -> Tuple[bool, str]:
     """Pass if the lost answers were retried: exit 0, items sorted and none missed."""
     ok = s.get('exit_code') == 0 and s.get('missed') == 0 and (s.get('sorted') or 0) > 0
     return ok, f'exit {s.get("exit_code")}, sorted {s.get("sorted")}, missed {s.get("missed")}'
 
 
-def judge_saturated(s: Summary, out: Path) -> Tuple[bool, str]:
+def judge_saturated(s: Summary, run: Launch) -> Tuple[bool, str]:
     """Pass if the overfed run kept the arms 0.1 m apart without an e-stop."""
     ok = s.get('exit_code') == 0 and _sep(s) >= 0.1 and not stops(s, 'emergency')
     return ok, (f'exit {s.get("exit_code")}, sorted {s.get("sorted")} ({s.get("missed")} '
@@ -241,15 +184,15 @@ def judge_saturated(s: Summary, out: Path) -> Tuple[bool, str]:
                 f'{len(stops(s, "emergency"))} e-stops')
 
 
-def judge_sigstop(s: Summary, out: Path) -> Tuple[bool, str]:
+def judge_sigstop(s: Summary, run: Launch) -> Tuple[bool, str]:
     """Pass if the run ended non-zero naming the frozen monitor while the bridge held."""
     reason = str(s.get('exit_reason') or '')
     ok = s.get('exit_code') not in (0, None) and 'collision_monitor' in reason \
-        and 'holding' in _log(out, 'pybullet_bridge')
+        and 'holding' in run.log('pybullet_bridge')
     return ok, f'exit {s.get("exit_code")}: {reason[:80]}'
 
 
-def judge_sigkill(s: Summary, out: Path) -> Tuple[bool, str]:
+def judge_sigkill(s: Summary, run: Launch) -> Tuple[bool, str]:
     """Pass if the run ended with exit 1 naming the killed left planner."""
     reason = str(s.get('exit_reason') or '')
     return s.get('exit_code') == 1 and 'left_planner' in reason, \
@@ -263,8 +206,8 @@ class Case:
     name: str
     expected: str
     duration: float
-    judge: Callable[[Summary, Path], Tuple[bool, str]]
-    inject: Optional[Callable[[Run], None]] = None
+    judge: Callable[[Summary, Launch], Tuple[bool, str]]
+    inject: Optional[Callable[[Launch], Optional[int]]] = None
     flags: Tuple[str, ...] = ()
     mode: str = 'collaborative'
 
@@ -292,27 +235,25 @@ CASES = (
 
 
 def run_case(case: Case, out: Path, domain: int, log: Log) -> Dict:
-    """Run one case in ROS domain ``domain``; return its row: case, expected, observed, pass."""
+    """Run one case in ROS domain ``domain``; return its row: case, expected, observed, pass.
+
+    An injection returns None, or the pid of a process it stopped: SIGCONT after the run.
+    """
     use_domain(domain)
-    run = Run(out, case.duration, case.flags, case.mode)
+    run, frozen = Launch(case.mode, case.duration, out, 1.0, case.flags, quiet=False), None
     try:
         if not run.wait_for(r'(job started|graph idle) at sim t='):
             passed, observed = False, 'the job did not start: ' + ' / '.join(run.lines[-3:])
         else:
             try:
-                if case.inject is not None:
-                    case.inject(run)
-                run.finish(case.duration * 3 + 120)
-                path = out / 'summary.json'
-                summary = json.loads(path.read_text()) if path.is_file() else {}
-                summary.setdefault('exit_code', run.proc.returncode)
-                passed, observed = case.judge(summary, out)
+                frozen = case.inject(run) if case.inject is not None else None
+                passed, observed = case.judge(run.finish(case.duration * 3 + 120), run)
             except Exception as exc:  # noqa: B902 - a failed injection is a failed case
                 passed, observed = False, f'the injection failed: {type(exc).__name__}: {exc}'
     finally:
-        if run.resume is not None:
+        if frozen is not None:
             with suppress(ProcessLookupError):  # unless the launcher has ended it
-                os.kill(run.resume, signal.SIGCONT)
+                os.kill(frozen, signal.SIGCONT)
         if run.proc.poll() is None:
             run.proc.kill()
             run.proc.wait()
@@ -333,11 +274,10 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     rows = [run_case(c, out / f'case_{k}', 50 + k, log) for k, c in enumerate(CASES, 1)
             if not args.cases or k in args.cases]
     passed = sum(r['pass'] == 'yes' for r in rows)
-    text = (f'*Generated by `{command}` on {time.strftime("%Y-%m-%d %H:%M %Z")} '
-            f'({(time.monotonic() - start) / 60:.1f} min wall): each case is one run of the '
-            'launcher (real time; the collaborative job unless the case says no job), the '
-            "fault injected once the job runs, judged from the run's `summary.json` and node "
-            f'logs. {passed} of {len(rows)} cases pass.*\n\n' + table(rows))
+    text = stamp(command, start, 'each case is one run of the launcher (real time; the '
+                 'collaborative job unless the case says no job), the fault injected once the '
+                 "job runs, judged from the run's `summary.json` and node logs. "
+                 f'{passed} of {len(rows)} cases pass.') + '\n\n' + table(rows)
     print(text)
     if not args.cases:
         write_block(page, 'faults', 'Faults against the launcher', text)

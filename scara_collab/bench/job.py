@@ -1,19 +1,13 @@
-"""The sorting job, measured: in one process (:func:`run_job`) or through the launcher.
+"""The sorting job, measured in one process (:func:`run_job`).
 
 :func:`run_job` builds the whole graph in ONE process on one executor, unthrottled: sim time
 cannot run ahead of the nodes while they compute, so the figures are the job's own, free of
 the latency separate processes add. The bridge's lockstep gate stays on: even in one process
 messages travel through DDS asynchronously, and without the gate a loaded machine lets the
-bridge step on before they arrive. :func:`run_launcher` runs ``scara_collab.run.launcher``
-(one process per node, as the demo does) and reads the run's ``summary.json``.
+bridge step on before they arrive. Through the launcher: :mod:`scara_collab.bench.launched`.
 """
-import json
-from pathlib import Path
-import signal
-import subprocess
-import sys
 import time
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Callable, Dict, Optional, Sequence
 
 from scara_collab import graph
 from scara_collab.bench.util import Log
@@ -85,48 +79,3 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
                 'real_time_factor': bridge.sim.time / took, 'feed_interval': feed, 'seed': seed}
     finally:
         g.close()
-
-
-def launcher_cmd(mode: str, duration: float, output: Path, rtf: float,
-                 extra: Sequence[str] = (), quiet: bool = True) -> List[str]:
-    """Return the command line of the launcher (no plots; ``--quiet`` if ``quiet``)."""
-    return [sys.executable, '-c', 'import sys; from scara_collab.run.launcher import main; '
-            'sys.exit(main(sys.argv[1:]))', '--mode', mode, '--duration', f'{duration:g}',
-            '--rtf', f'{rtf:g}', '--output', str(output), '--no-plots', *extra,
-            *(['--quiet'] if quiet else [])]
-
-
-def run_launcher(mode: str, duration: float, output: Path, rtf: float = 0.0,
-                 seed: Optional[int] = None, timeout: float = 600.0,
-                 extra: Sequence[str] = ()) -> Dict[str, object]:
-    """Run the launcher (one process per node); return its ``summary.json``.
-
-    :param output: the run folder (created by the launcher).
-    :param rtf: the bridge's real-time factor (0 = as fast as the machine allows).
-    :param timeout: wall seconds before the launcher is stopped (SIGINT, then SIGKILL).
-    :param extra: more launcher flags (e.g. ``--feed-interval 1.0``, ``--fault ...``).
-    :return: the summary plus ``exit_code`` and ``launcher_wall_seconds``; ``{'error': ...}``
-        if it did not produce one in time.
-    """
-    seeded = list(extra) + (['--seed', str(seed)] if seed is not None else [])
-    proc = subprocess.Popen(launcher_cmd(mode, duration, output, rtf, seeded),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    start = time.monotonic()
-    try:
-        stdout, stderr = proc.communicate(timeout=timeout)
-    except subprocess.TimeoutExpired:
-        proc.send_signal(signal.SIGINT)  # the launcher stops its nodes and writes its files
-        try:
-            proc.communicate(timeout=60.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate()
-        return {'error': f'the launcher did not finish within {timeout:.0f} s',
-                'exit_code': proc.returncode}
-    summary = Path(output) / 'summary.json'
-    if not summary.is_file():
-        tail = (stderr or stdout).strip().splitlines()[-5:]
-        return {'error': f'no summary.json (exit code {proc.returncode}): ' + ' / '.join(tail),
-                'exit_code': proc.returncode}
-    return dict(json.loads(summary.read_text()), exit_code=proc.returncode,
-                launcher_wall_seconds=time.monotonic() - start)

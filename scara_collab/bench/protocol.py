@@ -1,74 +1,16 @@
 """The job protocol under load, through the launcher (separate processes).
 
 A long collaborative run, mirrored runs over several seeds (the replication manager's in-step
-mirror error), and the demo repeated while CPU hogs compete. Each launcher run has its own
-ROS domain and run folder; every figure is read from the run's ``summary.json``.
+mirror error), and the demo repeated while CPU hogs compete; each run in its own ROS domain,
+its figures from its ``summary.json``.
 """
-from contextlib import contextmanager
-import os
 from pathlib import Path
-import subprocess
-import sys
 import tempfile
 import time
-from typing import Dict, Iterator, List
 
-from scara_collab.bench.job import run_launcher
+from scara_collab.bench.launched import cells, launch, stamp
 from scara_collab.bench.report import write_block
-from scara_collab.bench.util import Log, num, table
-
-HOG = 'import time\nend = time.monotonic() + {limit}\nwhile time.monotonic() < end: pass\n'
-
-
-@contextmanager
-def cpu_hogs(n: int, limit: float) -> Iterator[None]:
-    """Run ``n`` busy-looping processes (each ends by itself after ``limit`` s) meanwhile."""
-    hogs = [subprocess.Popen([sys.executable, '-c', HOG.format(limit=limit)]) for _ in range(n)]
-    try:
-        yield
-    finally:
-        for h in hogs:
-            h.kill()
-            h.wait()
-
-
-def use_domain(k: int) -> None:
-    """Put this process and the launchers it starts in ROS domain ``140 + k % 90``, this host."""
-    os.environ.update(ROS_DOMAIN_ID=str(140 + k % 90), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
-
-
-def stops(summary: Dict[str, object], kind: str) -> List[Dict[str, object]]:
-    """Return the ``kind`` (``'protective'``, ``'emergency'``) stops of a run's summary."""
-    value = summary.get(f'{kind}_stops')
-    return list(value) if isinstance(value, list) else []
-
-
-def row(summary: Dict[str, object]) -> Dict[str, object]:
-    """Return the figures of one launcher run, from its summary."""
-    job = summary.get('job') or {}
-    keys = ('exit_code', 'exit_reason', 'error', 'sorted', 'missed', 'dropped', 'wrong_bin',
-            'items_per_minute', 'min_separation_m', 'mirror_error_max_m', 'mirror_in_step_moves',
-            'mirror_not_in_step', 'real_time_factor', 'sim_seconds')
-    return {**{k: summary.get(k) for k in keys},
-            'emergency_stops': len(stops(summary, 'emergency')),
-            'protective_stops': len(stops(summary, 'protective')),
-            'give_ups': job.get('give_ups'), 'retries': job.get('retries'),
-            'last_give_up': job.get('last_give_up')}
-
-
-def _launch(log: Log, domain: int, what: str, *args, **kwargs) -> Dict[str, object]:
-    """Run the launcher in ``domain``; return and log its :func:`row`."""
-    use_domain(domain)
-    r = row(run_launcher(*args, **kwargs))
-    log(f'{what}: exit {r["exit_code"]}, sorted {r["sorted"]}, missed {r["missed"]}, dropped '
-        f'{r["dropped"]}, give-ups {r["give_ups"]}, min separation {r["min_separation_m"]}')
-    return r
-
-
-def _cells(r: dict, *keys: str) -> dict:
-    fmt = {'min_separation_m': lambda v: num(v, 3, 'm'), 'real_time_factor': lambda v: num(v, 3),
-           'mirror_error_max_m': lambda v: num(None if v is None else v * 1e3, 3, 'mm')}
-    return {k.replace('_', ' '): fmt.get(k, str)(r[k]) for k in keys}
+from scara_collab.bench.util import Log
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
@@ -86,34 +28,30 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     runs, hogs = args.runs or (2 if smoke else 5), args.hogs or 2
     out = Path(tempfile.mkdtemp(prefix='scara_job_protocol_'))
     t0 = time.monotonic()
-    long = _launch(log, 0, 'collaborative', 'collaborative', long_s, out / 'long',
-                   timeout=long_s * 3 + 300)
-    mirrored = [dict(_launch(log, 1 + k, f'mirrored seed {seed}', 'mirrored', mirrored_s,
-                             out / f'mirrored_{seed}', seed=seed, timeout=mirrored_s * 4 + 300),
-                     seed=seed) for k, seed in enumerate(seeds)]
-    with cpu_hogs(hogs, runs * (hog_s * 4 + 200)):
-        demo = [_launch(log, 10 + k, f'run {k + 1} with {hogs} hogs', 'collaborative', hog_s,
-                        out / f'hogs_{k + 1}', timeout=hog_s * 6 + 300) for k in range(runs)]
+    long = launch('collaborative', 0, 'collaborative', long_s, out / 'long', log)
+    mirrored = [dict(launch(f'mirrored seed {seed}', 1 + k, 'mirrored', mirrored_s,
+                            out / f'mirrored_{seed}', log, seed=seed), seed=seed)
+                for k, seed in enumerate(seeds)]
+    demo = [dict(launch(f'run {k} with {hogs} hogs', 9 + k, 'collaborative', hog_s,
+                        out / f'hogs_{k}', log, hogs=hogs, timeout=hog_s * 6 + 300), run=k)
+            for k in range(1, runs + 1)]
     done = [r['exit_code'] == 0 and (r['sorted'] or 0) > 0 and r['missed'] == 0 for r in demo]
     text = '\n\n'.join([
-        f'*Generated by `{command}` on {time.strftime("%Y-%m-%d %H:%M %Z")} '
-        f'({(time.monotonic() - t0) / 60:.1f} min wall); each row is one launcher run (separate '
-        'processes, unthrottled, lockstep on), its figures from its `summary.json`.*',
+        stamp(command, t0, 'each row is one launcher run (separate processes, unthrottled, '
+              'lockstep on), its figures from its `summary.json`.'),
         f'**Collaborative, default feed, {long_s:g} sim s through the launcher**',
-        table([_cells(long, 'sorted', 'missed', 'dropped', 'wrong_bin', 'give_ups', 'retries',
-                      'items_per_minute', 'min_separation_m', 'emergency_stops',
-                      'real_time_factor')])
+        cells([long], ('sorted', 'missed', 'dropped', 'wrong_bin', 'give_ups', 'retries',
+                       'items_per_minute', 'min_separation_m', 'emergency', 'real_time_factor'))
         + (f'\n\nLast give-up: {long["last_give_up"]}' if long['last_give_up'] else ''),
         f'**Mirrored, {mirrored_s:g} sim s per seed** (in-step error: the replication '
         "manager's, over pairs the bridge started at the same instant from mirrored poses)",
-        table([_cells(r, 'seed', 'sorted', 'missed', 'dropped', 'mirror_error_max_m',
-                      'mirror_in_step_moves', 'mirror_not_in_step', 'give_ups',
-                      'real_time_factor') for r in mirrored]),
+        cells(mirrored, ('seed', 'sorted', 'missed', 'dropped', 'mirror_error_max_m',
+                         'mirror_in_step_moves', 'mirror_not_in_step', 'give_ups',
+                         'real_time_factor')),
         f'**The demo ({hog_s:g} sim s) with {hogs} CPU hogs: {sum(done)} of {len(demo)} runs '
         'completed** (exit 0, items sorted, none missed)',
-        table([dict(run=k, **_cells(r, 'exit_code', 'sorted', 'missed', 'dropped', 'give_ups',
-                                    'retries', 'min_separation_m', 'real_time_factor'))
-               for k, r in enumerate(demo, 1)])])
+        cells(demo, ('run', 'exit_code', 'sorted', 'missed', 'dropped', 'give_ups', 'retries',
+                     'min_separation_m', 'real_time_factor'))])
     print(text)
     if not smoke:
         write_block(page, 'job-protocol', 'The job protocol through the launcher', text)

@@ -22,8 +22,7 @@ import tempfile
 from typing import Dict, Optional, Sequence
 
 from scara_collab import graph
-from scara_collab.bench.job import run_launcher
-from scara_collab.bench.protocol import cpu_hogs, row, stops, use_domain
+from scara_collab.bench.launched import launch
 from scara_collab.bench.util import Log
 
 #: 20 +- 10 ms on the joint states and on every status the job's timing hangs on
@@ -40,46 +39,25 @@ CONDITIONS = {
 }
 
 
-def realtime_row(summary: Dict[str, object]) -> Dict[str, object]:
-    """Return one run's figures (:func:`scara_collab.bench.protocol.row`) and its stops."""
-    out = row(summary)
-    protective, emergency = stops(summary, 'protective'), stops(summary, 'emergency')
-    out.update(
-        protective=len(protective), emergency=len(emergency),
-        own_moves=sum('predicted' in str(s.get('cause', '')) for s in protective + emergency),
-        lost_s=round(sum(float(s.get('lost') or 0.0) for s in protective + emergency), 3),
-        causes='; '.join(sorted({str(s.get('cause', ''))[:60] for s in protective
-                                 + emergency})))
-    return out
-
-
-def run(condition: str, out: Path, duration: float, seed: int, feed: Optional[float] = None,
-        log: Optional[Log] = None) -> Dict[str, object]:
+def run(condition: str, out: Path, duration: float, seed: int, log: Log,
+        feed: Optional[float] = None) -> Dict[str, object]:
     """Run the collaborative job in one of :data:`CONDITIONS`; return its row."""
     lockstep, hogs, faults = CONDITIONS[condition]
-    extra = ['--lockstep', 'on' if lockstep else 'off']
+    flags = ['--lockstep', 'on' if lockstep else 'off']
     for f in faults:
-        extra += ['--fault', f]
+        flags += ['--fault', f]
     if feed is not None:
-        extra += ['--feed-interval', f'{feed:g}']
-    use_domain(seed * 7 + len(condition))
-    with cpu_hogs(hogs, duration * 3 + 300):
-        r = realtime_row(run_launcher('collaborative', duration, out / f'{condition}_{seed}',
-                                      rtf=1.0, seed=seed, timeout=duration * 3 + 300,
-                                      extra=extra))
-    r.update(condition=condition, seed=seed)
-    if log:
-        log(f'{condition} seed {seed}: exit {r["exit_code"]}, sorted {r["sorted"]}, missed '
-            f'{r["missed"]}, dropped {r["dropped"]}, min sep {r["min_separation_m"]}, '
-            f'stops {r["protective"]} protective / {r["emergency"]} emergency '
-            f'({r["own_moves"]} by the job\'s own moves)')
-    return r
+        flags += ['--feed-interval', f'{feed:g}']
+    r = launch(f'{condition} seed {seed}', seed * 7 + len(condition), 'collaborative',
+               duration, out / f'{condition}_{seed}', log, hogs=hogs, rtf=1.0, seed=seed,
+               extra=flags)
+    return dict(r, condition=condition, seed=seed)
 
 
-def capacity(out: Path, seeds: Sequence[int], duration: float, feed: float = 0.9,
-             log: Optional[Log] = None) -> Dict[str, object]:
+def capacity(out: Path, seeds: Sequence[int], duration: float, log: Log,
+             feed: float = 0.9) -> Dict[str, object]:
     """Items per minute at a saturating feed, lockstep on and off (quiet); and their ratio."""
-    rows = {c: [run(c, out / 'capacity', duration, s, feed=feed, log=log) for s in seeds]
+    rows = {c: [run(c, out / 'capacity', duration, s, log, feed=feed) for s in seeds]
             for c in ('lockstep', 'quiet')}
     mean = {c: sum(float(r['items_per_minute'] or 0.0) for r in rs) / len(rs)
             for c, rs in rows.items()}
@@ -140,10 +118,10 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     seeds = args.seeds or [1, 2, 3]
     runs = Path(tempfile.mkdtemp(prefix='scara_realtime_'))
     log(f'run folders in {runs}')
-    rows = [run(c, runs, duration, s, log=log) for s in seeds
+    rows = [run(c, runs, duration, s, log) for s in seeds
             for c in args.conditions or list(CONDITIONS)]
     cap_s = 240.0 if args.capacity_duration is None else args.capacity_duration
-    cap = capacity(runs, seeds, cap_s, log=log) if cap_s > 0 else None
+    cap = capacity(runs, seeds, cap_s, log) if cap_s > 0 else None
     text = markdown(rows, cap, command, duration)
     print(text)
     page.write_text(text, encoding='utf-8')

@@ -1,8 +1,8 @@
 """Section 7, throughput and real-time factor: the sorting job's capacity, and what bounds it.
 
 The job in one process (:func:`scara_collab.bench.job.run_job`) over seeds and modes, and
-through the launcher (:func:`scara_collab.bench.job.run_launcher`); the cycle bound and the
-line timing against TOPP-RA (:mod:`scara_collab.bench.capacity`); the simulator's own speed.
+through the launcher (:mod:`scara_collab.bench.launched`); the cycle bound and the line timing
+against TOPP-RA (:mod:`scara_collab.bench.capacity`); the simulator's own speed.
 """
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,6 +13,7 @@ import numpy as np
 
 from scara_collab.bench import capacity, job
 from scara_collab.bench.claims import CLAIMS
+from scara_collab.bench.launched import run_launcher
 from scara_collab.bench.payload import LINES
 from scara_collab.bench.util import (axes, finish, met, num, Progress, Rows, Section, spread,
                                      table)
@@ -96,7 +97,7 @@ def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
     for k in range(sizes.launcher_repeats if sizes.launcher_duration else 0):
         for name, flags in (('processes', ()), ('one_process', ('--one-process',))):
             progress.note(f'launcher, {name}, run {k + 1}: {sizes.launcher_duration:g} sim s')
-            launcher_runs.setdefault(name, []).append(job.run_launcher(
+            launcher_runs.setdefault(name, []).append(run_launcher(
                 'collaborative', sizes.launcher_duration, scratch / f'launcher_{name}_{k + 1}',
                 seed=first, extra=flags))
     progress.note('cycle bound, line timing against TOPP-RA, simulator alone')

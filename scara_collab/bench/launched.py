@@ -1,0 +1,190 @@
+"""The sections run through the launcher: the launcher as a subprocess, and a run's row.
+
+:class:`Launch` starts ``scara_collab.run.launcher`` (one process per node) and keeps its
+output lines; :func:`launch` runs it to the end in a ROS domain of its own, beside CPU hogs if
+asked, and returns its :func:`row`: the figures of its ``summary.json``. :func:`cells` and
+:func:`stamp` present rows as the launcher sections' blocks.
+"""
+from contextlib import contextmanager
+import json
+import os
+from pathlib import Path
+import queue
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from typing import Dict, Iterator, List, Optional, Sequence
+
+from scara_collab.bench.util import Log, num, table
+
+Summary = Dict[str, object]
+HOG = 'import time\nend = time.monotonic() + {limit}\nwhile time.monotonic() < end: pass\n'
+
+
+@contextmanager
+def cpu_hogs(n: int, limit: float) -> Iterator[None]:
+    """Run ``n`` busy-looping processes (each ends by itself after ``limit`` s) meanwhile."""
+    hogs = [subprocess.Popen([sys.executable, '-c', HOG.format(limit=limit)]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for h in hogs:
+            h.kill()
+            h.wait()
+
+
+def use_domain(k: int) -> None:
+    """Put this process and the launchers it starts in ROS domain ``140 + k % 90``, this host."""
+    os.environ.update(ROS_DOMAIN_ID=str(140 + k % 90), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+
+
+def launcher_cmd(mode: str, duration: float, output: Path, rtf: float,
+                 extra: Sequence[str] = (), quiet: bool = True) -> List[str]:
+    """Return the command line of the launcher (no plots; ``--quiet`` if ``quiet``)."""
+    return [sys.executable, '-c', 'import sys; from scara_collab.run.launcher import main; '
+            'sys.exit(main(sys.argv[1:]))', '--mode', mode, '--duration', f'{duration:g}',
+            '--rtf', f'{rtf:g}', '--output', str(output), '--no-plots', *extra,
+            *(['--quiet'] if quiet else [])]
+
+
+class Launch:
+    """The launcher as a subprocess, its output lines collected in a thread."""
+
+    def __init__(self, mode: str, duration: float, out: Path, rtf: float = 0.0,
+                 flags: Sequence[str] = (), quiet: bool = True):
+        """Start the launcher for ``duration`` sim s into the run folder ``out``."""
+        self.out, self.start = Path(out), time.monotonic()
+        self.proc = subprocess.Popen(launcher_cmd(mode, duration, out, rtf, flags, quiet),
+                                     env=dict(os.environ, PYTHONUNBUFFERED='1'),
+                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        self.lines: List[str] = []
+        self._queue: 'queue.Queue[str]' = queue.Queue()
+        threading.Thread(target=self._read, daemon=True).start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            self.lines.append(line.rstrip('\n'))
+            self._queue.put(line)
+
+    def wait_for(self, pattern: str, timeout: float = 180.0) -> bool:
+        """Return True once a line matches ``pattern`` (False on timeout or exit)."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            try:
+                if re.search(pattern, self._queue.get(timeout=0.2)):
+                    return True
+            except queue.Empty:
+                if self.proc.poll() is not None:
+                    return False
+        return False
+
+    def pid(self, node: str) -> int:
+        """Return the pid of a launched node."""
+        return int(json.loads((self.out / 'pids.json').read_text())[node])
+
+    def log(self, node: str) -> str:
+        """Return a node's log of the run ('' if it has none)."""
+        path = self.out / 'logs' / f'{node}.log'
+        return path.read_text(errors='replace') if path.is_file() else ''
+
+    def finish(self, timeout: float) -> Summary:
+        """Wait for the end (SIGINT, then SIGKILL, after ``timeout`` wall s); return the summary.
+
+        :return: ``summary.json`` plus ``exit_code`` and ``launcher_wall_seconds``, and an
+            ``error`` if the run overran or wrote no summary.
+        """
+        error = None
+        for stop in (None, signal.SIGINT, signal.SIGKILL):
+            if stop is not None:  # SIGINT: the launcher stops its nodes and writes its files
+                self.proc.send_signal(stop)
+                error = f'the launcher did not finish within {timeout:.0f} s'
+            try:
+                self.proc.wait(timeout=timeout if stop is None else 60)
+                break
+            except subprocess.TimeoutExpired:
+                pass
+        path = self.out / 'summary.json'
+        summary = json.loads(path.read_text()) if path.is_file() else {}
+        if not summary and error is None:
+            error = f'no summary.json (exit code {self.proc.returncode}): ' + ' / '.join(
+                self.lines[-5:])
+        return dict(summary, exit_code=self.proc.returncode,
+                    launcher_wall_seconds=time.monotonic() - self.start,
+                    **({'error': error} if error else {}))
+
+
+def run_launcher(mode: str, duration: float, output: Path, rtf: float = 0.0,
+                 seed: Optional[int] = None, timeout: float = 600.0,
+                 extra: Sequence[str] = ()) -> Summary:
+    """Run the launcher to the end; return :meth:`Launch.finish`'s summary.
+
+    :param rtf: the bridge's real-time factor (0 = as fast as the machine allows).
+    :param extra: more launcher flags (e.g. ``--feed-interval 1.0``, ``--fault ...``).
+    """
+    flags = list(extra) + (['--seed', str(seed)] if seed is not None else [])
+    return Launch(mode, duration, output, rtf, flags).finish(timeout)
+
+
+def stops(summary: Summary, kind: str) -> List[Dict[str, object]]:
+    """Return the ``kind`` (``'protective'``, ``'emergency'``) stops of a run's summary."""
+    value = summary.get(f'{kind}_stops')
+    return list(value) if isinstance(value, list) else []
+
+
+KEYS = ('exit_code', 'exit_reason', 'error', 'sorted', 'missed', 'dropped', 'wrong_bin',
+        'items_per_minute', 'min_separation_m', 'mirror_error_max_m', 'mirror_in_step_moves',
+        'mirror_not_in_step', 'real_time_factor', 'sim_seconds')
+
+
+def row(summary: Summary) -> Dict[str, object]:
+    """Return one run's figures: :data:`KEYS`, the job's give-ups, and its stops.
+
+    ``own_moves``: stops caused by the job's own moves (``predicted`` in the cause);
+    ``lost_s``: sim s the stops cost; ``causes``: their causes, each cut to 60 characters.
+    """
+    job = summary.get('job') or {}
+    both = stops(summary, 'protective') + stops(summary, 'emergency')
+    return {**{k: summary.get(k) for k in KEYS},
+            'give_ups': job.get('give_ups'), 'retries': job.get('retries'),
+            'last_give_up': job.get('last_give_up'),
+            'protective': len(stops(summary, 'protective')),
+            'emergency': len(stops(summary, 'emergency')),
+            'own_moves': sum('predicted' in str(s.get('cause', '')) for s in both),
+            'lost_s': round(sum(float(s.get('lost') or 0.0) for s in both), 3),
+            'causes': '; '.join(sorted({str(s.get('cause', ''))[:60] for s in both}))}
+
+
+def launch(what: str, domain: int, mode: str, duration: float, out: Path, log: Log,
+           hogs: int = 0, **kwargs) -> Dict[str, object]:
+    """Run the launcher in ``domain`` (beside ``hogs`` CPU hogs); log and return its :func:`row`.
+
+    :param kwargs: :func:`run_launcher`'s; ``timeout`` defaults to 3 × duration + 300 s.
+    """
+    use_domain(domain)
+    kwargs.setdefault('timeout', duration * 3 + 300)
+    with cpu_hogs(hogs, kwargs['timeout']):
+        r = row(run_launcher(mode, duration, out, **kwargs))
+    log(f'{what}: exit {r["exit_code"]}, sorted {r["sorted"]}, missed {r["missed"]}, dropped '
+        f'{r["dropped"]}, give-ups {r["give_ups"]}, min separation {r["min_separation_m"]}, '
+        f'stops {r["protective"]} protective / {r["emergency"]} emergency '
+        f'({r["own_moves"]} by the job\'s own moves)')
+    return r
+
+
+FORMATS = {'min_separation_m': lambda v: num(v, 3, 'm'), 'real_time_factor': num,
+           'mirror_error_max_m': lambda v: num(None if v is None else v * 1e3, 3, 'mm')}
+
+
+def cells(rows: Sequence[Dict[str, object]], keys: Sequence[str]) -> str:
+    """Return a Markdown table of the rows' ``keys``, headed by the keys without underscores."""
+    return table([{k.replace('_', ' '): FORMATS.get(k, str)(r.get(k)) for k in keys}
+                  for r in rows])
+
+
+def stamp(command: str, start: float, what: str) -> str:
+    """Return a block's first line: the command, the date, the wall minutes since ``start``."""
+    return (f'*Generated by `{command}` on {time.strftime("%Y-%m-%d %H:%M %Z")} '
+            f'({(time.monotonic() - start) / 60:.1f} min wall): {what}*')
