@@ -37,7 +37,7 @@ def announced(node, msg_type, topic: str, timeout: float = 10.0) -> str:
 
 
 def test_the_built_types_announce_jazzys_type_hashes():
-    """TFMessage and FollowJointTrajectory's feedback carry Jazzy's hashes on the graph."""
+    """The graph announces Jazzy's hashes for TFMessage and FollowJointTrajectory feedback."""
     context = rclpy.Context()
     rclpy.init(context=context)
     node = rclpy.create_node('test_interfaces', context=context)

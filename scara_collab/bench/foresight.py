@@ -1,12 +1,11 @@
 """Section 6, collision foresight: conflicts of random crossing moves, found and resolved."""
-from dataclasses import dataclass
 from pathlib import Path
 import time
 
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import (axes, finish, fmt_seconds, met, num, Progress, Rows,
+from scara_collab.bench.util import (axes, finish, fmt_seconds, met, num, Rows,
                                      Section, spread, table)
 from scara_collab.core import collision
 from scara_collab.core.config import load_config
@@ -78,16 +77,8 @@ def _execute(sim: CellSim, cell: CellModel, moves) -> float:
     return float(collision.arm_distance(cell.leader, q[:, 0], cell.follower, q[:, 1]).min())
 
 
-@dataclass(frozen=True)
-class Sizes:
-    """How many crossing pairs are drawn, and how many of the conflicts run in physics."""
-
-    foresight_pairs: int = 200
-    foresight_execute: int = 30
-
-
-def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
-    """Draw, schedule and (the first conflicts) execute the crossing pairs (seed 1).
+def measure(smoke: bool, scratch: Path) -> dict:
+    """Draw, schedule and (the first conflicts) execute 200 crossing pairs (seed 1; smoke: 6).
 
     :return: ``{'pairs': [...], 'margin', 'lead', 'n_pairs'}``; per pair: ``conflict``,
         ``foresight_s`` and ``impact_s`` (when the margin would break and the capsules touch
@@ -103,7 +94,8 @@ def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
     rng = np.random.default_rng(1)
     pairs = []
     with CellSim(cell, dict(load_config('simulation'), feed_interval=0.0)) as sim:
-        while len(pairs) < sizes.foresight_pairs:
+        n_pairs, n_execute = (6, 2) if smoke else (200, 30)
+        while len(pairs) < n_pairs:
             traj_l, traj_r = random_pair(cell, rng, plan_margin + 0.02)
             t0 = time.perf_counter()
             plan_l = schedule(left, traj_l, lead, right, Timeline.hold(0.0, traj_r.q[0]),
@@ -127,12 +119,10 @@ def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
                     left, plan_l.start + traj_l.t, traj_l.q, right, plan_r.start + traj_r.t,
                     traj_r.q)[0]
                 done = sum(p['executed_min_m'] is not None for p in pairs)
-                if rec['conflict'] and done < sizes.foresight_execute:
+                if rec['conflict'] and done < n_execute:
                     rec['executed_min_m'] = _execute(sim, cell, [(traj_l, plan_l.start),
                                                                  (traj_r, plan_r.start)])
             pairs.append(rec)
-            if len(pairs) % max(1, sizes.foresight_pairs // 4) == 0:
-                progress.note(f'collision foresight: {len(pairs)}/{sizes.foresight_pairs} pairs')
     return {'pairs': pairs, 'margin': margin, 'lead': lead, 'n_pairs': len(pairs)}
 
 
@@ -241,5 +231,4 @@ SECTION = Section(
     'monitor (runtime stop below the margin) is the safety net behind this. Target: zero '
     'breaches.',
     measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='foresight and separation histograms', full=Sizes(),
-    smoke=Sizes(foresight_pairs=6, foresight_execute=2))
+    figure_alt='foresight and separation histograms')

@@ -5,7 +5,7 @@ import time
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import (axes, finish, fmt_seconds, met, mm, num, Progress, Rows,
+from scara_collab.bench.util import (axes, finish, fmt_seconds, met, mm, num, Rows,
                                      Section, table)
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
@@ -56,7 +56,7 @@ def execute(cell: CellModel, arm: ArmModel, traj: Trajectory, settle: float = 0.
     return out
 
 
-def measure(sizes: None, progress: Progress, scratch: Path) -> dict:
+def measure(smoke: bool, scratch: Path) -> dict:
     """Plan the move both ways (timed), execute each; ``{'planned'|'executed': {method: …}}``."""
     cell = load_cell()
     arm = cell.leader
@@ -70,7 +70,6 @@ def measure(sizes: None, progress: Progress, scratch: Path) -> dict:
         out['planned'][method] = dict(path_metrics(traj, START, GOAL).as_dict(), plan_time=took,
                                       t=traj.t, p=traj.p,
                                       deviation=segment_deviation(traj.p, START, GOAL))
-        progress.note(f'{method} planned in {fmt_seconds(took)}; executing')
         out['executed'][method] = execute(cell, arm, traj)
     return out
 

@@ -1,12 +1,10 @@
 """Section 3, payload response: PID with the seeds' gains vs computed torque, on a 1.5 m line."""
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Tuple
 
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS, PAYLOAD_CLAIMS
-from scara_collab.bench.util import axes, finish, mm, num, Progress, Rows, Section, table
+from scara_collab.bench.util import axes, finish, mm, num, Rows, Section, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import CellModel, load_cell
@@ -70,24 +68,18 @@ def tracking(cell: CellModel, mode: str, payload: float, settle: float) -> dict:
             't': times[::every] - t0, 'to_goal': to_goal[::every]}
 
 
-@dataclass(frozen=True)
-class Sizes:
-    """The payloads and how long the response is observed after the move."""
-
-    payloads: Tuple[float, ...] = (0.0, 1.0, 2.5)
-    settle: float = 2.0              # s observed after the move, computed torque
-    pid_settle: float = 10.0         # s observed after the move, PID
+PAYLOADS = (0.0, 1.0, 2.5)
+"""kg in the gripper."""
 
 
-def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
+def measure(smoke: bool, scratch: Path) -> dict:
     """Run :func:`tracking` for every payload with both controllers."""
     cell = load_cell()
     rows = []
-    for payload in sizes.payloads:
+    for payload in PAYLOADS:
         for mode in CONTROLLERS:
-            progress.note(f'payload {payload:g} kg, {mode}')
-            window = sizes.pid_settle if mode == 'pid' else sizes.settle
-            rows.append(tracking(cell, mode, payload, window))
+            window = 10.0 if mode == 'pid' else 2.0  # s observed after the move
+            rows.append(tracking(cell, mode, payload, window / 20 if smoke else window))
     return {'rows': rows}
 
 
@@ -147,5 +139,4 @@ SECTION = Section(
     'furthest tool travel past the goal along the line, % of the line. Peak effort: the '
     'largest commanded joint effort (N·m, N·m, N). The SPEC sets no target here.',
     measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='distance to the goal over time, per payload', full=Sizes(),
-    smoke=Sizes(settle=0.2, pid_settle=0.5))
+    figure_alt='distance to the goal over time, per payload')

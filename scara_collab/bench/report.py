@@ -6,7 +6,6 @@ figures and writes their blocks into the page. Every generated part lies between
 ``<!-- NAME:begin -->`` and ``<!-- NAME:end -->`` markers: a run replaces the blocks it
 measured and keeps everything else, hand-written text included.
 """
-from dataclasses import asdict
 from pathlib import Path
 import re
 import resource
@@ -143,9 +142,8 @@ def run(out: Path, smoke: bool, only: Sequence[str], progress: Progress,
     :return: ``{'meta': ..., <section key>: data or {'error': ...}, 'figures': ...}``.
     """
     (out / 'figures').mkdir(parents=True, exist_ok=True)
-    sizes = {s.key: asdict(s.sizes(smoke)) for s in SECTIONS if s.sizes(smoke) is not None}
     results: Dict[str, object] = {
-        'meta': {**machine(), 'smoke': smoke, 'sizes': sizes, 'command': command,
+        'meta': {**machine(), 'smoke': smoke, 'command': command,
                  'date': time.strftime('%Y-%m-%d %H:%M %Z'), 'sections_s': {}},
         'figures': {}}
     with tempfile.TemporaryDirectory(prefix='scara_bench_') as scratch:
@@ -155,8 +153,7 @@ def run(out: Path, smoke: bool, only: Sequence[str], progress: Progress,
                 continue
             try:
                 with progress.section(section.title):
-                    results[section.key] = section.measure(section.sizes(smoke), progress,
-                                                           Path(scratch))
+                    results[section.key] = section.measure(smoke, Path(scratch))
             except Exception as exc:  # noqa: B902 - one broken section must not hide the rest
                 results[section.key] = {'error': f'{type(exc).__name__}: {exc}',
                                         'traceback': traceback.format_exc()}

@@ -1,11 +1,10 @@
 """Section 5, singularity: the seeds' loop, pseudo-inverse and DLS, and the planner's line."""
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, met, mm, num, Progress, Rows, Section, table
+from scara_collab.bench.util import axes, finish, met, mm, num, Rows, Section, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import base_to_world, fk, ik, ik_both, IKError, manipulability
 from scara_collab.core.model import ArmModel, load_cell
@@ -51,23 +50,15 @@ def study(arm: ArmModel, a, b, damping: float, threshold: float, dt: float) -> d
             's': s, 'speed': speed}
 
 
-@dataclass(frozen=True)
-class Sizes:
-    """The time step of the differential-kinematics loop."""
-
-    singularity_dt: float = 0.001    # s
-
-
-def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
+def measure(smoke: bool, scratch: Path) -> dict:
     """Run every case with and without DLS, the planner's line and the two refusals."""
     arm = load_cell().leader
     cfg = load_config('controllers')['trajectory']
     threshold, damping = float(cfg['dls_threshold']), float(cfg['dls_max_damping'])
-    cases = []
+    cases, dt = [], 0.01 if smoke else 0.001  # s: the differential-kinematics step
     for name, (a, b) in CASES.items():
-        progress.note(name)
-        cases.append({'name': name, 'pinv': study(arm, a, b, 0.0, threshold, sizes.singularity_dt),
-                      'dls': study(arm, a, b, damping, threshold, sizes.singularity_dt)})
+        cases.append({'name': name, 'pinv': study(arm, a, b, 0.0, threshold, dt),
+                      'dls': study(arm, a, b, damping, threshold, dt)})
     a, b = (base_to_world(arm, np.array(p)) for p in PLANNER_LINE)
     line = line_move(arm, ik(arm, a).unwrap(), b, dls_threshold=threshold,
                      dls_max_damping=damping)
@@ -152,5 +143,4 @@ SECTION = Section(
     'they test the solver where the seeds put their claim, not a move the cell can make. The '
     'planner times its own line so that no joint exceeds the limit. Target: ≤ 2 rad/s.',
     measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='joint speed along the study paths', full=Sizes(),
-    smoke=Sizes(singularity_dt=0.01))
+    figure_alt='joint speed along the study paths')

@@ -4,7 +4,6 @@ IK against a textbook numpy IK, the Jacobian and dynamics against Pinocchio, cap
 against coal, and the one collision formula on one state pair against the same formula written
 with branches on plain floats.
 """
-from dataclasses import dataclass
 from functools import partial
 import math
 from pathlib import Path
@@ -14,7 +13,7 @@ from typing import Callable, List, Sequence
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import (axes, finish, fmt_seconds, met, per_call, Progress, Rows,
+from scara_collab.bench.util import (axes, finish, fmt_seconds, met, per_call, Rows,
                                      Section, table)
 from scara_collab.core import collision, dynamics, kinematics
 from scara_collab.core.model import expand_xacro, load_cell
@@ -124,21 +123,14 @@ def coal_distance(coal, query, caps_a: list, caps_b: list) -> float:
     return best
 
 
-@dataclass(frozen=True)
-class Sizes:
-    """How long the solvers are timed."""
-
-    quick_solvers: bool = False      # few iterations: rough figures
-
-
-def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
+def measure(smoke: bool, scratch: Path) -> dict:
     """Time the motion core and its references; return ``{'rows': [...]}``."""
     import coal
     import pinocchio as pin
 
-    scale = 0.02 if sizes.quick_solvers else 1.0
+    scale = 0.02 if smoke else 1.0
     n_vec, n_call = max(int(100_000 * scale), 1000), max(int(20_000 * scale), 200)
-    n_pair, repeat = max(n_vec // 20, 200), 3 if sizes.quick_solvers else 5
+    n_pair, repeat = max(n_vec // 20, 200), 3 if smoke else 5
     cell = load_cell()
     arm, right = cell.leader, cell.follower
     rng = np.random.default_rng(0)
@@ -146,7 +138,6 @@ def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
     qd, qdd = rng.uniform(-2, 2, (n_vec, 3)), rng.uniform(-4, 4, (n_vec, 3))
     p = kinematics.fk(arm, q)
 
-    progress.note('IK vs a textbook numpy IK')
     t_ik = per_call(lambda: kinematics.ik(arm, IK_TARGET), n_call, repeat)
     t_ikv = per_call(lambda: kinematics.ik(arm, p, q), 1, repeat)
     xy = kinematics.world_to_base(arm, p)[:, :2]
@@ -161,7 +152,6 @@ def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
                  note=f'with the reach, limit and elbow checks ({sol.ok.mean():.0%} of the '
                  f'random targets inside the reach window); FK round trip {ik_err:.1e} m')]
 
-    progress.note('Jacobian and dynamics vs Pinocchio')
     model = pin.buildModelFromXML(expand_xacro('scara_arm.urdf.xacro', robot=arm.name))
     data = model.createData()
     fid = model.getFrameId(f'{arm.name}_quill')
@@ -177,7 +167,6 @@ def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
                        'Pinocchio ABA', (q, qd, ours_id(q, qd, qdd)), n_call, repeat,
                        ' (rad/s^2, m/s^2)')
 
-    progress.note('capsule distance vs coal')
     query = coal.DistanceRequest(), coal.DistanceResult()
     a0, a1, b0, b1 = (rng.uniform(-1, 1, (n_vec, 3)) for _ in range(4))
     t_sd = per_call(lambda: collision.segment_distance(a0[0], a1[0], b0[0], b1[0]), n_call,
@@ -217,8 +206,6 @@ def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
     same = max(float(np.max(np.abs(branchy_pair_distances(arm, u, right, v)
                                    - collision.arm_pair_distances(arm, u, right, v))))
                for u, v in zip(ql, qr))
-    progress.note(f'one state pair: the one formula vs the branchy float formula, ratio '
-                  f'{best[1] / best[0]:.2f}; max diff {same:.1e} m')
     scale = max(n_call // 20, 50)
     rows.append(_row('capsule distances, one state pair (the one formula)', 'latency',
                      best[0] / scale, best[1] / scale, 'branchy plain-float formula',
@@ -283,4 +270,4 @@ SECTION = Section(
     'branches on plain floats. Targets: IK ≤ 5 µs for one target, ≥ 10⁶ targets/s at once. '
     'On a shared machine absolute figures are noisy, ratios less so.',
     measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='speed-up over the references', full=Sizes(), smoke=Sizes(quick_solvers=True))
+    figure_alt='speed-up over the references')

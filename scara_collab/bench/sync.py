@@ -1,5 +1,4 @@
 """Section 4, synchronisation: mirrored moves through the ROS graph (mirror error, start lag)."""
-from dataclasses import dataclass
 from pathlib import Path
 import time
 from typing import Dict, List
@@ -12,7 +11,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from scara_collab import graph
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, met, mm, num, Progress, Rows, Section, table
+from scara_collab.bench.util import axes, finish, met, mm, num, Rows, Section, table
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import load_cell
@@ -54,20 +53,13 @@ def mirrored_targets(n_moves: int, seed: int = 0) -> List[np.ndarray]:
     return targets[:n_moves + 1]
 
 
-@dataclass(frozen=True)
-class Sizes:
-    """How many mirrored moves go through the graph."""
-
-    mirrored_moves: int = 6
-
-
-def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
+def measure(smoke: bool, scratch: Path) -> dict:
     """Send the targets one after another to ``collab/target`` through a fresh graph.
 
     The first target only positions the arms. :return: ``{'moves': [per move dict],
     'physics_step_s', 'state_period_s'}``.
     """
-    targets = mirrored_targets(sizes.mirrored_moves)
+    targets = mirrored_targets(1 if smoke else 6)
     g = InProcess('single')
     own = {'pybullet_bridge': {'real_time_factor': 0.0, 'feed_interval': 0.0},
            'left_planner': {'mode': 'line'}, 'right_planner': {'mode': 'line'}}
@@ -114,8 +106,6 @@ def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
             end = max(conv.to_sec(m.header.stamp) + conv.to_sec(m.points[-1].time_from_start)
                       for m in trajs.values())
             spin_until(lambda: bridge.sim.time > end + SETTLE, 'the end of the move')
-            progress.note(f'mirrored move {i}/{len(targets) - 1} done at sim '
-                          f't={bridge.sim.time:.1f} s')
             if i > 0:
                 stamps = [conv.to_sec(trajs[r].header.stamp) for r in graph.ROBOTS]
                 moves.append(_metrics(bridge.cell, states, t_send, targets[i - 1], target,
@@ -211,4 +201,4 @@ SECTION = Section(
     '(first state 0.1 mm from rest; resolution one state period). Targets: mirror error ≤ 1 mm, '
     'lag ≤ one physics step.',
     measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='mirror error over the moves', full=Sizes(), smoke=Sizes(mirrored_moves=1))
+    figure_alt='mirror error over the moves')

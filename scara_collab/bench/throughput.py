@@ -15,7 +15,7 @@ from scara_collab.bench import capacity, job
 from scara_collab.bench.claims import CLAIMS
 from scara_collab.bench.launched import run_launcher
 from scara_collab.bench.payload import LINES
-from scara_collab.bench.util import (axes, finish, met, num, Progress, Rows, Section, spread,
+from scara_collab.bench.util import (axes, finish, met, num, Rows, Section, spread,
                                      table)
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik
@@ -49,6 +49,13 @@ class Sizes:
     speed_repeat: int = 3
 
 
+SMOKE = Sizes(job_seeds=(1,), job_modes=('collaborative',), job_duration=8.0, repeats=1,
+              rated_duration=0.0, launcher_duration=0.0, cycle_step=0.6, topp_lines=2,
+              speed_items=(0,), speed_modes=('computed_torque',), speed_seconds=0.5,
+              speed_repeat=1)
+"""The seconds-long smoke run's sizes."""
+
+
 def sim_speed(mode: str, n_items: int, seconds: float) -> float:
     """Return the simulator's real-time factor with both arms shuttling, ``n_items`` on the belt.
 
@@ -78,29 +85,23 @@ def sim_speed(mode: str, n_items: int, seconds: float) -> float:
         return steps * sim.dt / (time.perf_counter() - start)
 
 
-def measure(sizes: Sizes, progress: Progress, scratch: Path) -> dict:
+def measure(smoke: bool, scratch: Path) -> dict:
     """Run the capacity runs, the repeats, the rated feed, the launcher, the bounds, the speed."""
+    sizes = SMOKE if smoke else Sizes()
     feed, first = sizes.capacity_feed, sizes.job_seeds[0]
-
-    def run(mode, seed, duration, feed=None):
-        progress.note(f'{mode}, seed {seed}, an item every {feed or job.default_feed():g} s, '
-                      f'{duration:g} sim s')
-        return job.run_job(mode, duration, feed=feed, seed=seed, log=progress.note,
-                           report_every=60.0)
-    runs = [run(mode, seed, sizes.job_duration, feed)
+    runs = [job.run_job(mode, sizes.job_duration, feed=feed, seed=seed)
             for seed in sizes.job_seeds for mode in sizes.job_modes]
     repeats = [r for r in runs if r['mode'] == 'collaborative' and r['seed'] == first]
-    repeats += [run('collaborative', first, sizes.job_duration, feed)
+    repeats += [job.run_job('collaborative', sizes.job_duration, feed=feed, seed=first)
                 for _ in range(1, sizes.repeats)]
-    rated = run('collaborative', first, sizes.rated_duration) if sizes.rated_duration else None
+    rated = job.run_job('collaborative', sizes.rated_duration, seed=first) \
+        if sizes.rated_duration else None
     launcher_runs = {}
     for k in range(sizes.launcher_repeats if sizes.launcher_duration else 0):
         for name, flags in (('processes', ()), ('one_process', ('--one-process',))):
-            progress.note(f'launcher, {name}, run {k + 1}: {sizes.launcher_duration:g} sim s')
             launcher_runs.setdefault(name, []).append(run_launcher(
                 'collaborative', sizes.launcher_duration, scratch / f'launcher_{name}_{k + 1}',
                 seed=first, extra=flags))
-    progress.note('cycle bound, line timing against TOPP-RA, simulator alone')
     ratios = capacity.topp_ratios(sizes.topp_lines)
     speed = [{'items': n, 'mode': mode, 'seconds': sizes.speed_seconds,
               'rtf': float(np.median([sim_speed(mode, n, sizes.speed_seconds)
@@ -307,8 +308,4 @@ SECTION = Section(
     '≥ 30 items/min at the rated feed, none missed; line time ≤ 1.01 × TOPP-RA; ≥ 5× real '
     'time in one process, ≥ 3.5× as separate processes; the same run, the same result.',
     measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='items per minute per mode and seed', full=Sizes(),
-    smoke=Sizes(job_seeds=(1,), job_modes=('collaborative',), job_duration=8.0, repeats=1,
-                rated_duration=0.0, launcher_duration=0.0, cycle_step=0.6, topp_lines=2,
-                speed_items=(0,), speed_modes=('computed_torque',), speed_seconds=0.5,
-                speed_repeat=1))
+    figure_alt='items per minute per mode and seed')

@@ -1,4 +1,5 @@
 """What the benchmarks share: the machine, timing, progress lines, Markdown tables, figures."""
+from contextlib import contextmanager
 from dataclasses import dataclass
 import json
 import math
@@ -8,7 +9,7 @@ import platform
 import sys
 import time
 import timeit
-from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -36,7 +37,7 @@ def per_call(fn: Callable[[], object], number: int, repeat: int = 5) -> float:
 
 
 class Progress:
-    """Progress lines on stderr with the elapsed wall time: one per section, notes inside it."""
+    """Progress lines on stderr with the elapsed wall time: one per section."""
 
     def __init__(self):
         """Start the clock now."""
@@ -47,34 +48,23 @@ class Progress:
         """Wall seconds since this object was made."""
         return time.monotonic() - self.start
 
-    def line(self, text: str) -> None:
-        """Print ``text`` after the elapsed time."""
+    def note(self, text: str) -> None:
+        """Print one line after the elapsed time."""
         print(f'[{self.elapsed():7.1f} s] {text}', file=sys.stderr, flush=True)
 
-    def note(self, text: str) -> None:
-        """Print one indented line (progress inside a section)."""
-        self.line(f'   {text}')
-
-    def section(self, name: str) -> '_Section':
-        """Return a context manager that prints the section's start and its duration."""
-        return _Section(self, name)
-
-
-class _Section:
-    def __init__(self, progress: Progress, name: str):
-        self.progress, self.name = progress, name
-
-    def __enter__(self) -> Progress:
-        self.t0 = time.monotonic()
-        self.progress.line(f'{self.name} ...')
-        return self.progress
-
-    def __exit__(self, exc_type, exc, tb) -> bool:
-        took = time.monotonic() - self.t0
-        self.progress.sections[self.name] = took
-        status = 'done' if exc_type is None else f'FAILED ({exc_type.__name__}: {exc})'
-        self.progress.line(f'{self.name} {status} in {took:.1f} s')
-        return False
+    @contextmanager
+    def section(self, name: str) -> Iterator[None]:
+        """Print the section's start, then its duration or its failure."""
+        t0, status = time.monotonic(), 'done'
+        self.note(f'{name} ...')
+        try:
+            yield
+        except Exception as exc:
+            status = f'FAILED ({type(exc).__name__}: {exc})'
+            raise
+        finally:
+            self.sections[name] = time.monotonic() - t0
+            self.note(f'{name} {status} in {self.sections[name]:.1f} s')
 
 
 def fmt_seconds(seconds: Optional[float], digits: int = 3) -> str:
@@ -171,13 +161,12 @@ class Section:
     :ivar heading: the heading in ``RESULTS.md``, without its number.
     :ivar claims: the keys of the seeds' claims quoted at the top.
     :ivar text: the fixed paragraph: what is measured, how, the target.
-    :ivar measure: ``measure(sizes, progress, scratch) -> data`` (plain data, arrays allowed).
+    :ivar measure: ``measure(smoke, scratch) -> data`` (plain data, arrays allowed); ``smoke``:
+        seconds-long sizes; ``scratch``: a folder for run files.
     :ivar tables: ``tables(data) -> [Markdown]``: the tables, each maybe with a short label.
     :ivar summary: ``summary(data) -> rows`` of the summary table.
     :ivar figure: ``figure(data) -> matplotlib figure``.
     :ivar figure_alt: the figure's alternative text.
-    :ivar full: the sizes of the full run (a frozen dataclass; None: the section has none).
-    :ivar smoke: the sizes of the seconds-long smoke run.
     """
 
     key: str
@@ -185,17 +174,11 @@ class Section:
     heading: str
     claims: Tuple[str, ...]
     text: str
-    measure: Callable[[Any, Progress, Path], dict]
+    measure: Callable[[bool, Path], dict]
     tables: Callable[[dict], List[str]]
     summary: Callable[[dict], Rows]
     figure: Callable[[dict], Any]
     figure_alt: str
-    full: Optional[Any] = None
-    smoke: Optional[Any] = None
-
-    def sizes(self, smoke: bool = False) -> Optional[Any]:
-        """Return the sizes of the smoke run if ``smoke``, else of the full run."""
-        return self.smoke if smoke else self.full
 
 
 def usable(data) -> bool:
