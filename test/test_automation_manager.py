@@ -86,20 +86,33 @@ def test_the_job_survives_lost_and_late_answers():
 
 
 def test_the_node_logs_the_jobs_decisions_at_both_levels():
-    """The node logs at both levels: rclpy refuses a call site whose severity changes."""
-    import rclpy
+    """The job's decisions reach ``/rosout`` at their own level, info and warning in turn.
 
-    from scara_collab.nodes.automation_manager import AutomationManager
-    from scara_collab.graph import ros_args
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
+    rclpy refuses a call site whose severity changes, so the node logs each level from its
+    own call site.
+    """
+    from rcl_interfaces.msg import Log
+    from ros_harness import Graph
+
+    g = Graph()
     try:
-        node = AutomationManager(context=ctx, cli_args=ros_args(('automation', 'controllers')))
-        for level in ('info', 'warn', 'info', 'warn'):
-            node._log(level, f'a {level} decision')
-        node.destroy_node()
+        node = g.add_node_of('automation_manager')
+        logs = g.collect(Log, '/rosout', 100)
+        sub = list(g.probe.subscriptions)[-1]
+        assert g.spin_until(lambda: sub.get_publisher_count() >= 2)  # the node's and the probe's
+        levels = ('info', 'warn', 'info', 'warn')
+        for k, level in enumerate(levels):
+            node._log(level, f'decision {k}: {level}')
+
+        def decisions():
+            return [m for m in logs if m.name == 'automation_manager'
+                    and m.msg.startswith('decision ')]
+        assert g.spin_until(lambda: len(decisions()) == 4)
+        assert [(m.msg, m.level) for m in decisions()] == [
+            (f'decision {k}: {level}', {'info': Log.INFO, 'warn': Log.WARN}[level])
+            for k, level in enumerate(levels)]
     finally:
-        rclpy.try_shutdown(context=ctx)
+        g.close()
 
 
 def test_the_job_starts_only_once_every_endpoint_it_uses_is_matched():

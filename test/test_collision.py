@@ -9,6 +9,7 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
+from scara_collab.core import kinematics
 from scara_collab.core.collision import (arm_capsules, arm_distance, arm_pair_distances,
                                          capsule_distance, closest_points, first_safe_delay,
                                          segment_distance, smallest_safe_delay,
@@ -224,7 +225,6 @@ def test_arm_capsules_geometry_with_translated_and_rotated_base(arms):
 
 def test_arm_capsules_agree_with_kinematics(arms):
     """The capsule axes start at the kinematics' tool tip, shoulder and elbow."""
-    kinematics = pytest.importorskip('scara_collab.core.kinematics')
     rng = np.random.default_rng(5)
     for arm in arms:
         q = rng.uniform(arm.lower, arm.upper, (100, 3))

@@ -175,7 +175,7 @@ def test_a_mirrored_lane_moves_and_grips_both_arms_under_one_request(cell):
     """One request for both arms; arrived when both have; a grip per arm; asked a lead ahead."""
     proto, lane = protocol(cell, mirrored=True)
     lead, foll = cell.leader.name, cell.follower.name
-    assert lane.mirrored and proto.soon(lane, 1.0) == pytest.approx(
+    assert lane.mirrored and proto.asap_start(lane, 1.0) == pytest.approx(
         1.0 + proto.settings.pair_lead)
     cmd = proto.move(lane, 'to_park', target(cell), 0.1, 0.0)
     assert cmd.mirrored and set(lane.moves) == {lead, foll}

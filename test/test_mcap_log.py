@@ -1,7 +1,7 @@
 """MCAP recording of a run: schema texts, a short in-process run read back two ways, cut files.
 
 The run: the bridge (unthrottled, items fed) and the launcher's run recorder with a
-:class:`McapLog` attached, in one executor; the probe moves the left arm and publishes the
+:class:`McapRecorder` attached, in one executor; the probe moves the left arm and publishes the
 three target topics. The file is read back with mcap + mcap_ros2's decoder (the ``ros2msg``
 schemas stored in it) and by deserializing the raw bytes with rclpy against the real classes.
 """
@@ -32,7 +32,7 @@ from scara_collab.core.kinematics import fk
 from scara_collab.core.trajectory import joint_move
 from scara_collab.graph import message_class, topics
 from scara_collab.nodes import conversions as conv
-from scara_collab.nodes.mcap_recorder import McapLog
+from scara_collab.nodes.mcap_recorder import McapRecorder
 from scara_collab.nodes.pybullet_bridge import PyBulletBridge
 from scara_collab.nodes.recorder import RunRecorder
 from scara_collab.records.mcap_log import (
@@ -64,7 +64,7 @@ def record_run(directory: Path, cell, seconds: float = 3.0) -> dict:
     try:
         bridge = _bridge(g, feed_interval=0.4)
         rec = g.add(RunRecorder(directory, 'collaborative', cell=cell, context=g.context))
-        log = McapLog(rec, directory / 'run.mcap', robots=ROBOTS, urdf=cell.urdf)
+        log = McapRecorder(rec, directory / 'run.mcap', robots=ROBOTS, urdf=cell.urdf)
         rec.sinks.append(log)
         assert g.spin_until(lambda: rec.log.t_last is not None and rec.sim_time > 0.2, 30)
         rec.start_job()
@@ -334,7 +334,7 @@ def test_an_unclosed_recording_keeps_its_chunks_and_close_completes_it(tmp_path)
         _bridge(g)
         node = g.add(Node('recorder', context=g.context, parameter_overrides=[
             Parameter('use_sim_time', Parameter.Type.BOOL, True)]))
-        log = McapLog(node, path, robots=ROBOTS, chunk_size=16 * 1024)
+        log = McapRecorder(node, path, robots=ROBOTS, chunk_size=16 * 1024)
         assert g.spin_until(lambda: log.messages >= 600, timeout=30)
         log.flush()  # what a killed run leaves: the chunks so far, no summary, no footer
         reading = Reading()

@@ -78,6 +78,6 @@ def test_mirror_error_is_zero_for_mirrored_joints_and_the_offset_otherwise():
 def test_joint_mirroring_is_exact_only_for_arms_of_the_same_geometry():
     """The cell's arms mirror joint by joint; an arm with a longer link 2 does not."""
     from dataclasses import replace
-    from scara_collab.core.mirror import joints_mirror
-    assert joints_mirror(LEFT, RIGHT) and joints_mirror(RIGHT, LEFT)
-    assert not joints_mirror(LEFT, replace(RIGHT, l2=RIGHT.l2 + 0.1))
+    from scara_collab.core.mirror import is_joint_mirror
+    assert is_joint_mirror(LEFT, RIGHT) and is_joint_mirror(RIGHT, LEFT)
+    assert not is_joint_mirror(LEFT, replace(RIGHT, l2=RIGHT.l2 + 0.1))

@@ -329,8 +329,8 @@ class SortingJob:
     def _grip(self, lane: Lane, grasp: bool, now: float) -> None:
         self._out += self.protocol.grip(lane, grasp, now)
 
-    def _soon(self, lane: Lane, now: float) -> float:
-        return self.protocol.soon(lane, now)
+    def _asap_start(self, lane: Lane, now: float) -> float:
+        return self.protocol.asap_start(lane, now)
 
     # --- after a move -----------------------------------------------------------------------
     def _arrived(self, lane: Lane, now: float) -> None:
@@ -343,7 +343,7 @@ class SortingJob:
         elif lane.phase == 'via':
             if lane.route:  # the next leg of a detour
                 phase, target = lane.route.pop(0)
-                self._move(lane, phase, target, self._soon(lane, now), now)
+                self._move(lane, phase, target, self._asap_start(lane, now), now)
             elif lane.holding:
                 self._to_bin(lane, now)
             elif not self._chase(lane, self.items.get(lane.item.id, lane.item), now):
@@ -390,7 +390,7 @@ class SortingJob:
     def _to_bin(self, lane: Lane, now: float) -> None:
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls,
                                   self.settings.drop_clearance)
-        self._move_safely(lane, 'to_bin', drop, self._soon(lane, now), now)
+        self._move_safely(lane, 'to_bin', drop, self._asap_start(lane, now), now)
 
     def _move_safely(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
         """Ask for a move like :meth:`_move`; a mirrored pair may go round by a waypoint.
@@ -467,7 +467,7 @@ class SortingJob:
         elif s.carry_z > s.pick_z + 1e-6 and self._would_sweep(lane, now):
             up = np.array([lane.target[0], lane.target[1], s.carry_z])
             lane.bin_tries, lane.holding = 0, True
-            self._move(lane, 'lift', up, self._soon(lane, now), now)
+            self._move(lane, 'lift', up, self._asap_start(lane, now), now)
         else:
             lane.bin_tries, lane.holding = 0, True
             self._to_bin(lane, now)
@@ -490,7 +490,7 @@ class SortingJob:
         others = [it for it in self.items.values() if it.id != lane.item.id]
         spare = s.carry_z - s.pick_z - self.cell.item_size  # = carry_clearance
         return bool(others) and sorting.carry_sweeps(
-            self.cell, traj.p, self._soon(lane, now) + traj.t, others, s.pick_z, spare,
+            self.cell, traj.p, self._asap_start(lane, now) + traj.t, others, s.pick_z, spare,
             mirrored=lane.mirrored)
 
     # --- out of the way ---------------------------------------------------------------------
@@ -498,7 +498,7 @@ class SortingJob:
         """Wait clear of the shared zone, above the first bin, so the other arm is free."""
         park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
                                   self.settings.drop_clearance)
-        self._move_safely(lane, 'to_park', park, self._soon(lane, now), now)
+        self._move_safely(lane, 'to_park', park, self._asap_start(lane, now), now)
 
     def _park_unused(self, now: float) -> None:
         """Arms no lane uses wait above their first bin, off the belt (once)."""
@@ -518,7 +518,7 @@ class SortingJob:
             self.log('info', f'{lane.robot}: parks to clear the way for {how.other.robot}')
             self._park(lane, now)
         elif how.action == 'reaim':
-            self._reaim(lane, how.other, now)
+            self._aim_elsewhere(lane, how.other, now)
         elif how.action == 'give_way':
             self._give_up(lane, now, how.why)
         else:  # back out to the waypoint, then on to the bin
@@ -527,9 +527,9 @@ class SortingJob:
             self.log('info', f'{lane.robot}: both arms hold items and wait for each other: '
                      f'{lane.robot} backs out to y={how.via[1]:.2f} first')
             lane.route = [('to_bin', drop)]
-            self._move(lane, 'via', how.via, self._soon(lane, now), now)
+            self._move(lane, 'via', how.via, self._asap_start(lane, now), now)
 
-    def _reaim(self, lane: Lane, other: Lane, now: float) -> None:
+    def _aim_elsewhere(self, lane: Lane, other: Lane, now: float) -> None:
         """Ask again for the item an arm waits to meet, where the belt has carried it by now.
 
         The planner holds a waiting move until the other arm's next move clears the way (the

@@ -358,7 +358,7 @@ class LaneProtocol:
         return MoveCommand(robot, np.asarray(target, dtype=float),
                            self._request([robot], start), False, purpose)
 
-    def soon(self, lane: Lane, now: float) -> float:
+    def asap_start(self, lane: Lane, now: float) -> float:
         """Return the start to ask for a move that should start as soon as possible.
 
         One arm: the planners' planning lead ahead (``move_lead``): the time the request, the

@@ -66,7 +66,7 @@ def mirror_joints(q: ArrayLike) -> np.ndarray:
     return q * np.array([-1.0, -1.0, 1.0])
 
 
-def joints_mirror(src: ArmModel, dst: ArmModel, samples: int = 16, tol: float = 1e-9) -> bool:
+def is_joint_mirror(src: ArmModel, dst: ArmModel, samples: int = 16, tol: float = 1e-9) -> bool:
     """Return True if :func:`mirror_joints` mirrors ``src``'s tool onto ``dst``'s exactly.
 
     It does for two arms of the same geometry (the cell's, from one xacro macro): then a
@@ -75,7 +75,7 @@ def joints_mirror(src: ArmModel, dst: ArmModel, samples: int = 16, tol: float = 
 
     >>> from scara_collab.core.model import load_cell
     >>> cell = load_cell()
-    >>> joints_mirror(cell.leader, cell.follower)
+    >>> is_joint_mirror(cell.leader, cell.follower)
     True
     """
     u = (np.arange(samples)[:, None] * np.array([0.381966, 0.618034, 0.723607])) % 1.0

@@ -1,6 +1,6 @@
 """Record a run's topics raw into an MCAP file (the launcher's ``--record``).
 
-:class:`McapLog` subscribes the topics raw (``raw=True``: the CDR bytes as they came off the
+:class:`McapRecorder` subscribes the topics raw (``raw=True``: the CDR bytes as they came off the
 wire) on a node of its own that no executor spins; a wall-clock timer on the node it is given
 (the launcher's run recorder) drains their queues every ``period`` and hands every message,
 with its receive time, to the file (:class:`scara_collab.records.mcap_log.McapWriter`, which says
@@ -12,7 +12,7 @@ a cell in the root namespace would (``/joint_states``), so every cell's file rea
 Usage (a sketch, not a doctest: it needs a running node, e.g. the launcher's run
 recorder)::
 
-    log = McapLog(node, 'runs/x/run.mcap', robots=('scara_left', 'scara_right'))
+    log = McapRecorder(node, 'runs/x/run.mcap', robots=('scara_left', 'scara_right'))
     ...                                   # spin the node: its timer drains the topics
     log.close()                           # {'mcap': {'file': ..., 'messages': ...}}
 """
@@ -27,7 +27,7 @@ from scara_collab.nodes import qos
 from scara_collab.records.mcap_log import McapWriter
 
 
-class McapLog(McapWriter):
+class McapRecorder(McapWriter):
     """Write the topics of a run into an MCAP file, taken raw from the graph.
 
     :param node: the node whose executor drives the recording (a wall-clock timer on it drains

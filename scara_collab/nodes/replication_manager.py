@@ -36,7 +36,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import base_to_world, fk
-from scara_collab.core.mirror import joints_mirror, mirror_error, mirror_joints, mirror_point
+from scara_collab.core.mirror import is_joint_mirror, mirror_error, mirror_joints, mirror_point
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
@@ -85,7 +85,7 @@ class ReplicationManager(Node):
         self.offer_pubs = tuple(self.create_publisher(JointTrajectory,
                                                       f'{a.name}/target_trajectory', 10)
                                 for a in (lead, foll))
-        self.mirror_by_joints = joints_mirror(lead, foll)
+        self.mirror_by_joints = is_joint_mirror(lead, foll)
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', 10)
         self.diagnostics = Diagnostics(self, self.status_pub)  # and on /diagnostics
         self.error_pub = self.create_publisher(Float64, '~/mirror_error', 10)

@@ -105,7 +105,7 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Optional[list] = No
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:  # the nodes' goodbyes (a lockstep leave) first: shutdown.before_shutdown
-        shutdown.close(rclpy.get_default_context(), reversed(nodes))
+        shutdown.close(None, reversed(nodes))  # the default context
 
 
 def close_graph(executor, nodes, context) -> None:

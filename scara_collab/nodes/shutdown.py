@@ -15,7 +15,7 @@ shuts the context down. A context shut down some other way (a signal handler, a 
 >>> said
 ['bye']
 """
-from typing import Callable, Dict, Iterable, List
+from typing import Callable, Dict, Iterable, List, Optional
 import weakref
 
 import rclpy
@@ -60,9 +60,13 @@ def run_hooks(context: Context) -> int:
     return len(hooks)
 
 
-def close(context: Context, nodes: Iterable[Node]) -> None:
-    """Run ``context``'s pre-shutdown callbacks, destroy ``nodes``, shut ``context`` down."""
-    run_hooks(context)
+def close(context: Optional[Context], nodes: Iterable[Node]) -> None:
+    """Run ``context``'s pre-shutdown callbacks, destroy ``nodes``, shut ``context`` down.
+
+    :param context: None: rclpy's default context, which is then replaced by a fresh one, so
+        ``rclpy.init()`` works again in this process (as after ``rclpy.try_shutdown()``).
+    """
+    run_hooks(rclpy.get_default_context() if context is None else context)
     for node in nodes:
         node.destroy_node()
     rclpy.try_shutdown(context=context)

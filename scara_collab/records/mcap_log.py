@@ -2,7 +2,7 @@
 
 :class:`McapWriter` writes messages that came off the wire as CDR bytes (never deserialized
 or re-encoded) into one MCAP file in the layout of rosbag2's MCAP storage plugin; the node
-side that takes them raw from the graph is :class:`scara_collab.nodes.mcap_recorder.McapLog`
+side that takes them raw from the graph is :class:`scara_collab.nodes.mcap_recorder.McapRecorder`
 (the launcher's ``--record``). No rclpy here.
 
 - the ``ros2`` profile; per topic a channel with message encoding ``cdr`` and a schema named

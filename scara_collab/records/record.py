@@ -34,7 +34,7 @@ the run's. The summary's verdict (:func:`scara_collab.records.verdict.apply`) ta
 launcher's ``exit_code`` from :attr:`RunRecord.extra` and keeps it unless it is 0.
 
 Other recordings of the run (the launcher's ``--record``:
-:class:`scara_collab.nodes.mcap_recorder.McapLog`) go into :attr:`RunRecord.sinks`; they
+:class:`scara_collab.nodes.mcap_recorder.McapRecorder`) go into :attr:`RunRecord.sinks`; they
 record until the end of the run, past the window, and :meth:`RunRecord.finish` closes them
 first.
 
@@ -109,8 +109,8 @@ class RunRecord:
         self.first_state_wall: Optional[float] = None
         self.summary: Optional[Dict] = None
         self.plots: List[Path] = []
-        # more recordings of the run (e.g. McapLog): closed by finish(), first; close() returns
-        # a dict merged into the summary
+        # more recordings of the run (e.g. McapRecorder): closed by finish(), first; close()
+        # returns a dict merged into the summary
         self.sinks: List = []
 
     # --- time ------------------------------------------------------------------------------

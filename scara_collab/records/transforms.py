@@ -21,7 +21,7 @@ TOPICS = (Topic('/robot_description', DESCRIPTION_TYPE, 'latched'),
           Topic('/tf_static', TF_TYPE, 'latched'), Topic('/tf', TF_TYPE))
 #: tf2_msgs/msg/TFMessage (Jazzy), for a recorder without tf2_msgs installed
 TF_DEFINITION = 'geometry_msgs/TransformStamped[] transforms\n'
-#: its REP-2011 type hash in Jazzy (checked by scripts/check_interfaces.py against the built one)
+#: its REP-2011 type hash in Jazzy (checked by test/test_interfaces.py against the built one)
 TF_HASH = 'RIHS01_e369d0f05a23ae52508854b66f6aa0437f3449d652e8cbf22d5abe85d020f087'
 
 

@@ -281,11 +281,11 @@ class Launcher:
                                     context=self.context, namespace=self.namespace)
         self.recorder.extra['lockstep'] = getattr(args, 'lockstep', 'on')
         if getattr(args, 'record', False):  # raw subscriptions on the recorder; finish() closes
-            from scara_collab.nodes.mcap_recorder import McapLog
+            from scara_collab.nodes.mcap_recorder import McapRecorder
             from scara_collab.records.mcap_log import MCAP_FILE
-            mcap = McapLog(self.recorder, output / MCAP_FILE,
-                           robots=[a.name for a in self.recorder.cell.arms],
-                           urdf=self.recorder.cell.urdf)  # + /robot_description, /tf
+            mcap = McapRecorder(self.recorder, output / MCAP_FILE,
+                                robots=[a.name for a in self.recorder.cell.arms],
+                                urdf=self.recorder.cell.urdf)  # + /robot_description, /tf
             self.recorder.sinks.append(mcap)
             console.say(f'[launch] recording {len(mcap.topics)} topics to {mcap.path}')
         self.executor = make_executor(context=self.context)
