@@ -335,9 +335,11 @@ def lockstep_expect(nodes: Sequence[NodeSpec]) -> List[str]:
     return [n.name for n in nodes if n.lockstep]
 
 
-#: s, the planners' ``send_margin`` in real time: a trajectory reaches the bridge within
-#: milliseconds, and the planners add how late the bridge's starts have come (measured)
-REALTIME_SEND_MARGIN = 0.01
+#: s, the planners' ``send_margin`` in real time: the planning lead, as in lockstep. A margin
+#: of 0.01 s (a trajectory reaches the bridge within milliseconds) made late starts common
+#: beside a CPU hog, and one such run broke the safety margin (docs/limits.md), so real time
+#: keeps the lead until the cause is found
+REALTIME_SEND_MARGIN = 0.05
 
 
 def job_params(mode: str, lockstep: bool = True) -> Dict[str, Dict[str, str]]:
@@ -350,7 +352,7 @@ def job_params(mode: str, lockstep: bool = True) -> Dict[str, Dict[str, str]]:
     hardware, and the planners send their moves :data:`REALTIME_SEND_MARGIN` ahead.
 
     >>> job_params('collaborative', lockstep=False)['left_planner']
-    {'send_margin': '0.01'}
+    {'send_margin': '0.05'}
 
     :raises ValueError: for a mode not in :data:`LAUNCH_MODES`.
     """
