@@ -442,6 +442,45 @@ def test_the_follower_re_times_its_move_for_a_new_leader_move(cell, clock, follo
     assert move.plan.start > first.plan.start and st.delay == move.plan.start - 11.0
 
 
+def test_a_re_time_the_bridge_refuses_leaves_the_first_move_committed(cell, clock, follower):
+    """The first move had started at the bridge after all: its re-time is refused at the door.
+
+    The planner keeps the first move as the arm's commitment (it runs), not nothing; the
+    first move's own word, heard after the re-time left, does not undo the re-time.
+    """
+    first = _sent(_target(follower, ACROSS['scara_right'], stamp=11.0))
+    leader_move = _move(cell.leader, OUT['scara_left'], ACROSS['scara_left'], back=True)
+    again = _sent(_hear(follower, 'scara_left/1', 10.5, leader_move))
+    assert follower.committed.plan == again.plan and follower.committed.retimed == first.plan
+    assert follower.on_own_execution('accepted', first.request, 11.0, stamped=True) == []
+    assert follower.committed.plan == again.plan  # the first one's acceptance: still re-timed
+    follower.on_own_execution('refused', first.request)
+    assert follower.committed.plan == first.plan and follower.committed.retimed is None
+    clock.t = 10.8
+    queued = _status(_target(follower, [3.0, 1.0, 0.3]))
+    assert queued.state == 'queued'  # behind the move that runs
+
+
+def test_an_accepted_re_time_is_the_arms_commitment(cell, clock, follower):
+    """Once the bridge accepts the re-timed move, a later refusal of it leaves nothing."""
+    first = _sent(_target(follower, ACROSS['scara_right'], stamp=11.0))
+    again = _sent(_hear(follower, 'scara_left/1', 10.5, _move(
+        cell.leader, OUT['scara_left'], ACROSS['scara_left'], back=True)))
+    follower.on_own_execution('accepted', first.request, again.plan.start, stamped=True)
+    assert follower.committed.retimed is None
+    follower.on_own_execution('refused', first.request)  # dropped as it would take over
+    assert follower.committed is None
+
+
+def test_a_move_starting_within_the_measured_lateness_is_not_re_timed(cell, clock, follower):
+    """The bridge may have started it already: its judgement at the start decides instead."""
+    first = _sent(_target(follower, ACROSS['scara_right'], stamp=10.3))
+    follower.on_own_execution('accepted', first.request, 10.5, stamped=True, late=0.5)
+    clock.t = 10.1
+    assert _hear(follower, 'scara_left/1', 10.2, _move(
+        cell.leader, OUT['scara_left'], ACROSS['scara_left'], back=True)) == []
+
+
 def test_the_follower_holds_when_a_new_leader_move_leaves_no_start(cell, clock, follower):
     """A leader move ending where the follower's goes: the follower holds and waits."""
     first = _sent(_target(follower, ACROSS['scara_right'], stamp=11.0))

@@ -263,6 +263,50 @@ def test_the_simulator_drops_a_move_made_unsafe_reports_it_once_and_refuses_it_a
         sim.execute(RIGHT, sim.time + follow.t, follow.q, follow.qd, follow.qdd, 'R2', 0.0)
 
 
+def test_a_move_must_begin_where_the_arm_will_be_at_its_start(cell, poses):
+    """A re-time of a move that has started, sent while the arm is still near its start.
+
+    The arm has barely left the first pose when it arrives (the measured pose is within the
+    start tolerance of it), but by its start the running move has taken the arm far on: it is
+    refused at the door, so the reference never jumps back.
+    """
+    sim = _sim(cell)
+    sim.reset_arm(LEFT, poses['left_out'])
+    sim.reset_arm(RIGHT, poses['right_out'])
+    a = joint_move(cell.follower, poses['right_out'], poses['right_in'])
+    sim.execute(RIGHT, a.t, a.q, a.qd, a.qdd, 'R', 0.0)
+    sim.step(30)  # it has started
+    tol = float(load_config('simulation')['start_tolerance'])
+    assert np.max(np.abs(sim.arm_state(RIGHT)[0] - a.q[0])) < tol
+    later = sim.time + 0.5 * a.duration
+    with pytest.raises(ValueError, match='where its running move puts the arm at its start'):
+        sim.execute(RIGHT, later + a.t, a.q, a.qd, a.qdd, 'R', later)
+    assert sim.motion[RIGHT].waiting is None
+    # from where the running move will be, the same move is admitted
+    there = sim.motion[RIGHT].running.timeline.at(later)
+    b = joint_move(cell.follower, there, poses['right_out'])
+    sim.execute(RIGHT, later + b.t, b.q, b.qd, b.qdd, 'R2', later)
+    assert sim.motion[RIGHT].waiting.id == 'R2'
+
+
+def test_a_waiting_move_is_dropped_if_the_arm_is_not_at_its_first_point_when_it_takes_over(
+        cell, poses):
+    """Measured again at the start: an arm that lags (or was pushed) does not jump."""
+    cm = CellMotion(cell.arms, [poses['left_out'], poses['right_out']], cell.safety_margin, DT,
+                    start_tolerance=0.05)
+    b = _move('R', 1.0, poses['right_out'], poses['right_in'])
+    cm.take(RIGHT, b, 0.0, _q(cm))
+    pushed = dict(_q(cm), **{RIGHT: poses['right_out'] + [0.1, 0.0, 0.0]})
+    [(robot, event, move, reason)] = cm.advance(1.0, pushed)
+    assert (robot, event, move) == (RIGHT, 'dropped', b)
+    assert 'starts 0.1000 away from the measured position of joint 1' in reason
+    assert not cm[RIGHT].active(1.0)
+    again = b.shifted(2.0)
+    cm.take(RIGHT, again, 1.0, _q(cm))
+    [(robot, event, move, _)] = cm.advance(2.0, _q(cm))  # where the arm is: it starts
+    assert (robot, event, move.id, move.start) == (RIGHT, 'started', 'R', 2.0)
+
+
 # --- 200 raw commands through the other arm's workspace ----------------------------------------
 def test_random_raw_commands_never_bring_the_arms_within_the_margin(cell):
     """200 raw commands through the other arm's path never break the margin in physics.

@@ -29,9 +29,12 @@ after ``max_delay``: retried whenever that arm commits a new move, refused after
 ``max_wait``), ``superseded`` (a queued or waiting request replaced by a newer one),
 ``refused`` (with the reason; the arm stays where it is).
 
-**Follower re-timing.** The follower's committed move that has not started yet is scheduled
-again when a new leader move is heard: delayed if it would now conflict, or, if no delay
-helps, the arm is held (:class:`HoldArm`) and the move waits.
+**Follower re-timing.** The follower's committed move that has not started yet (its start
+is further off than the worst start lateness measured) is scheduled again when a new leader
+move is heard: delayed if it would now conflict, or, if no delay helps, the arm is held
+(:class:`HoldArm`) and the move waits. If the bridge refuses the re-timed move (the first
+one had started after all: it would not begin where the arm is), the first one stays the
+arm's commitment. Either way the bridge judges every waiting move again as it takes over.
 
 **Start lateness.** When the bridge reports the arm's move started late, the move is re-based
 to its real start (its ``planned`` status is sent again with the new window) and the
@@ -117,10 +120,15 @@ class MoveRequest(NamedTuple):
 
 
 class CommittedMove(NamedTuple):
-    """The arm's own move as sent: its plan (start, delay) and the request it answers."""
+    """The arm's own move as sent: its plan (start, delay) and the request it answers.
+
+    :ivar retimed: the plan this one re-times, until the bridge accepts the new one (if it
+        refuses it, the move it re-timed is what the arm is committed to); None otherwise.
+    """
 
     plan: Plan
     asked: MoveRequest
+    retimed: Optional[Plan] = None
 
     @property
     def request(self) -> int:
@@ -298,7 +306,7 @@ class ArmPlanner:
             blocked = self.blocked
             self._plan_and_schedule(blocked._replace(wanted=0.0), wanted=blocked.wanted)
         elif (not self.leader and self.committed is not None
-              and self.committed.plan.start > now):
+              and self.committed.plan.start > now + self.start_lateness.worst):
             self._make_way(now)
         return self._commands()
 
@@ -317,12 +325,17 @@ class ArmPlanner:
 
         An ``accepted`` move adds its lateness to the measured lead and, if late, is re-based
         to its real start; once refused, preempted or held nothing of it runs, so the next
-        request is planned at once.
+        request is planned at once, except a refused re-time: the move it re-timed stays.
         """
         if self.committed is None or request != self.committed.request:
             return self._commands()  # not the arm's current move
         if state == 'accepted' and stamped:
             self.start_lateness.add(late)
+        retimed = self.committed.retimed
+        if state == 'accepted' and retimed is not None:
+            if start is not None and start < self.committed.plan.start - 1e-6:
+                return self._commands()  # the first one's word, heard after the re-time left
+            self.committed = self.committed._replace(retimed=None)
         if state == 'accepted' and late > 0:
             plan = self.committed.plan
             self.committed = self.committed._replace(plan=Plan(plan.traj, start,
@@ -330,6 +343,9 @@ class ArmPlanner:
             last = self.answers.last(request)
             self._report('planned', request, f'started {late:.3f} s late by the bridge',
                          self.committed.plan, '' if last is None else last.kind)
+        elif state == 'refused' and retimed is not None:
+            # the bridge keeps the move it was to re-time (one that had started, most likely)
+            self.committed = CommittedMove(retimed, self.committed.asked)
         elif state in NOT_RUNNING:
             self.committed = None
         return self._commands()
@@ -415,7 +431,7 @@ class ArmPlanner:
             self._wait(move.asked)
         elif plan.delay > 0:
             self._send(Plan(plan.traj, plan.start, plan.start - move.asked.wanted), move.asked,
-                       f're-timed for a new {self.other_arm.name} move')
+                       f're-timed for a new {self.other_arm.name} move', retimed=move.plan)
 
     def _wait(self, asked: MoveRequest) -> None:
         """Wait for the other arm: it blocks ``asked`` even after its committed motion."""
@@ -432,9 +448,10 @@ class ArmPlanner:
             self._report('waiting', asked.request, f'{self.other_arm.name} blocks it: no start '
                          f'within {s.max_delay:.0f} s keeps {s.margin:.2f} m')
 
-    def _send(self, plan: Plan, asked: MoveRequest, note: str = '') -> None:
-        """Commit the arm to ``plan`` for ``asked``: send it and report it planned."""
-        self.committed = CommittedMove(plan, asked)
+    def _send(self, plan: Plan, asked: MoveRequest, note: str = '',
+              retimed: Optional[Plan] = None) -> None:
+        """Commit the arm to ``plan`` for ``asked`` (re-timing ``retimed``): send it, report it."""
+        self.committed = CommittedMove(plan, asked, retimed)
         self._out.append(SendMove(asked.request, plan))
         kind = 'line' if path_metrics(plan.traj).max_deviation < LINE_DEVIATION else 'joint move'
         self._report('planned', asked.request, note, plan, kind)

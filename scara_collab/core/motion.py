@@ -10,6 +10,10 @@ ros2_control's joint trajectory controller keeps them. The rules, written here o
 - **Replace.** A new trajectory takes over at its own start: until then the arm keeps what
   it runs (or holds), and a trajectory still waiting for its start is replaced at once
   (:meth:`ArmMotion.take`, :meth:`ArmMotion.advance`).
+- **Start where the arm is.** A trajectory must begin within ``start_tolerance`` of where the
+  arm is when it takes over: the measured pose for one that starts now, where the running move
+  puts the arm for one that waits; a waiting move is measured again as it takes over, so the
+  reference never jumps (:meth:`CellMotion.start_gap`).
 - **Hold, brake.** A hold drops both and keeps a pose; a brake runs the stop at the
   acceleration limits (:func:`scara_collab.core.safety.braking`) at once
   (:meth:`ArmMotion.hold`, :meth:`ArmMotion.brake`).
@@ -233,16 +237,19 @@ class CellMotion:
     :param margin: m between capsule surfaces that an admitted move keeps.
     :param dt: the physics step, s (the start rule's slack).
     :param step: s between predicted samples (:func:`scara_collab.core.safety.first_breach`).
+    :param start_tolerance: rad | m a move may begin away from where the arm is
+        (:meth:`start_gap`); None: not checked.
     """
 
     def __init__(self, arms: Sequence[ArmModel], q: ArrayLike, margin: float, dt: float,
-                 step: float = safety.PREDICTION_STEP):
+                 step: float = safety.PREDICTION_STEP, start_tolerance: Optional[float] = None):
         """Every arm holds its pose in ``q``."""
         self.models = {a.name: a for a in arms}
         self.leader = arms[0].name
         self.arms: Dict[str, ArmMotion] = {a.name: ArmMotion(a.name, p)
                                            for a, p in zip(arms, np.asarray(q, dtype=float))}
         self.margin, self.dt, self.step = float(margin), float(dt), float(step)
+        self.start_tolerance = start_tolerance
         self.checking = True  # False: admit without the check (an arm alone)
 
     def __getitem__(self, robot: str) -> ArmMotion:
@@ -252,6 +259,29 @@ class CellMotion:
     def others(self, robot: str) -> List[str]:
         """Return the other arms' names."""
         return [r for r in self.arms if r != robot]
+
+    def start_gap(self, robot: str, move: Move, now: float, q: Dict[str, np.ndarray]) -> str:
+        """Return why ``move`` would not begin where ``robot`` is when it takes over, or ``''``.
+
+        Where the arm is then: the measured pose ``q[robot]`` for a move that starts now (or
+        takes over now), else where its running move puts it at the move's start. A move
+        that begins elsewhere would make the reference jump: the controller then chases it
+        at its torque limits, faster than any trajectory the arm was admitted for.
+        """
+        if self.start_tolerance is None:
+            return ''
+        at = max(now, move.start)
+        if at <= now:
+            there, where = np.asarray(q[robot], dtype=float), 'the measured position'
+        else:
+            there = self.arms[robot].current(now, q.get(robot)).at(at)
+            where = f'where its running move puts the arm at its start (t={at:.3f} s)'
+        gap = np.abs(move.timeline.at(at) - there)
+        j = int(np.argmax(gap))
+        if gap[j] <= self.start_tolerance:
+            return ''
+        return (f'the trajectory starts {gap[j]:.4f} away from {where} of joint {j + 1} '
+                f'({there[j]:.4f}); at most {self.start_tolerance} is allowed')
 
     def judge(self, robot: str, move: Move, now: float, q: Dict[str, np.ndarray]) -> Check:
         """Judge ``move`` of ``robot`` against every other arm's commitments from ``now``.
@@ -306,8 +336,9 @@ class CellMotion:
         """Move every arm on to ``now``, judging each waiting move again as it takes over.
 
         The leader goes first, so a follower move taking over at the same instant is judged
-        against the leader's. A waiting move that no longer keeps the margin is dropped (the
-        arm keeps what it ran).
+        against the leader's. A waiting move that no longer begins where the arm is
+        (:meth:`start_gap`) or no longer keeps the margin is dropped (the arm keeps what it
+        ran).
 
         :return: ``(robot, event, move, reason)``: ``started``, ``finished``, or ``dropped``
             with the reason.
@@ -316,11 +347,10 @@ class CellMotion:
         for robot, arm in self.arms.items():
             w = arm.waiting
             if w is not None and now >= w.start:
-                check = self.judge(robot, w, now, q)
-                if not check.ok:
+                reason = self.start_gap(robot, w, now, q) or self.judge(robot, w, now, q).reason
+                if reason:
                     arm.waiting = None
-                    out.append((robot, 'dropped', w, f'judged again at its start: '
-                                f'{check.reason}'))
+                    out.append((robot, 'dropped', w, f'judged again at its start: {reason}'))
             out.extend((robot, ev, m, '') for ev, m in arm.advance(now))
         return out
 

@@ -69,7 +69,7 @@ class Servo:
             joint_gains(ctl_cfg['computed_torque'], 'kd'), g=gravity,
             friction_smoothing=friction_smoothing)
         self.names = tuple(a.name for a in arms)
-        self.motion = CellMotion(arms, q, margin, physics_dt)
+        self.motion = CellMotion(arms, q, margin, physics_dt, start_tolerance=start_tolerance)
         self.motion.checking = margin > 0
         #: ``(robot, move id, reason)`` of waiting moves dropped as they took over (the bridge
         #: reports and empties it)
@@ -125,7 +125,8 @@ class Servo:
         :raises TrajectoryError: (a ``ValueError``) with the reason: emergency stop active and
             the move not separating, bad shape, non-finite value, non-increasing times, a
             position outside the joint limits, a velocity above the limits (also between
-            points), or a start more than ``start_tolerance`` away from the measured position.
+            points), or a start more than ``start_tolerance`` away from where the arm is when it
+            takes over (:meth:`scara_collab.core.motion.CellMotion.start_gap`).
             :class:`scara_collab.core.motion.Refused` (a ``ValueError`` too): it would bring
             the arms within the margin. The arm keeps doing what it did.
         """
@@ -134,15 +135,12 @@ class Servo:
                                     self.velocity_tolerance, qdd=qdd)
         if self.estop:
             self.check_recovery(a, valid.q, q_now, qd_now, now)
-        ref = HermiteReference(*valid)
-        jump = np.abs(ref.sample(max(now, ref.start))[0] - q_now[a])
-        if np.any(jump > self.start_tolerance):
-            j = int(np.argmax(jump))
-            raise TrajectoryError(
-                f'the trajectory starts {jump[j]:.4f} away from the measured position of joint '
-                f'{j + 1} ({q_now[a][j]:.4f}); at most {self.start_tolerance} is allowed')
-        move = Move(move_id, Timeline(valid.t, valid.q), float(stamp), ref)
-        return self.motion.take(self.names[a], move, now, dict(zip(self.names, q_now)))
+        move = Move(move_id, Timeline(valid.t, valid.q), float(stamp), HermiteReference(*valid))
+        poses = dict(zip(self.names, q_now))
+        gap = self.motion.start_gap(self.names[a], move, now, poses)
+        if gap:
+            raise TrajectoryError(gap)
+        return self.motion.take(self.names[a], move, now, poses)
 
     def hold(self, a: int, q: np.ndarray) -> None:
         """Drop arm ``a``'s trajectories (running and next): it holds ``q`` ``(3,)`` at rest."""
