@@ -187,3 +187,32 @@ def test_process_cpu_seconds_agrees_with_the_process_own_account():
     proc = process_cpu_seconds(os.getpid())
     after = os.times()
     assert before.user + before.system - 0.02 <= proc <= after.user + after.system + 0.02
+
+
+def test_a_joint_faster_than_its_limit_is_an_episode_named_once_with_its_peak(cell, tmp_path):
+    """A joint that jumps: one episode per burst: its start, its peak; a gap is not a speed.
+
+    The right elbow moves at its limit (not named), then 0.03 and 0.05 rad in two 10 ms
+    steps (3 and 5 rad/s against 2: one episode, peak 5), then again 1 s later (a second
+    episode); a 0.5 rad step across a 1 s gap in the states is no speed at all.
+    """
+    log = RunLog(tmp_path, cell, batch=3, state_period=0.01)
+    q = np.zeros(6)
+    t = 0.0
+    steps = [0.02] * 5 + [0.03, 0.05] + [0.0] * 100 + [0.04]
+    log.add_state(t, q[:3], q[3:])
+    for dq in steps:
+        t += 0.01
+        q[4] += dq
+        log.add_state(t, q[:3], q[3:])
+    t += 1.0
+    q[4] += 0.5  # after a gap in the states
+    log.add_state(t, q[:3], q[3:])
+    log.close()
+    limit = float(cell.follower.max_velocity[1])
+    assert log.overspeed_count == 2
+    first, second = log.overspeed
+    assert (first['robot'], first['joint'], first['limit']) == (cell.follower.name, 2, limit)
+    assert first['time'] == pytest.approx(0.06) and first['speed'] == pytest.approx(5.0)
+    assert second['time'] == pytest.approx(1.08) and second['speed'] == pytest.approx(4.0)
+    assert log.max_speed_ratio == pytest.approx(5.0 / limit)

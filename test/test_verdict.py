@@ -132,6 +132,15 @@ def test_the_report_names_stops_silences_and_intruders_in_a_few_lines():
     assert re.search(r'problems +exit 6: .*\n +exit 4: emergency stop standing', text), text
 
 
+def test_the_report_names_a_joint_faster_than_its_limit():
+    """An overspeed episode is one line with the count and the first; none, no line."""
+    assert 'overspeed' not in report.format_report(dict(CLEAN))
+    fast = [{'time': 114.14, 'robot': 'scara_right', 'joint': 2, 'speed': 2.95, 'limit': 2.0}]
+    text = report.format_report(dict(CLEAN, overspeed=fast, overspeed_count=3))
+    assert ('  overspeed      3 time(s) a joint ran faster than its limit allows (no admitted '
+            'trajectory does): first scara_right joint 2 2.95 (limit 2) at sim t=114.14 s') in text
+
+
 def test_every_exit_code_is_documented():
     """The launcher's docstring and the README name every exit code the verdict can give."""
     from scara_collab.run import launcher

@@ -384,6 +384,13 @@ def format_report(s: Dict) -> str:
         rows = s.get('joint_state_rows') or 0
         lines.append(f'  telemetry      {missing} of {rows + missing} joint states not heard '
                      f'(largest gap {s.get("largest_gap_s") or 0.0:.2f} s): short of CPU?')
+    fast = s.get('overspeed') or []
+    if fast:
+        first = fast[0]
+        lines.append(f'  overspeed      {s.get("overspeed_count", len(fast))} time(s) a joint ran '
+                     'faster than its limit allows (no admitted trajectory does): first '
+                     f'{first["robot"]} joint {first["joint"]} {first["speed"]:.2f} (limit '
+                     f'{first["limit"]:g}) at sim t={first["time"]:.2f} s')
     cost = s.get('cpu_per_sim_s') or {}
     if cost:
         parts = [f'{k.replace("_", " ")} {v:.3f}' for k, v in cost.items() if k != 'total']

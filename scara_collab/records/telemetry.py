@@ -9,6 +9,10 @@
   (:func:`scara_collab.core.collision.arm_distance`), in metres;
 - ``events.csv``: the conveyor events ``time, kind, item, class, robot``.
 
+It also watches the joints' speeds between consecutive states: a joint faster than
+:data:`OVERSPEED` times its velocity limit did something no admitted trajectory asks for (a
+reference that jumped, a collision), so every such episode is kept (:attr:`RunLog.overspeed`).
+
 States are buffered and computed in vectorised batches (at most ``batch`` rows, or whenever
 :meth:`RunLog.flush` is called); every batch is written and flushed to disk at once, so a run
 that is interrupted keeps every complete row it recorded. Events are flushed one by one.
@@ -41,6 +45,12 @@ TIMESERIES = 'timeseries.csv'
 EVENTS = 'events.csv'
 EVENT_COLUMNS = ('time', 'kind', 'item', 'class', 'robot', 'cause')
 COUNTED = ('spawned', 'sorted', 'missed', 'wrong_bin', 'dropped')
+#: a joint's measured speed above this many times its limit is an episode worth naming (the
+#: trajectories are limited to 1.01 times it; measured between states 10 ms apart, runs that
+#: track them stay below 1.1)
+OVERSPEED = 1.2
+#: overspeed episodes kept in full (all are counted)
+OVERSPEED_KEPT = 20
 MIRROR_ERROR = 'mirror_error_m'
 ARM_DISTANCE = 'arm_distance_m'
 try:
@@ -155,6 +165,15 @@ class RunLog:
         self.max_mirror_error = 0.0
         self.max_mirror_error_time: Optional[float] = None
         self.events: List[Event] = []
+        #: ``{time, robot, joint, speed, limit}`` of the first :data:`OVERSPEED_KEPT` episodes
+        #: of a joint above :data:`OVERSPEED` times its limit (when each began, its peak speed)
+        self.overspeed: List[Dict[str, object]] = []
+        self.overspeed_count = 0
+        self.max_speed_ratio = 0.0  # the fastest any joint went, as a share of its limit
+        self._limits = np.concatenate([a.max_velocity for a in cell.arms])
+        self._joints = [(a.name, k + 1) for a in cell.arms for k in range(3)]
+        self._last: Optional[Tuple[float, np.ndarray]] = None  # the last state written
+        self._episode_end: Dict[int, float] = {}  # joint index -> last overspeed sample, s
         self.closed = False
         self._t: List[float] = []
         self._q: List[np.ndarray] = []
@@ -209,6 +228,7 @@ class RunLog:
                 self.missing += int(np.sum(np.round(steps[late] / self.state_period) - 1))
                 self.largest_gap = max(self.largest_gap, float(steps[late].max()))
             self._t_written = float(t[-1])
+            self._watch_speed(t, q)
             k = int(np.argmin(dist))
             if dist[k] < self.min_distance:
                 self.min_distance, self.min_distance_time = float(dist[k]), float(t[k])
@@ -217,6 +237,36 @@ class RunLog:
                 self.max_mirror_error, self.max_mirror_error_time = float(error[k]), float(t[k])
         self._ts.flush()
         self._ev.flush()
+
+    def _watch_speed(self, t: np.ndarray, q: np.ndarray) -> None:
+        """Take the joint speeds between consecutive states (a gap is not a speed)."""
+        if self._last is not None:
+            t = np.concatenate(([self._last[0]], t))
+            q = np.vstack([self._last[1], q])
+        self._last = (float(t[-1]), q[-1].copy())
+        if t.size < 2:
+            return
+        dt = np.diff(t)
+        close = (dt > 0) & (dt <= 1.5 * self.state_period)
+        ratio = np.abs(np.diff(q, axis=0)) / np.where(close, dt, 1.0)[:, None] / self._limits
+        ratio[~close] = 0.0
+        self.max_speed_ratio = max(self.max_speed_ratio, float(ratio.max()))
+        for i, j in np.argwhere(ratio > OVERSPEED):
+            at, r = float(t[i + 1]), float(ratio[i, j])
+            episode = self._episode_end.get(int(j))
+            self._episode_end[int(j)] = at
+            robot, joint = self._joints[j]
+            row = {'time': round(at, 3), 'robot': robot, 'joint': joint,
+                   'speed': round(r * float(self._limits[j]), 3),
+                   'limit': float(self._limits[j])}
+            if episode is None or at - episode > 0.1:  # a new episode
+                self.overspeed_count += 1
+                if len(self.overspeed) < OVERSPEED_KEPT:
+                    self.overspeed.append(row)
+            else:  # the same episode: keep its fastest sample
+                same = [e for e in self.overspeed if e['robot'] == robot and e['joint'] == joint]
+                if same and same[-1]['speed'] < row['speed']:
+                    same[-1].update(speed=row['speed'])
 
     def close(self) -> None:
         """Write what is queued and close the files (idempotent)."""
