@@ -12,7 +12,8 @@ def _summary(**over):
               'lost': 0.6, 'standing': False},
              {'time': 70.0, 'cause': 'no valid joint state for 0.21 s (sim)', 'lost': 0.5,
               'standing': False}],
-         'emergency_stops': []}
+         'emergency_stops': [], 'cpu_per_sim_s': {'total': 1.279, 'pybullet_bridge': 0.477},
+         'overspeed_count': 2}
     s.update(over)
     return s
 
@@ -25,6 +26,8 @@ def test_a_row_counts_the_stops_and_those_the_jobs_own_moves_caused():
     assert 'no valid joint state' in r['causes']
     bare = row(_summary(protective_stops=None, emergency_stops=3))
     assert (bare['protective'], bare['emergency'], bare['own_moves']) == (0, 0, 0)
+    assert (r['cpu_s'], r['overspeed']) == (1.279, 2)
+    assert row({'exit_code': 1})['cpu_s'] is None  # a run that never got going
 
 
 def test_every_condition_is_a_launcher_setting_that_parses():
@@ -52,4 +55,5 @@ def test_the_page_has_a_row_per_run_and_the_capacity_ratio():
            'ratio': 0.976}
     text = realtime.markdown(rows, cap, 'scripts/bench_realtime.py --seeds 1', 600.0)
     assert text.count('| lockstep | 1 | 0 | 60 |') == 1 and '| quiet | 1 |' in text
+    assert '| 1.100 | 2 | 1.279 |' in text  # lost_s, overspeed, cpu_s
     assert 'ratio 0.976' in text and 'Stop causes' in text

@@ -143,9 +143,12 @@ def row(summary: Summary) -> Dict[str, object]:
     """Return one run's figures: :data:`KEYS`, the job's give-ups, and its stops.
 
     ``own_moves``: stops caused by the job's own moves (``predicted`` in the cause);
-    ``lost_s``: sim s the stops cost; ``causes``: their causes, each cut to 60 characters.
+    ``lost_s``: sim s the stops cost; ``causes``: their causes, each cut to 60 characters;
+    ``cpu_s``: the graph's CPU s per sim s (every process); ``overspeed``: episodes of a joint
+    faster than its limit allows (the arm left its trajectory).
     """
     job = summary.get('job') or {}
+    cpu = summary.get('cpu_per_sim_s') or {}
     both = stops(summary, 'protective') + stops(summary, 'emergency')
     return {**{k: summary.get(k) for k in KEYS},
             'give_ups': job.get('give_ups'), 'retries': job.get('retries'),
@@ -154,7 +157,9 @@ def row(summary: Summary) -> Dict[str, object]:
             'emergency': len(stops(summary, 'emergency')),
             'own_moves': sum('predicted' in str(s.get('cause', '')) for s in both),
             'lost_s': round(sum(float(s.get('lost') or 0.0) for s in both), 3),
-            'causes': '; '.join(sorted({str(s.get('cause', ''))[:60] for s in both}))}
+            'causes': '; '.join(sorted({str(s.get('cause', ''))[:60] for s in both})),
+            'cpu_s': cpu.get('total') if isinstance(cpu, dict) else None,
+            'overspeed': summary.get('overspeed_count')}
 
 
 def launch(what: str, domain: int, mode: str, duration: float, out: Path, log: Log,

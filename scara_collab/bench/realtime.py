@@ -17,6 +17,7 @@ separation, the stops (protective ones caused by the job's own moves are the pre
 ``predicted`` in their cause), the exit code. :func:`capacity` measures items per minute at
 an item every 0.9 s (the feed faster than the arms) with and without lockstep.
 """
+import os
 from pathlib import Path
 import tempfile
 from typing import Dict, Optional, Sequence
@@ -69,7 +70,8 @@ def capacity(out: Path, seeds: Sequence[int], duration: float, log: Log,
 
 
 COLUMNS = ('condition', 'seed', 'exit_code', 'sorted', 'missed', 'dropped', 'give_ups',
-           'min_separation_m', 'protective', 'emergency', 'own_moves', 'lost_s')
+           'min_separation_m', 'protective', 'emergency', 'own_moves', 'lost_s', 'overspeed',
+           'cpu_s')
 
 
 def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]],
@@ -81,7 +83,10 @@ def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]]
              f'Measured with `{command}`: the collaborative job through the launcher at '
              f'`--rtf 1`, {duration:g} sim s a run, the rated feed (conditions: '
              "`scara_collab/bench/realtime.py`). `own_moves`: stops caused by the job's own "
-             'moves (a predicted conflict); `lost_s`: sim seconds the stops cost.', '',
+             'moves (a predicted conflict); `lost_s`: sim seconds the stops cost; `overspeed`: '
+             'times a joint ran faster than its limit allows (the arm left its trajectory); '
+             "`cpu_s`: the graph's CPU seconds per sim second, all its processes, on a machine "
+             f'of {os.cpu_count()} cores (a hog takes one).', '',
              '| ' + ' | '.join(COLUMNS) + ' |', '|' + '---|' * len(COLUMNS)]
     lines += ['| ' + ' | '.join(cell(r.get(k)) for k in COLUMNS) + ' |' for r in rows]
     causes = [f'- {r["condition"]} seed {r["seed"]}: {r["causes"]}' for r in rows
