@@ -248,6 +248,22 @@ def test_a_grasped_item_is_lifted_only_when_it_would_sweep_the_belt(cell):
             assert nxt.target[2] == pytest.approx(job.settings.carry_z)
 
 
+def test_the_sweep_check_covers_a_start_as_late_as_measured(cell):
+    """An item just upstream of the carry path is clear on time, swept if the move is late."""
+    from scara_collab.core.sorting import carry_sweeps
+    size, spare, z = cell.item_size, 0.02, cell.belt.top_z + cell.item_size / 2
+    path = np.array([[2.0, 0.0, 0.25], [2.0, 0.0, 0.25]])  # the held item low over x = 2 m
+    times = np.array([1.0, 1.5])
+    gap = 0.1  # m more than the closest the check allows, upstream at 1.5 s
+    x = 2.0 - size - spare - gap - cell.belt.speed * 1.5  # centres size + spare + gap apart
+    upstream = [SeenItem(5, cell.item_classes[0], np.array([x, 0.0, z]), 0.0)]
+    pick_z = path[0, 2]
+    assert not carry_sweeps(cell, path, times, upstream, pick_z, spare)
+    late = 1.2 * gap / cell.belt.speed
+    assert carry_sweeps(cell, path, times, upstream, pick_z, spare, late=late)
+    assert not carry_sweeps(cell, path, times, upstream, pick_z, spare, late=0.8 * late / 1.2)
+
+
 def test_an_arm_holding_an_item_retries_its_bin_instead_of_dropping_it(cell):
     """An arm holding an item tries its bin again when a move fails, never drops it off the bin."""
     job, pick, t = at_the_item(cell, lift_after_grasp=False)
@@ -499,11 +515,12 @@ def test_an_arm_takes_no_item_the_other_arms_booked_move_would_make_it_wait_for(
 def test_the_booking_is_the_trajectory_the_planner_published(cell):
     """The other arm's booked motion is the planner's own trajectory, not planned again.
 
-    Published before or after the planner's ``planned`` status, it becomes the booking, shifted
-    to the start the bridge reports. Until then a move is booked as the job planned it when it
-    asked (a chase: its intercept), so the other lane does not take the arm for standing still
-    meanwhile; a move the job could not plan then is planned once it is timed. Trajectories of
-    moves the job did not ask for, and any in single mode, are ignored.
+    Heard before or after the planner's ``planned`` status, it books the arm by the
+    committed-motion model's rules, at the start the bridge reports. Until then a move is
+    booked as the job planned it when it asked (a chase: its intercept), so the other lane
+    does not take the arm for standing still meanwhile; a move the job could not plan then is
+    planned once it is timed. A trajectory the job did not ask for commits the arm as well;
+    in single mode nothing is booked.
     """
     from scara_collab.core import planning
     lead = cell.leader
@@ -524,23 +541,26 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
         traj = job.plan(lead.name, job.q[lead.name], cmd.target)
         job.plan.forget()  # from here on, planning the move again would be counted
         calls[:] = []
-        published = traj.t + cmd.start + 0.05, traj.q + 1e-3  # the planner's, not the job's
+        move_id = f'{lead.name}/{cmd.request}'
+        published = cmd.start + 0.05, traj.t, traj.q + 1e-3  # the planner's, not the job's
         if published_first:
-            job.on_trajectory(lead.name, cmd.request, *published)
+            job.on_trajectory(lead.name, move_id, cmd.request, *published)
         job.on_planner(lead.name, cmd.request, 'planned', cmd.start + 0.05,
                        cmd.start + 0.05 + traj.duration)
         if not published_first:
-            job.on_trajectory(lead.name, cmd.request, *published)
+            job.on_trajectory(lead.name, move_id, cmd.request, *published)
         booked = job.belt.committed(lead.name, 0.0, job.q)
-        np.testing.assert_allclose(booked.q, published[1])
-        job.on_execution(lead.name, cmd.request, 'accepted', cmd.start + 0.25,
-                         cmd.start + 0.25 + traj.duration)
-        np.testing.assert_allclose(job.belt.committed(lead.name, 0.0, job.q).t,
-                                   published[0] + 0.2)
+        np.testing.assert_allclose(booked.q[1:], published[2])
+        for on in (job.on_execution, lambda *a: job.on_arm_status(lead.name, 'accepted',
+                                                                  move_id, cmd.start + 0.25)):
+            on(lead.name, cmd.request, 'accepted', cmd.start + 0.25,
+               cmd.start + 0.25 + traj.duration)
+        assert job.belt.committed(lead.name, 0.0, job.q).end == \
+            pytest.approx(cmd.start + 0.25 + traj.duration)
         assert calls == []  # never planned again
-        job.on_trajectory(lead.name, cmd.request + 1, *published)  # not a move it asked for
-        assert job.belt.committed(lead.name, 0.0, job.q).start == \
-            pytest.approx(published[0][0] + 0.2)
+    raw = make_job(cell)
+    raw.on_trajectory(lead.name, 'by hand', None, 0.0, traj.t, traj.q)  # not asked for
+    assert raw.belt.committed(lead.name, 0.0, raw.q).end == pytest.approx(traj.duration)
     lost = make_job(cell, plan=counted)  # a park move: booked as the job plans it when it asks
     busy = lost.lane(lead.name)
     cmd = lost.park(lead.name, 0.0)[-1]
@@ -557,7 +577,7 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
     single = make_job(cell, mode='single')
     single.on_items([item_on_belt(cell, 98, x=1.07, y=0.27)])
     cmd = single.chase(lead.name, single.items[98], 0.0)[-1]
-    single.on_trajectory(lead.name, cmd.request, *published)
+    single.on_trajectory(lead.name, f'{lead.name}/{cmd.request}', cmd.request, *published)
     assert single.lane(lead.name).moves[lead.name].timeline is None  # one arm: nothing to book
 
 

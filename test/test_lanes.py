@@ -121,6 +121,24 @@ def test_a_late_answer_lengthens_the_next_wait(cell):
     assert proto.tick(lane, 1.0 + timeout + 0.31)[0][0].request == cmd.request
 
 
+def test_late_starts_of_its_own_moves_push_the_next_as_soon_as_possible_start(cell):
+    """What the job assumes comes from what it measures: the bridge's late starts.
+
+    Only its own open moves count (a stale status or another request's does not); the typical
+    lateness is added, so a one-off spike does not move the aim.
+    """
+    proto, lane = protocol(cell)
+    lead = proto.settings.move_lead
+    assert proto.asap_start(lane, 1.0) == pytest.approx(1.0 + lead)  # lockstep: nothing more
+    for k in range(5):
+        cmd = proto.move(lane, 'to_park', target(cell), proto.asap_start(lane, k), k)
+        proto.on_execution(lane.robot, cmd.request + 7, 'accepted', k + 1.0, k + 2.0, late=0.5)
+        proto.on_execution(lane.robot, cmd.request, 'accepted', k + 0.1, k + 2.0,
+                           late=0.04 if k != 2 else 0.9)
+    assert proto.start_lag.typical == pytest.approx(0.04) and proto.start_lag.worst == 0.9
+    assert proto.asap_start(lane, 10.0) == pytest.approx(10.0 + lead + 0.04)
+
+
 def test_a_move_not_planned_by_its_deadline_fails_and_says_what_it_waited_for(cell):
     """Queued or waiting for longer than ``move_timeout`` (``carry_timeout`` holding): failed."""
     proto, lane = protocol(cell)

@@ -52,9 +52,10 @@ def test_a_solo_belt_books_holds_and_unblocks_nothing(cell):
     assert belt.in_turn(out, 0.0) is out
     belt.asked(foll)
     assert foll.moves[foll.robot].timeline is None
-    belt.on_trajectory(foll.robot, out[0].request, foll.moves[foll.robot], np.zeros(2),
-                       np.zeros((2, 3)))
-    assert foll.moves[foll.robot].timeline is None
+    belt.on_trajectory(foll.robot, 'm', foll.moves[foll.robot], 0.0, np.array([0.0, 1.0]),
+                       np.zeros((2, 3)), 0.0, proto.q)
+    belt.on_status(foll.robot, 'accepted', 'm', 0.0, 0.0, proto.q)
+    assert foll.moves[foll.robot].timeline is None and not foll.moves[foll.robot].heard
     waiting(lead)
     waiting(foll)
     assert belt.unblock(10.0, proto.q) is None
@@ -62,8 +63,13 @@ def test_a_solo_belt_books_holds_and_unblocks_nothing(cell):
     assert belt.unhindered(lead, None, hit, 0.0, proto.q, 0.0) is hit
 
 
-def test_a_move_is_booked_as_asked_then_as_the_planner_published_it(cell):
-    """Asked: the job's plan from the requested start; then the planner's, shifted to its start."""
+def test_a_move_is_booked_as_asked_then_as_the_arm_is_committed_to_it(cell):
+    """Asked: the job's plan from the requested start; once heard, the committed-motion model's.
+
+    The planner's trajectory, then the bridge's later start, then its end: the booking is
+    what the model says the arm runs. A move timed while its trajectory was lost is the job's
+    plan, shifted or planned from where the arm is.
+    """
     belt, proto, lead, _ = shared(cell)
     cmd = proto.move(lead, 'to_park', park_point(cell, lead.robot), 0.5, 0.0)
     assert belt.committed(lead.robot, 0.0, proto.q).end == 0.0  # not booked yet: it holds
@@ -72,19 +78,37 @@ def test_a_move_is_booked_as_asked_then_as_the_planner_published_it(cell):
     assert asked.start == pytest.approx(0.5)
     assert asked.end == pytest.approx(0.5 + cmd.plan.duration)
     track = lead.moves[lead.robot]
-    t, q = cmd.plan.t + 0.6, cmd.plan.q + 1e-3  # the planner's own, published
-    belt.on_trajectory(lead.robot, cmd.request, track, t, q)
-    np.testing.assert_allclose(belt.committed(lead.robot, 0.0, proto.q).q, q)
+    q = cmd.plan.q + 1e-3  # the planner's own, published, to start at 0.6
+    belt.on_trajectory(lead.robot, 'L/1', track, 0.6, cmd.plan.t, q, 0.05, proto.q)
+    assert track.heard
+    np.testing.assert_allclose(belt.committed(lead.robot, 0.1, proto.q).q[1:], q)
     timed = proto.on_execution(lead.robot, cmd.request, 'accepted', 0.8, 0.8 + cmd.plan.duration)
-    belt.timed(lead.robot, cmd.request, timed, proto.q)
-    np.testing.assert_allclose(belt.committed(lead.robot, 0.0, proto.q).t, t + 0.2)
-    proto.on_execution(lead.robot, cmd.request, 'finished', None, None)
-    assert belt.committed(lead.robot, 0.0, proto.q).end == 0.0  # over: the arm holds
+    belt.timed(lead.robot, cmd.request, timed, proto.q)  # heard: the model books it
+    belt.on_status(lead.robot, 'accepted', 'L/1', 0.8, 0.1, proto.q)
+    booked = belt.committed(lead.robot, 0.1, proto.q)
+    assert booked.start == 0.1 and booked.end == pytest.approx(0.8 + cmd.plan.duration)
+    np.testing.assert_allclose(booked.at(0.8 + cmd.plan.t[3]), q[3])
+    belt.on_status(lead.robot, 'finished', 'L/1', None, 0.8 + cmd.plan.duration, proto.q)
+    late = 1.0 + cmd.plan.duration
+    assert belt.committed(lead.robot, late, proto.q).end == late  # over: the arm holds
     # a move timed before any trajectory came is planned from where the arm is
     cmd = proto.move(lead, 'to_park', [1.5, -1.0, 0.4], 2.0, 1.0)
     timed = proto.on_planner(lead.robot, cmd.request, 'planned', 2.0, 3.0)
     belt.timed(lead.robot, cmd.request, timed, proto.q)
     np.testing.assert_allclose(timed.timeline.t, 2.0 + cmd.plan.t)
+
+
+def test_a_trajectory_the_job_did_not_ask_for_commits_the_arm_too(cell):
+    """A raw command (or a planner's hold) books the arm as the bridge will run it."""
+    belt, proto, lead, _ = shared(cell)
+    q0 = proto.q[lead.robot]
+    there = planning.Timeline(np.array([0.0, 1.0]), np.vstack([q0, q0 + [0.3, 0.0, 0.0]]))
+    belt.on_trajectory(lead.robot, '', None, 0.0, there.t, there.q, 2.0, proto.q)
+    raw = belt.committed(lead.robot, 2.0, proto.q)
+    assert (raw.start, raw.end) == (2.0, 3.0)
+    np.testing.assert_allclose(raw.q[-1], q0 + [0.3, 0.0, 0.0])
+    belt.on_status(lead.robot, 'held', '', None, 2.5, proto.q)  # the bridge held the arm
+    assert belt.committed(lead.robot, 2.5, proto.q).end == 2.5
 
 
 def test_the_followers_moves_wait_for_the_leaders_planner(cell):

@@ -235,21 +235,34 @@ class SortingJob:
             self.belt.timed(robot, request, timed, self.q)
 
     def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
-                     end: Optional[float], reason: str = '') -> None:
-        """Take a bridge execution status about ``robot``'s move for ``request``."""
-        timed = self.protocol.on_execution(robot, request, state, start, end, reason)
+                     end: Optional[float], reason: str = '', late: Optional[float] = None) -> None:
+        """Take a bridge execution status about ``robot``'s move for ``request``.
+
+        :param late: s an ``accepted`` move starts after the start it asked for (None: it
+            asked for none, or not known).
+        """
+        timed = self.protocol.on_execution(robot, request, state, start, end, reason, late)
         if timed is not None:
             self.belt.timed(robot, request, timed, self.q)
 
-    def on_trajectory(self, robot: str, request: int, t: np.ndarray, q: np.ndarray) -> None:
-        """Take the trajectory a planner published for ``robot``'s move ``request``.
+    def on_trajectory(self, robot: str, move_id: str, request: Optional[int], stamp: float,
+                      t: np.ndarray, q: np.ndarray) -> None:
+        """Take a trajectory ``robot`` was sent: a planner's move of the job's, or any other.
 
-        With two lanes it is the motion the move commits the arm to (its booking); a later
-        start reported by the bridge shifts it.
+        With two lanes the arm is committed to it (the belt's booking, by the committed-motion
+        model's rules; the bridge's statuses correct it: :meth:`on_arm_status`).
 
-        :param t: ``(N,)`` absolute sim times, s; :param q: ``(N, 3)`` joint positions.
+        :param move_id: its name; :param request: the job's request it answers, or None (a
+            raw command, a hold); :param stamp: its start, s (0: now); :param t: ``(N,)`` s
+            from its start; :param q: ``(N, 3)`` joint positions.
         """
-        self.belt.on_trajectory(robot, request, self.protocol.open_track(robot, request), t, q)
+        track = None if request is None else self.protocol.open_track(robot, request)
+        self.belt.on_trajectory(robot, move_id, track, stamp, t, q, self.protocol.now, self.q)
+
+    def on_arm_status(self, robot: str, state: str, move_id: str,
+                      start: Optional[float] = None) -> None:
+        """Take the bridge's status of any move of ``robot`` (what the arm is committed to)."""
+        self.belt.on_status(robot, state, move_id, start, self.protocol.now, self.q)
 
     def on_grip(self, token: int, ok: bool, message: str = '') -> None:
         """Take a gripper response for request ``token``: any attempt of a grip still open."""
@@ -479,7 +492,9 @@ class SortingJob:
         to the planner (the plan memo keeps it for that request), is checked against every
         other item's predicted position with ``carry_clearance`` to spare
         (:func:`scara_collab.core.sorting.carry_sweeps`; in mirrored mode the follower's
-        mirror image too). Checking costs about a millisecond; lifting costs a move.
+        mirror image too), over every start up to the worst start lateness measured lately
+        (a late move meets the items further down the belt). Checking costs about a
+        millisecond; lifting costs a move.
         """
         s = self.settings
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, s.drop_clearance)
@@ -491,7 +506,7 @@ class SortingJob:
         spare = s.carry_z - s.pick_z - self.cell.item_size  # = carry_clearance
         return bool(others) and sorting.carry_sweeps(
             self.cell, traj.p, self._asap_start(lane, now) + traj.t, others, s.pick_z, spare,
-            mirrored=lane.mirrored)
+            mirrored=lane.mirrored, late=self.protocol.start_lag.worst)
 
     # --- out of the way ---------------------------------------------------------------------
     def _park(self, lane: Lane, now: float) -> None:

@@ -96,8 +96,10 @@ class MoveTrack:
     end: Optional[float] = None
     reason: str = ''
     arrived: bool = False
-    #: the motion it commits to (the job's own plan of it, from its start), once timed
+    #: the motion it commits to (the job's own plan of it, from its start), until heard
     timeline: Optional[planning.Timeline] = None
+    #: its trajectory was heard: the committed-motion model books it from then on
+    heard: bool = False
 
 
 @dataclass
@@ -236,6 +238,9 @@ class LaneProtocol:
         # (real time, a busy machine) is waited for as it measures, not as lockstep would be
         self.answer_lag = Lateness()
         self.grip_lag = Lateness()
+        #: how late the bridge started the job's moves after the start they asked for (sim s):
+        #: what a move asked for "as soon as possible" allows for on top of the lead
+        self.start_lag = Lateness()
 
     @property
     def grasp_lead(self) -> float:
@@ -269,11 +274,17 @@ class LaneProtocol:
         return self._on_status(robot, request, PLANNER_STATUS.get(state), start, end, reason)
 
     def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
-                     end: Optional[float], reason: str = '') -> Optional[MoveTrack]:
+                     end: Optional[float], reason: str = '',
+                     late: Optional[float] = None) -> Optional[MoveTrack]:
         """Take a bridge execution status about ``robot``'s move for ``request``.
 
+        :param late: s the bridge started it after the start it asked for (``accepted`` of a
+            stamped move; None: not known): measured into :attr:`start_lag`.
         :return: the move's track if this status timed it (``accepted``), else None.
         """
+        if (state == 'accepted' and late is not None
+                and self.open_track(robot, request) is not None):
+            self.start_lag.add(late)
         return self._on_status(robot, request, BRIDGE_STATUS.get(state), start, end, reason)
 
     def _on_status(self, robot: str, request: int, new: Optional[str], start: Optional[float],
@@ -366,9 +377,12 @@ class LaneProtocol:
         planner keeps it while it can still send the move in time, so the time the job took
         to decide counts into the lead instead of coming on top of it (real time; in lockstep
         deciding takes no sim time). A mirrored pair: ``pair_lead`` ahead, so both planners
-        get a start that is still in the future and plan the same.
+        get a start that is still in the future and plan the same. Either way the typical
+        lateness measured on the bridge's starts comes on top (0 in lockstep), so the start
+        the job plans with is the one the move gets.
         """
-        return now + (self.settings.pair_lead if lane.mirrored else self.settings.move_lead)
+        lead = self.settings.pair_lead if lane.mirrored else self.settings.move_lead
+        return now + lead + self.start_lag.typical
 
     def _command(self, lane: Lane) -> MoveCommand:
         return MoveCommand(lane.robot, lane.target, lane.request, lane.mirrored, lane.phase,

@@ -5,13 +5,16 @@ The job holds one of two objects with the same methods:
 - :class:`SoloBelt` (one lane: ``single``, and ``mirrored``, whose one lane moves both arms):
   nothing to book, nothing to hold, nobody to wait for;
 - :class:`SharedBelt` (``collaborative``: a lane per arm): the shared zone booked in time.
-  It books what each arm is committed to: a move as the job planned it when it asked
-  (:meth:`SharedBelt.asked`), then as the planner published it (:meth:`SharedBelt.on_trajectory`,
-  :meth:`SharedBelt.timed`), read back by :meth:`SharedBelt.committed`. From that it times a
-  chase around the other arm's booked motion (:meth:`SharedBelt.unhindered`), tells the job how
-  to unblock an arm that waits for the other (:meth:`SharedBelt.unblock`: park, re-aim, give
-  way or back out), and holds the follower's moves until the leader's planner has answered
-  (:meth:`SharedBelt.in_turn`).
+  What each arm is committed to is the committed-motion model's
+  (:class:`scara_collab.core.motion.Heard`: every trajectory the arm was sent, a raw one too,
+  and the bridge's word on it; :meth:`SharedBelt.on_trajectory`, :meth:`SharedBelt.on_status`).
+  Before a move of the job's is heard, it is booked as the job planned it when it asked
+  (:meth:`SharedBelt.asked`), or, timed by a status while its trajectory was lost, as the job
+  plans it then (:meth:`SharedBelt.timed`); :meth:`SharedBelt.committed` reads it back. From
+  that it times a chase around the other arm's booked motion (:meth:`SharedBelt.unhindered`),
+  tells the job how to unblock an arm that waits for the other (:meth:`SharedBelt.unblock`:
+  park, re-aim, give way or back out), and holds the follower's moves until the leader's
+  planner has answered (:meth:`SharedBelt.in_turn`).
 
 Both read the job's lanes (the same :class:`scara_collab.core.lanes.Lane` objects the job and
 its request protocol use) and the arms' joints the job passes in; the geometry is
@@ -23,9 +26,11 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from scara_collab.core import pairing, planning, sorting
+from scara_collab.core.config import load_config
 from scara_collab.core.job_settings import JobSettings
 from scara_collab.core.lanes import Command, Lane, MoveCommand, MoveTrack, MOVING, PlanFn
 from scara_collab.core.model import CellModel
+from scara_collab.core.motion import Heard
 
 #: s: an item with less than this left in an arm's reach is urgent: about two cycles, so of
 #: two urgent items the arm can still take the one after the other. An urgent item is chased
@@ -75,8 +80,12 @@ class SoloBelt:
     def timed(self, robot: str, request: int, track: MoveTrack, q: Joints) -> None:
         """Book nothing."""
 
-    def on_trajectory(self, robot: str, request: int, track: Optional[MoveTrack],
-                      t: np.ndarray, q_traj: np.ndarray) -> None:
+    def on_trajectory(self, robot: str, move_id: str, track: Optional[MoveTrack], stamp: float,
+                      t: np.ndarray, q_traj: np.ndarray, now: float, q: Joints) -> None:
+        """Book nothing."""
+
+    def on_status(self, robot: str, state: str, move_id: str, start: Optional[float],
+                  now: float, q: Joints) -> None:
         """Book nothing."""
 
     def unhindered(self, lane: Lane, item: sorting.SeenItem, hit: sorting.Intercept,
@@ -113,6 +122,9 @@ class SharedBelt:
         self.lanes = list(lanes)
         self._held: List[MoveCommand] = []  # the follower's moves, held for the leader's answer
         self._held_since = 0.0
+        dt = 1.0 / float(load_config('simulation')['physics_rate'])
+        #: what each arm is committed to, as heard (the bridge's rules)
+        self.heard = {a.name: Heard(a.name, dt=dt) for a in cell.arms}
 
     # --- in turn: the leader's move first ----------------------------------------------------
     def in_turn(self, out: List[Command], now: float) -> List[Command]:
@@ -149,36 +161,36 @@ class SharedBelt:
         self._held = []
 
     # --- what each arm has booked ------------------------------------------------------------
-    def on_trajectory(self, robot: str, request: int, track: Optional[MoveTrack],
-                      t: np.ndarray, q_traj: np.ndarray) -> None:
-        """Take the trajectory a planner published for ``robot``'s move ``request``.
+    def on_trajectory(self, robot: str, move_id: str, track: Optional[MoveTrack], stamp: float,
+                      t: np.ndarray, q_traj: np.ndarray, now: float, q: Joints) -> None:
+        """Take a trajectory ``robot`` was sent, the job's or not: the arm is committed to it.
 
-        It is the motion the move commits the arm to (its booking, see :meth:`timed`); a
-        later start reported by the bridge shifts it.
-
-        :param track: the move's open track (None: not a move of the job's, or over).
-        :param t: ``(N,)`` absolute sim times, s; :param q_traj: ``(N, 3)`` joint positions.
+        :param move_id: its name; :param track: the open track of the job's move it is (None:
+            not one, e.g. a raw command or a hold); :param stamp: its start, s (0: now);
+        :param t: ``(N,)`` s from its start; :param q_traj: ``(N, 3)`` joint positions.
+        :param now: sim s; :param q: the arms' joints.
         """
-        if track is None:
-            return
-        track.timeline = planning.Timeline(np.asarray(t, dtype=float),
-                                           np.asarray(q_traj, dtype=float))
-        if track.start is not None:  # already timed: the start that counts
-            self._shift(track)
+        move = self.heard[robot].trajectory(move_id, stamp, t, q_traj, now, q.get(robot))
+        if track is not None and move is not None:
+            track.heard = True  # from now on, what was heard books it
+
+    def on_status(self, robot: str, state: str, move_id: str, start: Optional[float],
+                  now: float, q: Joints) -> None:
+        """Take the bridge's status of any move of ``robot`` (:meth:`.motion.Heard.status`)."""
+        self.heard[robot].status(state, move_id, now, start, q.get(robot))
 
     def timed(self, robot: str, request: int, track: MoveTrack, q: Joints) -> None:
-        """Keep the motion a timed move commits ``robot`` to (each lane's look-ahead).
+        """Book a timed move of the job's whose trajectory has not been heard.
 
-        It is the trajectory the planner published (:meth:`on_trajectory`), shifted to the
-        start the planner's ``planned`` or the bridge's ``accepted`` reports. Only if that
-        message has not come (lost, or overtaken by the status) is the move planned here, as
-        the planner did, from where the arm is now (``q``: the arms' joints; it has not
-        started yet).
+        Its booking (the job's plan, :meth:`asked`) is shifted to the start the planner's
+        ``planned`` or the bridge's ``accepted`` reports. If the job could not plan it when it
+        asked, it is planned here, as the planner did, from where the arm is now (``q``: the
+        arms' joints; it has not started yet). A heard trajectory books it instead.
         """
-        if track.start is None:
+        if track.start is None or track.heard:
             return
         if track.timeline is not None:
-            self._shift(track)
+            track.timeline = track.timeline.shifted(track.start - track.timeline.start)
             return
         lane = next(la for la in self.lanes if la.request == request and robot in la.moves)
         try:
@@ -187,25 +199,21 @@ class SharedBelt:
             return
         track.timeline = planning.Timeline.of(traj, track.start)
 
-    @staticmethod
-    def _shift(track: MoveTrack) -> None:
-        """Shift the track's booked motion to the start reported for it."""
-        track.timeline = track.timeline.shifted(track.start - track.timeline.start)
-
     def committed(self, robot: str, now: float, q: Joints) -> planning.Timeline:
         """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds at ``q``).
 
-        Booked: a move the planner timed (``planned``, ``accepted``), or one just asked for,
-        as the job planned it when it asked (:meth:`asked`): in the ticks before the
-        planner's answer the other lane must not decide as if the arm stood still.
+        A move of the job's not heard yet (asked, or timed while its trajectory was lost) is
+        booked as the job planned it: in the ticks before the planner's answer the other lane
+        must not decide as if the arm stood still. Otherwise the arm is committed to what was
+        heard (:attr:`heard`: the moves it runs or waits to run, the job's or not).
         """
         for lane in self.lanes:
             track = lane.moves.get(robot) if lane.phase in MOVING else None
-            if (track is not None and track.timeline is not None
+            if (track is not None and not track.heard and track.timeline is not None
                     and track.state in ('asked', 'planned', 'accepted')
                     and track.timeline.end > now):
                 return track.timeline
-        return planning.Timeline.hold(now, q[robot])
+        return self.heard[robot].motion(now, q[robot])
 
     def asked(self, lane: Lane) -> None:
         """Book a move just asked for as the job planned it (``lane.plan``).

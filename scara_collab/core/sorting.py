@@ -293,7 +293,7 @@ def rank_by_cycle(cell: CellModel, arm: ArmModel, q_start, order: Sequence[Tuple
 
 def carry_sweeps(cell: CellModel, path: np.ndarray, times: np.ndarray,
                  items: Iterable[SeenItem], pick_z: float, spare: float,
-                 mirrored: bool = False) -> bool:
+                 mirrored: bool = False, late: float = 0.0) -> bool:
     """Return True if an item held under the tool along ``path`` would touch one on the belt.
 
     A held item hangs with its bottom ``pick_z - belt top`` below the tool (it was grasped
@@ -304,6 +304,8 @@ def carry_sweeps(cell: CellModel, path: np.ndarray, times: np.ndarray,
 
     :param path: ``(N, 3)`` tool positions (world); :param times: ``(N,)`` when, s (sim).
     :param items: the other items resting on the belt.
+    :param late: s the move may start after ``times`` say: every start in between is checked
+        (the belt carries an item ``belt.speed * late`` further meanwhile).
     """
     size = cell.item_size
     low = path[:, 2] - pick_z < size + spare  # the held bottom below the item tops
@@ -311,10 +313,13 @@ def carry_sweeps(cell: CellModel, path: np.ndarray, times: np.ndarray,
         return False
     t, xy = np.asarray(times)[low], path[low, :2]
     paths = [xy] + ([xy * [1.0, -1.0] + [0.0, 2 * cell.belt.centre_y]] if mirrored else [])
+    reach = size + spare
+    carried = cell.belt.speed * max(float(late), 0.0)  # how much further a late start finds it
+    back, ahead = min(carried, 0.0) - reach, max(carried, 0.0) + reach
     for it in items:
         x = it.position[0] + cell.belt.speed * (t - it.stamp)
         for p in paths:
-            if np.any((np.abs(p[:, 0] - x) < size + spare)
-                      & (np.abs(p[:, 1] - it.position[1]) < size + spare)):
+            if np.any((p[:, 0] > x + back) & (p[:, 0] < x + ahead)
+                      & (np.abs(p[:, 1] - it.position[1]) < reach)):
                 return True
     return False

@@ -107,7 +107,8 @@ class AutomationManager(Node):
                 self.create_subscription(DiagnosticStatus, f'{a.name}/execution_status',
                                          guarded(self, self._on_execution), 50),
                 self.create_subscription(JointTrajectory, f'{a.name}/joint_trajectory',
-                                         guarded(self, self._on_trajectory), 10))
+                                         guarded(self, lambda msg, n=a.name:
+                                                 self._on_trajectory(n, msg)), 10))
         # every state and item list, each in turn: with a depth of 1, the callback of one
         # takes the newest (one published after the next /clock, if the node is behind), and
         # the tick sees it or not by timing (README, *Repeatable runs*)
@@ -169,6 +170,8 @@ class AutomationManager(Node):
 
     def _on_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
+        if st.robot in self.job.sorted_by:  # the cell's arms: what the arm is committed to
+            self.job.on_arm_status(st.robot, st.state, st.move, st.start)
         try:
             robot, request = proto.parse_move_id(st.move)
         except proto.ProtocolError:
@@ -177,18 +180,19 @@ class AutomationManager(Node):
         if state == 'preempted' and not proto.planners_move(robot, st.by):
             # someone else's trajectory took the arm over: the move failed, plan again
             state, reason = 'refused', f'taken over by move {st.by or "(no id)"}'
-        self.job.on_execution(robot, request, state, st.start, st.end, reason)
+        self.job.on_execution(robot, request, state, st.start, st.end, reason,
+                              st.late if st.stamp else None)
 
-    def _on_trajectory(self, msg: JointTrajectory) -> None:
+    def _on_trajectory(self, robot: str, msg: JointTrajectory) -> None:
         try:
-            robot, request = proto.parse_move_id(msg.header.frame_id)
+            owner, request = proto.parse_move_id(msg.header.frame_id)
         except proto.ProtocolError:
-            return  # not a planner's move of a request (a raw command, a hold): nothing to book
-        if robot not in self.job.sorted_by:  # the cell's arms
-            raise proto.ProtocolError(f'trajectory for move {msg.header.frame_id!r}: '
-                                      'no such arm in the cell')
+            owner, request = robot, None  # not a planner's move of a request: a raw one, a hold
+        if owner != robot:
+            raise proto.ProtocolError(f'trajectory for move {msg.header.frame_id!r} on '
+                                      f"{robot}'s topic")
         stamp, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
-        self.job.on_trajectory(robot, request, stamp + t, q)
+        self.job.on_trajectory(robot, msg.header.frame_id, request, stamp, t, q)
 
     def _on_estop(self, kind: str, msg: Bool) -> None:
         was = any(self._stops.values())
