@@ -187,10 +187,9 @@ class AutomationManager(Node):
         try:
             owner, request = proto.parse_move_id(msg.header.frame_id)
         except proto.ProtocolError:
-            owner, request = robot, None  # not a planner's move of a request: a raw one, a hold
-        if owner != robot:
-            raise proto.ProtocolError(f'trajectory for move {msg.header.frame_id!r} on '
-                                      f"{robot}'s topic")
+            owner, request = robot, None
+        if owner != robot:  # not a planner's move of a request of this arm: a raw one, a hold
+            request = None  # (the bridge runs it on this arm all the same)
         stamp, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
         self.job.on_trajectory(robot, msg.header.frame_id, request, stamp, t, q)
 
