@@ -155,7 +155,6 @@ class RunLog:
         self.state_period = float(state_period)
         self.missing = 0            # joint states never heard (gaps in the stamps)
         self.largest_gap = 0.0      # s between consecutive recorded stamps, beyond one period
-        self._t_written: Optional[float] = None
         self.columns = state_columns(cell)
         self.rows = 0
         self.t_first: Optional[float] = None
@@ -172,7 +171,7 @@ class RunLog:
         self.max_speed_ratio = 0.0  # the fastest any joint went, as a share of its limit
         self._limits = np.concatenate([a.max_velocity for a in cell.arms])
         self._joints = [(a.name, k + 1) for a in cell.arms for k in range(3)]
-        self._last: Optional[Tuple[float, np.ndarray]] = None  # the last state written
+        self._last: Optional[Tuple[float, np.ndarray]] = None  # the last state written (t, q)
         self._episode_end: Dict[int, float] = {}  # joint index -> last overspeed sample, s
         self.closed = False
         self._t: List[float] = []
@@ -221,13 +220,11 @@ class RunLog:
             np.savetxt(self._ts, np.column_stack((t, q, p_lead, p_foll, error, dist)),
                        fmt=_FORMAT, delimiter=',')
             self.rows += t.size
-            steps = np.diff(t if self._t_written is None else np.concatenate(
-                ([self._t_written], t)))
+            steps = np.diff(t if self._last is None else np.concatenate(([self._last[0]], t)))
             late = steps > 1.5 * self.state_period
             if np.any(late):
                 self.missing += int(np.sum(np.round(steps[late] / self.state_period) - 1))
                 self.largest_gap = max(self.largest_gap, float(steps[late].max()))
-            self._t_written = float(t[-1])
             self._watch_speed(t, q)
             k = int(np.argmin(dist))
             if dist[k] < self.min_distance:
