@@ -13,7 +13,9 @@ implies ``tf``), ``auto_start`` (``true``: the job starts once the graph is conn
 for nobody, as on hardware or in Gazebo: the bridge's ``lockstep_window`` 0), ``namespace``
 (e.g. ``/cell_1``: every node of the cell in that namespace with the graph's remaps,
 :func:`scara_collab.graph.remaps`, so cells in different namespaces share a domain; default
-none).
+none), ``cells`` (N > 1: a line of N cells along one belt, cell k under ``/cell_k`` with its
+bridge's line parameters and its upstream cells' handoff remaps, only cell 0 fed;
+:mod:`scara_collab.core.line`; with ``namespace`` the line goes under it, ``<ns>/cell_k``).
 """
 import os
 
@@ -27,7 +29,7 @@ from scara_collab import graph
 
 PACKAGE = 'scara_collab'
 ARGUMENTS = {'mode': 'collaborative', 'tf': 'false', 'viewer': 'false', 'rviz': 'false',
-             'auto_start': 'true', 'lockstep': 'true', 'namespace': ''}
+             'auto_start': 'true', 'lockstep': 'true', 'namespace': '', 'cells': '1'}
 
 
 def _typed(value: str):
@@ -50,21 +52,35 @@ def nodes(context):
     params = graph.job_params(arg['mode'], lockstep=arg['lockstep'].lower() == 'true')
     if arg['mode'] != 'idle':
         params['automation_manager']['auto_start'] = arg['auto_start']
-    namespace = graph.namespace_of(arg['namespace'])
-    placed = {'namespace': namespace, 'remappings': list(graph.remaps(namespace).items())
-              } if namespace else {}
+    try:
+        cells = int(arg['cells'])
+    except ValueError:
+        cells = 0
+    if cells < 1:
+        raise ValueError(f"cells must be an integer >= 1, got {arg['cells']!r}")
+    base = graph.namespace_of(arg['namespace'])
     out = []
-    for spec in graph.job_nodes(automation=arg['mode'] != 'idle',
-                                viewer=arg['viewer'].lower() == 'true',
-                                transforms=rviz or arg['tf'].lower() == 'true'):
-        files = [os.path.join(share, 'config', f'{c}.yaml') for c in spec.configs]
-        values = {k: _typed(v) for k, v in params.get(spec.name, {}).items()}
-        out.append(Node(package=PACKAGE, executable=spec.name, name=spec.name, output='screen',
-                        parameters=files + [dict(values, use_sim_time=True)], **placed))
-    if rviz:
-        out.append(Node(package='rviz2', executable='rviz2', name='rviz2', output='screen',
-                        arguments=['-d', os.path.join(share, 'config', 'cell.rviz')],
-                        parameters=[{'use_sim_time': True}], **placed))
+    for k in range(cells):
+        namespace = base + graph.cell_namespace(k, cells)
+        upstream = [base + ns for ns in graph.line_upstream(k, cells)]
+        line = graph.line_params(k, cells)
+        if k > 0 and arg['mode'] != 'idle':
+            line.setdefault('pybullet_bridge', {})['feed_interval'] = '0.0'  # handed on
+        placed = {'namespace': namespace, 'remappings': list(
+            graph.remaps(namespace, upstream).items())} if namespace else {}
+        for spec in graph.job_nodes(automation=arg['mode'] != 'idle',
+                                    viewer=arg['viewer'].lower() == 'true' and k == 0,
+                                    transforms=rviz or arg['tf'].lower() == 'true'):
+            files = [os.path.join(share, 'config', f'{c}.yaml') for c in spec.configs]
+            own = dict(params.get(spec.name, {}), **line.get(spec.name, {}))
+            values = {key: _typed(v) for key, v in own.items()}
+            out.append(Node(package=PACKAGE, executable=spec.name, name=spec.name,
+                            output='screen',
+                            parameters=files + [dict(values, use_sim_time=True)], **placed))
+        if rviz and k == 0:
+            out.append(Node(package='rviz2', executable='rviz2', name='rviz2', output='screen',
+                            arguments=['-d', os.path.join(share, 'config', 'cell.rviz')],
+                            parameters=[{'use_sim_time': True}], **placed))
     return out
 
 

@@ -86,28 +86,78 @@ def resolve(name: str, namespace: Optional[str] = '') -> str:
     return f'{namespace_of(namespace)}/{name}'
 
 
-def remaps(namespace: Optional[str] = '') -> Dict[str, str]:
+def remaps(namespace: Optional[str] = '',
+           upstream: Sequence[str] = ()) -> Dict[str, str]:
     """Return the remaps every node of a cell in ``namespace`` needs (none in the root).
 
     rclpy's time source subscribes the absolute ``/clock`` (:data:`SIM_TIME_CLOCK`); in a
-    namespace it must hear the cell's own clock.
+    namespace it must hear the cell's own clock. In a line of cells, the cells ``upstream``
+    (their namespaces, nearest first) hand items on: the nearest one's ``line/handoff`` is
+    this cell's ``line/upstream``, the one before's its ``line/upstream2`` (should the
+    nearest one die).
 
     >>> remaps(), remaps('cell_1')
     ({}, {'/clock': '/cell_1/clock'})
+    >>> remaps('cell_2', upstream=['/cell_1', '/cell_0'])['line/upstream2']
+    '/cell_0/line/handoff'
     """
     ns = namespace_of(namespace)
-    return {SIM_TIME_CLOCK: resolve(CLOCK, ns)} if ns else {}
+    out = {SIM_TIME_CLOCK: resolve(CLOCK, ns)} if ns else {}
+    for name, cell in zip((LINE_UPSTREAM, LINE_UPSTREAM2), upstream):
+        out[name] = resolve(LINE_HANDOFF, cell)
+    return out
 
 
-def node_args(namespace: Optional[str] = '') -> List[str]:
+def node_args(namespace: Optional[str] = '', upstream: Sequence[str] = ()) -> List[str]:
     """Return the ``--ros-args`` that put a node into ``namespace`` ([] for the root)."""
     ns = namespace_of(namespace)
-    if not ns:
-        return []
-    out = ['--ros-args', '-r', f'__ns:={ns}']
-    for source, target in remaps(ns).items():
+    out = ['--ros-args', '-r', f'__ns:={ns}'] if ns else ['--ros-args']
+    for source, target in remaps(ns, upstream).items():
         out += ['-r', f'{source}:={target}']
-    return out
+    return out if len(out) > 1 else []
+
+
+# --- a line of cells (scara_collab.core.line) -------------------------------------------------
+LINE_HANDOFF = 'line/handoff'    # what a cell hands on, with its frontier (pybullet_bridge)
+LINE_UPSTREAM = 'line/upstream'  # the upstream cell's line/handoff, remapped
+LINE_UPSTREAM2 = 'line/upstream2'  # the handoffs of the cell before that (if the next dies)
+
+
+def cell_namespace(k: int, cells: int) -> str:
+    """Return the namespace of cell ``k`` of a line of ``cells`` (the root for a lone cell).
+
+    >>> cell_namespace(0, 1), cell_namespace(0, 3), cell_namespace(2, 3)
+    ('', '/cell_0', '/cell_2')
+    """
+    if not 0 <= k < cells:
+        raise ValueError(f'cell {k} is not in a line of {cells}')
+    return f'/cell_{k}' if cells > 1 else ''
+
+
+def line_upstream(k: int, cells: int) -> List[str]:
+    """Return the namespaces of the two cells before cell ``k`` (nearest first), if any.
+
+    >>> line_upstream(0, 3), line_upstream(1, 3), line_upstream(2, 3)
+    ([], ['/cell_0'], ['/cell_1', '/cell_0'])
+    """
+    cell_namespace(k, cells)
+    return [cell_namespace(j, cells) for j in (k - 1, k - 2) if j >= 0]
+
+
+def line_params(k: int, cells: int) -> Dict[str, Dict[str, str]]:
+    """Return the parameters of cell ``k`` of a line of ``cells``, per node (none when alone).
+
+    Every cell but the first is fed by the one upstream; every cell but the last hands on.
+
+    >>> line_params(1, 3)['pybullet_bridge']
+    {'line_cell': '1', 'line_upstream': 'true', 'line_downstream': 'true'}
+    """
+    cell_namespace(k, cells)
+    if cells == 1:
+        return {}
+    return {'pybullet_bridge': {'line_cell': str(k), 'line_upstream': str(k > 0).lower(),
+                                'line_downstream': str(k < cells - 1).lower()},
+            'automation_manager': {'line_cell': str(k), 'line_cells': str(cells)}}
 
 
 @dataclass(frozen=True)
@@ -238,6 +288,7 @@ TOPICS: Tuple[Topic, ...] = (
     Topic('joint_states', 'sensor_msgs/msg/JointState'),
     Topic('conveyor/items', 'visualization_msgs/msg/MarkerArray'),
     Topic('conveyor/events', _STATUS, 'events'),
+    Topic(LINE_HANDOFF, _STATUS, 'events'),                        # ... in a line of cells
     Topic('collab/target', _POINT),                                # automation_manager
     Topic('collab/target_trajectory', _TRAJECTORY),                # ... its plan of a move
     Topic('collision_monitor/min_distance', 'std_msgs/msg/Float64'),
@@ -382,7 +433,7 @@ def param_value(value) -> str:
 
 def ros_args(configs: Sequence[str] = (), params: Optional[Mapping[str, object]] = None,
              sim_time: bool = True, config_dir: Optional[Path] = None,
-             namespace: Optional[str] = '') -> List[str]:
+             namespace: Optional[str] = '', upstream: Sequence[str] = ()) -> List[str]:
     """Return a node's ``--ros-args``: sim time, ``--params-file`` per config, ``-p`` per param.
 
     In a ``namespace`` also the node's namespace and the cell's remaps (:func:`node_args`).
@@ -391,12 +442,14 @@ def ros_args(configs: Sequence[str] = (), params: Optional[Mapping[str, object]]
     :param params: single parameters, set after the files.
     :param config_dir: where the files are (default: the package's config folder).
     :param namespace: the cell's namespace (default: the root, no remaps).
+    :param upstream: in a line of cells, the namespaces of the cells upstream, nearest first
+        (:func:`remaps`).
     """
     if config_dir is None and configs:
         from scara_collab.core.paths import config_dir as package_config_dir
         config_dir = package_config_dir()
     out = ['--ros-args', '-p', f'use_sim_time:={"true" if sim_time else "false"}']
-    out += node_args(namespace)[1:]
+    out += node_args(namespace, upstream)[1:]
     for name in configs:
         out += ['--params-file', str(Path(config_dir) / f'{name}.yaml')]
     for key, value in (params or {}).items():

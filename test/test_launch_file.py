@@ -124,3 +124,27 @@ def test_lockstep_false_runs_the_bridge_without_a_window(monkeypatch):
     assert planner['send_margin'] == graph.REALTIME_SEND_MARGIN
     with pytest.raises(ValueError, match='lockstep must be true or false'):
         bridge('off')
+
+
+def test_cells_3_starts_a_line_of_cells_in_their_namespaces(monkeypatch):
+    """``cells:=3``: every node of cell k under ``/cell_k``, the bridges joined into a line."""
+    module = load(monkeypatch)
+    opaque = module.generate_launch_description().args[0][-1]
+    nodes = opaque.kwargs['function'](dict(module.ARGUMENTS, cells='3'))
+    per_cell = len(graph.job_nodes())
+    assert len(nodes) == 3 * per_cell
+    bridges = [n for n in nodes if n.kwargs['name'] == 'pybullet_bridge']
+    assert [b.kwargs['namespace'] for b in bridges] == ['/cell_0', '/cell_1', '/cell_2']
+    own = [b.kwargs['parameters'][-1] for b in bridges]
+    assert [(o['line_cell'], o['line_upstream'], o['line_downstream']) for o in own] == [
+        (0, False, True), (1, True, True), (2, True, False)]
+    assert 'feed_interval' not in own[0] and own[1]['feed_interval'] == 0.0
+    remaps = dict(bridges[2].kwargs['remappings'])
+    assert remaps['/clock'] == '/cell_2/clock'
+    assert remaps['line/upstream'] == '/cell_1/line/handoff'
+    assert remaps['line/upstream2'] == '/cell_0/line/handoff'
+    lone = opaque.kwargs['function'](dict(module.ARGUMENTS))  # cells:=1: today's cell
+    assert 'namespace' not in lone[0].kwargs and 'line_cell' not in lone[0].kwargs[
+        'parameters'][-1]
+    with pytest.raises(ValueError, match='cells must be an integer >= 1'):
+        opaque.kwargs['function'](dict(module.ARGUMENTS, cells='0'))

@@ -147,8 +147,8 @@ def test_events_are_written_at_once_and_counted_per_window(cell, tmp_path):
     lines = (tmp_path / EVENTS).read_text().splitlines()
     assert lines[0].split(',') == list(EVENT_COLUMNS) and len(lines) == 6
     assert lines[3] == '3.000,sorted,1,red,scara_left,'
-    assert log.event_counts() == {'spawned': 2, 'sorted': 1, 'missed': 1, 'wrong_bin': 0,
-                                  'dropped': 0, 'grasped': 1}
+    assert log.event_counts() == {'spawned': 2, 'received': 0, 'sorted': 1, 'missed': 1,
+                                  'handed_on': 0, 'wrong_bin': 0, 'dropped': 0, 'grasped': 1}
     window = log.event_counts(2.0, 4.0)
     assert set(COUNTED) <= set(window) and (window['spawned'], window['sorted']) == (1, 1)
     log.close()

@@ -158,6 +158,9 @@ SCHEMAS = {
         Rule('arrive_tolerance', 'positive'),
         Rule('grip_timeout', 'positive'),
         Rule('grip_retries', 'int', lambda v: v >= 0, 'must be >= 0'),
+        Rule('line_cells', 'int', lambda v: v >= 1, 'must be >= 1'),
+        Rule('line_cell', 'int', lambda v: v >= 0, 'must be >= 0'),
+        Rule('line_capacity', 'positive'),
     ],
 }
 

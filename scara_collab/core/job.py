@@ -58,7 +58,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from scara_collab.core import pairing, sharing, sorting
+from scara_collab.core import line, pairing, sharing, sorting
 from scara_collab.core.job_settings import JobSettings, MODES
 from scara_collab.core.lanes import (Command, FAILED_MOVE, GripCommand, GripTrack, Lane,
                                      LaneEvent, LaneProtocol, MOVE_STATES, MoveCommand,
@@ -171,6 +171,9 @@ class SortingJob:
         self.start_time: Optional[float] = None
         self.items: Dict[int, sorting.SeenItem] = {}
         self.claimed: Dict[int, str] = {}
+        #: in a line of cells, the items this cell leaves for the ones downstream
+        self.share = (line.Share(settings.line_cell, settings.line_cells, settings.line_capacity)
+                      if settings.line_cells > 1 else None)
         self.counts: Dict[str, int] = {}
         self.sorted_by: Dict[str, int] = {a.name: 0 for a in cell.arms}
         self.give_ups = 0
@@ -218,6 +221,8 @@ class SortingJob:
     def on_items(self, items: Sequence[sorting.SeenItem]) -> None:
         """Take the items resting on the belt now (not held, not falling, not in a bin)."""
         self.items = {it.id: it for it in items}
+        if self.share is not None and self.items:
+            self.share.see(self.items, max(it.stamp for it in items))
 
     def on_estop(self, on: bool) -> None:
         """Take the emergency stop: while set, nothing new is commanded."""
@@ -273,7 +278,7 @@ class SortingJob:
         self.counts[kind] = self.counts.get(kind, 0) + 1
         if kind == 'sorted' and robot in self.sorted_by:
             self.sorted_by[robot] += 1
-        if kind in ('sorted', 'wrong_bin', 'missed', 'dropped'):
+        if kind in sorting.GONE:
             self.claimed.pop(item, None)
             last = self.notes.close(item)
             if kind == 'missed':
@@ -433,7 +438,8 @@ class SortingJob:
         arm = self.cell.arm(lane.robot)
         others_busy = any(o.phase != 'idle' for o in self.lanes if o is not lane)
         free = [it for i, it in self.items.items()
-                if i not in self.claimed and lane.failures.get(i, 0) < 2]
+                if i not in self.claimed and lane.failures.get(i, 0) < 2
+                and (self.share is None or self.share.takes(i, now))]
         if how.half:  # the leader takes its half; the partner is mirrored
             side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
             free = [it for it in free if np.sign(it.position[1]) == side]

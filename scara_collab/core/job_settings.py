@@ -38,6 +38,9 @@ class JobSettings:
     bin_retries: int = 3
     steal_cycle: float = 0.0
     move_lead: float = 0.05
+    line_cell: int = 0
+    line_cells: int = 1
+    line_capacity: float = 40.0
 
     @staticmethod
     def from_config(cell: CellModel, cfg: dict, mode: Optional[str] = None,
@@ -54,6 +57,9 @@ class JobSettings:
         mode = mode or cfg['mode']
         if mode not in MODES:
             raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
+        if not 0 <= int(cfg['line_cell']) < int(cfg['line_cells']):
+            raise ValueError(f"line_cell {cfg['line_cell']} is not a cell of a line of "
+                             f"{cfg['line_cells']}")
         pick_z = sorting.pick_height(cell, cfg['pick_clearance'])
         # a held item hangs item_size + pick_clearance below the tool: lifted to carry_z, its
         # bottom clears the tops of the items on the belt by carry_clearance
@@ -73,4 +79,6 @@ class JobSettings:
             unblock_after=float(cfg['unblock_after']),
             steal_cycle=float(cfg['steal_cycle']),
             pair_margin=cell.safety_margin + float(controllers['planning_buffer']),
-            move_lead=float(controllers['planning_lead']))
+            move_lead=float(controllers['planning_lead']),
+            line_cell=int(cfg['line_cell']), line_cells=int(cfg['line_cells']),
+            line_capacity=float(cfg['line_capacity']))

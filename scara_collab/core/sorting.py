@@ -18,6 +18,17 @@ from scara_collab.core.kinematics import ik
 from scara_collab.core.model import ArmModel, CellModel
 from scara_collab.core.trajectory import Trajectory
 
+#: what can happen to an item, in the bridge's ``conveyor/events``: the one list of kinds.
+#: ``received`` and ``handed_on`` are a line's (:mod:`scara_collab.core.line`): an item put on
+#: this section's belt by the cell upstream, and one carried past its end to the cell
+#: downstream (the last cell of a line, and a cell on its own, miss it instead).
+ITEM_EVENTS = ('spawned', 'received', 'grasped', 'released', 'sorted', 'wrong_bin', 'missed',
+               'handed_on', 'dropped')
+#: the kinds a run counts (its summary has one number for each)
+COUNTED = ('spawned', 'received', 'sorted', 'missed', 'handed_on', 'wrong_bin', 'dropped')
+#: after these the item has left the cell
+GONE = ('sorted', 'wrong_bin', 'missed', 'handed_on', 'dropped')
+
 
 @dataclass(frozen=True)
 class SeenItem:

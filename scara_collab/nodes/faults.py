@@ -24,6 +24,14 @@ arrive 10-50 ms late). To prove that the graph survives them, every node takes t
     flight for ever; when it has not moved between two looks 0.25 s (wall) apart, what waits
     is delivered, in order. ``drop`` and ``delay`` entries for the same name take the first
     ``N`` messages; ``latency`` applies to the others.
+``loss:<name>:<p>``
+    lose each message (or response) with probability ``p``;
+``repeat:<name>:<p>``
+    deliver each message twice with probability ``p`` (a retransmission seen twice). Both
+    draw from a generator seeded with the name, so a run loses and repeats the same ones.
+``crash:<node>:<sim s>``
+    the node of that fully qualified name (``/cell_1/pybullet_bridge``; the bridge only) dies
+    at that sim time, at once and without a goodbye, as a process that is killed (exit 70).
 
 Names are fully qualified (``/scara_left/gripper``, ``/scara_left/planner_status``). A node
 applies the entries that name its own publishers and clients and ignores the others, so the
@@ -45,9 +53,12 @@ from rclpy.node import Node
 
 from scara_collab.nodes.guarded import guarded
 
-KINDS = ('drop', 'delay', 'latency')
-FORMS = ('drop:/<name>:<N>, delay:/<name>:<N>:<seconds> or '
-         'latency:/<name>:<mean seconds>:<jitter seconds>')
+KINDS = ('drop', 'delay', 'latency', 'loss', 'repeat', 'crash')
+FORMS = ('drop:/<name>:<N>, delay:/<name>:<N>:<seconds>, '
+         'latency:/<name>:<mean seconds>:<jitter seconds>, loss:/<name>:<p>, '
+         'repeat:/<name>:<p> or crash:/<node>:<sim seconds>')
+CRASH_EXIT = 70  # the exit status of a node that a crash fault kills
+_CHANCE = ('loss', 'repeat')  # a probability per message
 #: wall s between looks at a latency queue on wall time (sim time: every /clock instead)
 LATENCY_PERIOD = 1e-3
 #: wall s between looks at whether a node's sim clock stands still (paused): what is in
@@ -72,7 +83,7 @@ def _parse_one(spec: str) -> Tuple[str, Fault]:
     """Return ``(name, fault)`` of one entry; :raises ValueError: with the reason."""
     parts = spec.split(':')
     kind = parts[0]
-    arity = {'drop': 3, 'delay': 4, 'latency': 4}.get(kind)
+    arity = {'drop': 3, 'delay': 4, 'latency': 4, 'loss': 3, 'repeat': 3, 'crash': 3}.get(kind)
     if arity is None or len(parts) != arity or not parts[1].startswith('/'):
         raise ValueError(f'fault {spec!r}: expected {FORMS} with a fully qualified name')
     try:
@@ -86,6 +97,14 @@ def _parse_one(spec: str) -> Tuple[str, Fault]:
                              'seconds with 0 <= jitter <= mean (delays uniform in '
                              '[mean - jitter, mean + jitter])')
         return parts[1], Fault(kind, 0, mean, jitter)
+    if kind == 'crash':
+        if not 0 <= numbers[0] < float('inf'):
+            raise ValueError(f'fault {spec!r}: expected crash:/<node>:<sim seconds >= 0>')
+        return parts[1], Fault(kind, 0, numbers[0])
+    if kind in _CHANCE:
+        if not 0 <= numbers[0] <= 1:
+            raise ValueError(f'fault {spec!r}: expected {kind}:/<name>:<p> with 0 <= p <= 1')
+        return parts[1], Fault(kind, 0, numbers[0])
     try:
         n = int(parts[2])
         delay = float(parts[3]) if kind == 'delay' else 0.0
@@ -98,15 +117,15 @@ def _parse_one(spec: str) -> Tuple[str, Fault]:
 
 
 def parse_faults(specs: Sequence[str]) -> Dict[str, List[Fault]]:
-    """Parse ``drop``, ``delay`` and ``latency`` entries (see the module docstring).
+    """Parse the entries (see the module docstring).
 
     >>> parse_faults(['drop:/a/gripper:2'])['/a/gripper'][0].remaining
     2
     >>> parse_faults(['latency:/joint_states:0.02:0.01'])['/joint_states'][0].jitter
     0.01
 
-    :raises ValueError: an entry that is not one of the three forms, or a latency whose
-        jitter is negative or larger than its mean.
+    :raises ValueError: an entry that is not one of the forms, a latency whose jitter is
+        negative or larger than its mean, or a probability outside [0, 1].
     """
     out: Dict[str, List[Fault]] = {}
     for spec in specs:
@@ -178,17 +197,28 @@ class FaultPlan:
             name: LatencyLine(name, f.delay, f.jitter)
             for name, faults in self.faults.items() for f in faults if f.kind == 'latency'}
         self._lines: Dict[str, '_LineDelivery'] = {}  # name -> its queue's delivery, once used
+        self._chance = {name: random.Random(zlib.crc32(b'chance' + name.encode('utf-8')))
+                        for name, faults in self.faults.items()
+                        if any(f.kind in _CHANCE for f in faults)}
+
+    def crash_time(self, node: str) -> Optional[float]:
+        """Return the sim time the node of fully qualified name ``node`` is to die, or None."""
+        return next((f.delay for f in self.faults.get(node, ()) if f.kind == 'crash'), None)
 
     def next(self, name: str) -> Optional[Tuple[str, float]]:
-        """Return ``('drop', 0)``, ``('delay', s)`` or None (deliver) for the next on ``name``.
+        """Return ``('drop', 0)``, ``('delay', s)``, ``('repeat', 0)`` or None (deliver).
 
-        A latency is not decided here (:func:`deliver` puts the message in its line).
+        A loss is a drop. A latency is not decided here (:func:`deliver` puts the message in
+        its line).
         """
         for fault in self.faults.get(name, ()):
             if fault.remaining > 0:
                 fault.remaining -= 1
                 self.injected[name] = self.injected.get(name, 0) + 1
                 return fault.kind, fault.delay
+            if fault.kind in _CHANCE and self._chance[name].random() < fault.delay:
+                self.injected[name] = self.injected.get(name, 0) + 1
+                return ('drop' if fault.kind == 'loss' else 'repeat'), 0.0
         return None
 
 
@@ -289,10 +319,18 @@ def deliver(node: Node, plan: FaultPlan, name: str, action: Callable[[], None]) 
         delivery.put(action)
         return
     kind, delay = decision
-    node.get_logger().warning(f'fault injection: {kind} {name}'
-                              + (f' by {delay:g} s' if kind == 'delay' else ''))
+    chance = next((f for f in plan.faults[name] if f.kind in _CHANCE), None)
+    if chance is None:
+        node.get_logger().warning(f'fault injection: {kind} {name}'
+                                  + (f' by {delay:g} s' if kind == 'delay' else ''))
+    elif plan.injected[name] == 1:  # said once: it goes on for every message
+        node.get_logger().warning(f'fault injection: {chance.kind} {name}, each message with '
+                                  f'probability {chance.delay:g}')
     if kind == 'delay':
         _Later(node, delay, action)
+    elif kind == 'repeat':
+        action()
+        action()
 
 
 class FaultyPublisher:

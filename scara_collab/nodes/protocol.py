@@ -42,6 +42,8 @@ from typing import ClassVar, Dict, get_type_hints, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
+from scara_collab.core import line, sorting
+
 LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
 
@@ -316,8 +318,7 @@ class ExecutionStatus(_MoveStatus):
 
 
 # --- items -----------------------------------------------------------------------------------
-ITEM_EVENTS = ('spawned', 'grasped', 'released', 'sorted', 'wrong_bin', 'missed', 'dropped')
-COUNTED = ('spawned', 'sorted', 'wrong_bin', 'missed', 'dropped')
+ITEM_EVENTS, COUNTED = sorting.ITEM_EVENTS, sorting.COUNTED
 
 
 @dataclass(frozen=True)
@@ -517,3 +518,58 @@ class SimStatus(_Status):
             return f'arms held: {self.absent} silent'
         state = 'paused' if self.paused else 'running'
         return f'{state} at sim t={self.time:.3f} s, {self.moving} arm(s) moving'
+
+
+# --- a line of cells -------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LineHandoff(_Status):
+    """What a cell of a line hands on, and how far it has run (``line/handoff``).
+
+    ``cell``: the sender's index along the line; ``frontier``: the sim time up to which every
+    item it hands on is in this message or an earlier one; ``handed``: items handed on up to
+    the frontier, all told; ``items``: the handoffs of the last seconds before the frontier,
+    each ``[id, class, y, crossing time]`` (repeated from message to message, so a lost
+    message is made up for); ``belt``: the items resting on the sender's belt at the
+    frontier, each ``[id, class, x, y]`` (what its section still carries should it die;
+    :mod:`scara_collab.core.line`).
+    """
+
+    cell: int
+    frontier: float
+    handed: int
+    items: list
+    belt: list = field(default_factory=list)
+
+    KIND: ClassVar[str] = 'line_handoff'
+
+    def __post_init__(self):  # noqa: D105 (the checks the message's fields must pass)
+        if not math.isfinite(self.frontier):
+            raise ValueError(f'frontier must be a finite sim time, got {self.frontier!r}')
+        lists = isinstance(self.items, list) and isinstance(self.belt, list)
+        if self.handed < 0 or not lists:
+            raise ValueError(f'handed {self.handed!r} < 0, or items or belt not a list')
+
+    def handoffs(self) -> list:
+        """Return ``items`` as :class:`~scara_collab.core.line.Handoff` records.
+
+        :raises ProtocolError: an item that is not ``[id, class, y, time]``.
+        """
+        try:
+            return [line.Handoff.from_list(v) for v in self.items]
+        except ValueError as exc:
+            raise ProtocolError(f'LineHandoff from cell {self.cell}: {exc}') from None
+
+    def on_belt(self) -> list:
+        """Return ``belt`` as :class:`~scara_collab.core.line.OnBelt` records.
+
+        :raises ProtocolError: an item that is not ``[id, class, x, y]``.
+        """
+        try:
+            return [line.OnBelt.from_list(v) for v in self.belt]
+        except ValueError as exc:
+            raise ProtocolError(f'LineHandoff from cell {self.cell}: {exc}') from None
+
+    def text(self) -> str:
+        """Return the frontier and the count."""
+        return (f'cell {self.cell} at sim t={self.frontier:.3f} s, {self.handed} handed on, '
+                f'{len(self.items)} in this message')

@@ -36,6 +36,7 @@ for from the start (as if they had answered sim time 0), so the first steps do n
 how soon they answer; the launcher and the in-process job name the nodes they start.
 """
 import math
+import os
 import time
 from typing import Dict, Optional
 
@@ -61,8 +62,9 @@ from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.execution import Execution
-from scara_collab.nodes.faults import declare_faults, FaultyPublisher
+from scara_collab.nodes.faults import CRASH_EXIT, declare_faults, FaultyPublisher
 from scara_collab.nodes.guarded import guarded
+from scara_collab.nodes.line_link import LineLink
 from scara_collab.nodes.lockstep import LockstepGate, parse_timeouts
 from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import EVENTS, LATCHED
@@ -80,10 +82,16 @@ PARAMETERS = {
     'home': [0.0, 1.5708, 0.0],           # leader joints; the follower mirrored
     'lockstep_window': 0.02,              # sim s, 0 = no lockstep
     'lockstep_timeout': 5.0,              # wall s before a silent participant is dropped
+    'line_cell': 0,                       # this cell's index along a line of cells
+    'line_upstream': False,               # a cell upstream hands items on (line/upstream)
+    'line_downstream': False,             # hand on what passes the belt's end (line/handoff)
+    'line_timeout': 5.0,                  # wall s of upstream silence taken for its death
 }
 RULES = (Rule('profile', 'text'), Rule('markers_rate', 'positive'),
          Rule('step_chunk', 'positive'), Rule('home', 'vec3'),
-         Rule('lockstep_window', 'nonneg'), Rule('lockstep_timeout', 'positive'))
+         Rule('lockstep_window', 'nonneg'), Rule('lockstep_timeout', 'positive'),
+         Rule('line_cell', 'int'), Rule('line_upstream', 'bool'),
+         Rule('line_downstream', 'bool'), Rule('line_timeout', 'positive'))
 
 
 class Pacer:
@@ -144,6 +152,7 @@ class PyBulletBridge(Node):
         self.sim: Optional[CellSim] = None
         self.gate: Optional[LockstepGate] = None
         self.actions: Optional[TrajectoryActions] = None
+        self.line: Optional[LineLink] = None
         try:
             self._setup()
         except BaseException:
@@ -220,6 +229,12 @@ class PyBulletBridge(Node):
             guards=[g for g in self.get_parameter('lockstep_guards').value or [] if g.strip()],
             on_guard=self._on_guard,
             expect=[n for n in self.get_parameter('lockstep_expect').value or [] if n.strip()])
+        if params['line_cell'] < 0:
+            raise ValueError(f'line_cell must be >= 0, got {params["line_cell"]}')
+        self.line = LineLink(self, self.sim, params['line_cell'], params['line_upstream'],
+                             params['line_downstream'], on_news=self._wake,
+                             faults=self.faults, timeout=params['line_timeout'])
+        self._crash_at = self.faults.crash_time(self.get_fully_qualified_name())
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._timer = self.create_timer(self.pacer.period, self._tick, clock=self._steady)
         self._parked = False  # the stepping timer is off while the bridge waits for answers
@@ -229,7 +244,8 @@ class PyBulletBridge(Node):
             self._timer.cancel()
         self.actions = (TrajectoryActions(self, self.cell, self.sim, self.execution)
                         if FollowJointTrajectory is not None else None)
-        if self.gate.enabled:  # re-arm now and then, so a silent participant times out
+        if self.gate.enabled or self.line.upstream:  # re-arm now and then (a silent
+            # participant times out; a late frontier from upstream is looked at again)
             self.create_timer(0.25, self._look, clock=self._steady)
         self._publish_all()
         self.get_logger().info(
@@ -302,14 +318,15 @@ class PyBulletBridge(Node):
         if self.control.paused:
             return
         due = self.pacer.due(self.sim.time)
-        limit = self.gate.limit(self.sim.time)
+        limit = min(self.gate.limit(self.sim.time), self.line.limit())
         if limit == float('inf'):  # nobody to wait for: the stepping timer runs
             if self._parked:
                 self._parked = False
                 self._timer.reset()
             self._advance(due)
             return
-        allowed = int(math.floor((limit - self.sim.time) / self.dt + 1e-6))
+        allowed = (int(math.floor((limit - self.sim.time) / self.dt + 1e-6))
+                   if math.isfinite(limit) else 0)  # -inf: nothing heard from upstream yet
         if self.pacer.rtf <= 0:
             self._advance(allowed)
             self.gate.limit(self.sim.time)  # at the limit: the wait for the answers starts now
@@ -334,6 +351,9 @@ class PyBulletBridge(Node):
             self.sim.step(n)
             due -= n
             self._publish_due()
+            if self._crash_at is not None and self.sim.time >= self._crash_at - 1e-9:
+                self.get_logger().error(f'fault injection: crash at sim t={self.sim.time:.3f} s')
+                os._exit(CRASH_EXIT)  # killed: no goodbye, no lockstep leave, no files
         if left is not None and self.control.steps_to_pause(self.dt) == 0:
             for key, publish in (('clock', self._publish_clock), ('state', self._publish_state)):
                 if self._next[key] - self._periods[key] < self.sim.time - 1e-9:
@@ -368,6 +388,7 @@ class PyBulletBridge(Node):
         if t >= self._next['clock']:
             self._publish_clock()
             self._next['clock'] += self._periods['clock']
+            self.line.publish(self.sim.time)
         if t >= self._next['state']:
             self._publish_state()
             self._next['state'] += self._periods['state']
@@ -435,6 +456,8 @@ class PyBulletBridge(Node):
         """Close the simulator with the node (also after a refused start)."""
         if self.gate is not None and self.gate.enabled:
             self.get_logger().info(self.gate.summary())
+        if self.line is not None and self.line.active:
+            self.get_logger().info(self.line.summary())
         if self.actions is not None:
             self.actions.destroy()  # an action server left alive keeps the node on the graph
         if self.sim is not None:

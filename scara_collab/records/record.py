@@ -58,11 +58,12 @@ from typing import Dict, List, Optional, Sequence, Union
 from scara_collab.core.config import load_config
 from scara_collab.core.job import items_per_minute
 from scara_collab.core.model import CellModel, load_cell
+from scara_collab.core.sorting import GONE
 from scara_collab.graph import BY_NAME, LAUNCH_MODES
 from scara_collab.records import report, verdict
 from scara_collab.records.graph_watch import GraphWatch
 from scara_collab.records.stops import StopLog
-from scara_collab.records.telemetry import COUNTED, RunLog
+from scara_collab.records.telemetry import RunLog
 
 MODES = LAUNCH_MODES
 #: the nodes a run has one of each: the cell's and the launcher's own (two: a second graph)
@@ -240,8 +241,8 @@ class RunRecord:
             'wall_seconds': wall,
             'real_time_factor': sim_seconds / wall if wall > 0 else None,
             **counts,
-            'in_progress': counts['spawned'] - sum(counts[k] for k in COUNTED
-                                                   if k != 'spawned'),
+            'in_progress': counts['spawned'] + counts['received'] - sum(counts[k]
+                                                                        for k in GONE),
             'items_per_minute': items_per_minute(counts['sorted'], sim_seconds),
             'counts_source': 'pybullet_bridge /conveyor/events in the job window',
             'min_separation_m': sep,

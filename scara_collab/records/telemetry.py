@@ -40,11 +40,11 @@ from scara_collab.core.collision import arm_distance
 from scara_collab.core.kinematics import fk
 from scara_collab.core.mirror import mirror_error
 from scara_collab.core.model import CellModel
+from scara_collab.core.sorting import COUNTED
 
 TIMESERIES = 'timeseries.csv'
 EVENTS = 'events.csv'
 EVENT_COLUMNS = ('time', 'kind', 'item', 'class', 'robot', 'cause')
-COUNTED = ('spawned', 'sorted', 'missed', 'wrong_bin', 'dropped')
 #: a joint's measured speed above this many times its limit is an episode worth naming (the
 #: trajectories are limited to 1.01 times it; measured between states 10 ms apart, runs that
 #: track them stay below 1.1)

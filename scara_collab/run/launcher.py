@@ -155,6 +155,12 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    help='run the cell under the namespace NS (e.g. /cell_1): every node, topic '
                    'and service of it, its clock and its lockstep, so cells in different '
                    'namespaces share a ROS domain (default: the root namespace)')
+    p.add_argument('--cells', type=int, default=1, metavar='N',
+                   help='a line of N cells along one belt, cell k under /cell_k with its own '
+                   'processes and run folder <output>/cell_k; only cell 0 is fed, each cell '
+                   'hands on what passes its belt to the next (scara_collab.run.line; '
+                   'default: %(default)s, one cell in the root namespace)')
+    p.add_argument('--line-cell', type=int, default=None, help=argparse.SUPPRESS)
     p.add_argument('--one-process', action='store_true',
                    help='run every node in one process on one executor (a component '
                    'container, scara_collab.run.container) instead of one process per node')
@@ -209,8 +215,18 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         parse_faults(args.fault)
     except ValueError as exc:
         p.error(f'--fault: {exc}')
+    if args.cells < 1:
+        p.error('--cells must be >= 1')
+    if args.line_cell is not None and not 0 <= args.line_cell < args.cells:
+        p.error(f'--line-cell {args.line_cell} is not a cell of a line of {args.cells}')
+    if args.cells > 1 and args.namespace:
+        p.error('--namespace and --cells: a line puts cell k under /cell_k')
+    if args.cells > 1 and (args.viewer is not None or args.gui):
+        p.error('--viewer and --gui show one cell; run a line without them')
     try:
-        args.namespace = graph.namespace_of(args.namespace)
+        args.namespace = graph.namespace_of(args.namespace) or (
+            graph.cell_namespace(args.line_cell, args.cells) if args.line_cell is not None
+            else '')
     except ValueError as exc:
         p.error(f'--namespace: {exc}')
     if args.step_chunk is not None and not args.step_chunk > 0:
@@ -400,7 +416,8 @@ class Launcher:
             self.job_started = True
         t0 = self.recorder.start_job()
         release = {}
-        if self.args.mode != 'idle':  # the belt starts feeding now
+        if self.args.mode != 'idle' and not getattr(self.args, 'line_cell', None):
+            # the belt starts feeding now (in a line, only cell 0's: the others are handed on)
             feed = getattr(self.args, 'feed_interval', None)
             release['feed_interval'] = float(load_config('simulation')['feed_interval']
                                              if feed is None else feed)
@@ -498,6 +515,9 @@ class Launcher:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the cell; returns the exit status (see the module docstring)."""
     args = parse_args(argv)
+    if args.cells > 1 and args.line_cell is None:  # a line: one launcher per cell
+        from scara_collab.run.line import run_line
+        return run_line(args, list(sys.argv[1:] if argv is None else argv))
     if args.mode != 'idle' and importlib.util.find_spec(AUTOMATION_MODULE) is None:
         print(f'launch_cell: --mode {args.mode} needs the automation manager '
               f'({AUTOMATION_MODULE}), which is not installed; --mode idle runs the graph '
@@ -551,3 +571,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             for s, handler in previous.items():
                 signal.signal(s, handler)
     return code
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -4,7 +4,9 @@ A :class:`Stage` is one node process with its parameters and its command line
 (``python -m scara_collab.run.child <module>:<function> --ros-args ...``); with
 ``--one-process`` one stage runs them all (:func:`one_process`, ``python -m
 scara_collab.run.container --node ... --node ...``). With ``--namespace`` every node runs in
-the cell's namespace with the cell's remaps (:func:`scara_collab.graph.ros_args`).
+the cell's namespace with the cell's remaps (:func:`scara_collab.graph.ros_args`); a cell of a
+line of cells (``--line-cell K`` of ``--cells N``) also gets its bridge's line parameters and
+its upstream cell's handoff topic (:func:`scara_collab.graph.line_params`).
 """
 import argparse
 from dataclasses import dataclass, field
@@ -28,6 +30,7 @@ class Stage:
     params: Dict[str, str] = field(default_factory=dict)
     members: Tuple['Stage', ...] = ()  # --one-process: the stages this process runs
     namespace: str = ''         # the cell's namespace ('' = the root)
+    upstream: Tuple[str, ...] = ()  # in a line: the cells upstream, nearest first
 
 
 def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
@@ -57,6 +60,10 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
         bridge['item_seed'] = str(args.seed)
     if port is not None:
         own['cell_viewer'] = {'port': str(port)}
+    k, cells = getattr(args, 'line_cell', None) or 0, getattr(args, 'cells', 1)
+    for name, values in graph.line_params(k, cells).items():
+        own.setdefault(name, {}).update(values)
+    upstream = tuple(graph.line_upstream(k, cells))
     faults = getattr(args, 'fault', [])
     out = []
     for spec in specs:
@@ -65,14 +72,14 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
             params['faults'] = graph.param_value(faults)
         out.append(Stage(spec.name, spec.entry, spec.configs,
                          spec.ready.describe(spec.name, params, namespace), params,
-                         namespace=namespace))
+                         namespace=namespace, upstream=upstream))
     return out
 
 
 def node_args(stage: Stage, config_dir: Path) -> List[str]:
     """Return the ``--ros-args`` of one stage's node."""
     return graph.ros_args(stage.configs, stage.params, config_dir=config_dir,
-                          namespace=stage.namespace)
+                          namespace=stage.namespace, upstream=stage.upstream)
 
 
 def command(stage: Stage, config_dir: Path) -> List[str]:

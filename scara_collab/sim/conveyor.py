@@ -7,10 +7,13 @@ collision geometry (:class:`BeltBox`; the URDF link keeps only its visual): an i
 velocity exactly, and :meth:`Conveyor.update` re-imposes the belt velocity ``(speed, 0, 0)``
 on every item resting on the belt (after a push, a release onto the belt, a collision).
 
-Events, checked at every update: ``missed`` (an item on the belt passes ``x_end``, removed),
+Events, checked at every update: ``missed`` (an item on the belt passes ``x_end``, removed;
+``handed_on`` instead in a cell of a line with a cell downstream, :meth:`Conveyor.join_line`),
 ``sorted`` / ``wrong_bin`` (an item at rest inside a bin, removed; the event names the bin's
-robot), ``dropped`` (at rest on the floor, removed), plus ``spawned`` as it happens; the
-gripper adds ``grasped`` and ``released`` (:meth:`Conveyor.event`).
+robot), ``dropped`` (at rest on the floor, removed), plus ``spawned`` as it happens and
+``received`` as an item handed on by the cell upstream comes onto the belt
+(:meth:`Conveyor.receive`); the gripper adds ``grasped`` and ``released``
+(:meth:`Conveyor.event`).
 """
 from dataclasses import dataclass
 import math
@@ -20,12 +23,12 @@ import numpy as np
 import pybullet
 
 from scara_collab.core.config import ConfigError
+from scara_collab.core.line import Handoff, OnBelt
 from scara_collab.core.model import CellModel
 from scara_collab.core.palette import class_colour
 from scara_collab.core.sorting import on_belt
 
 FEED_PATTERNS = ('random', 'mirror_pairs')
-EVENT_KINDS = ('spawned', 'grasped', 'released', 'sorted', 'wrong_bin', 'missed', 'dropped')
 PAYLOAD_CLASS = 'payload'
 """Class of the test bodies hung on a tool (``Grippers.attach_payload``), not sortable."""
 
@@ -53,7 +56,8 @@ class Item:
 class SimEvent:
     """Something that happened to an item.
 
-    :ivar time: sim time, s; :ivar kind: one of :data:`EVENT_KINDS`; :ivar item: item id;
+    :ivar time: sim time, s; :ivar kind: one of
+        :data:`~scara_collab.core.sorting.ITEM_EVENTS`; :ivar item: item id;
     :ivar cls: item class; :ivar robot: the arm involved (gripper, bin, last holder of a
         dropped item) or ``''``; :ivar cause: for an item that left the belt without a
         grasp (``dropped``, ``missed`` after a push), what touched it last, else ``''``.
@@ -140,6 +144,9 @@ class Conveyor:
                      for (robot, cls), p in cell.bins.items()]
         self.records: Dict[int, ItemRecord] = {}
         self._next_id = 1
+        self.hand_on = False  # a cell downstream takes what passes x_end (else: missed)
+        self._handed: List[Handoff] = []
+        self._arriving: List[Tuple[float, Handoff]] = []  # (arrival at x_start, item)
         self._events: List[SimEvent] = []
         self._get_pose = pb.getBasePositionAndOrientation
         self._get_vel = pb.getBaseVelocity
@@ -196,10 +203,71 @@ class Conveyor:
         self.spawn_item(cls, cy + off)
         self.spawn_item(cls, cy - off)
 
+    # --- a line of cells -------------------------------------------------------------------
+    def join_line(self, hand_on: bool, first_id: int = 1) -> None:
+        """Make this belt a section of a line (:mod:`scara_collab.core.line`).
+
+        :param hand_on: a cell downstream takes the items that pass ``x_end``
+            (:meth:`pop_handoffs`), instead of their being missed.
+        :param first_id: the id of this cell's first own item (the automatic feed, a spawn
+            service), so that its ids never meet those handed on from upstream.
+        """
+        self.hand_on = bool(hand_on)
+        self._next_id = max(self._next_id, int(first_id))
+
+    def receive(self, h: Handoff, at: float) -> None:
+        """Put the item ``h`` on the belt at ``x_start`` at sim time ``at`` (or now, if later).
+
+        It comes on at the first update at or after ``at``, as far along the belt as it rode
+        since then, with its id, class and lateral position: event ``received``.
+
+        :raises ValueError: an unknown class, a lateral position off the belt, or an id this
+            belt already has.
+        """
+        if h.cls not in self.cell.item_classes:
+            raise ValueError(f'handed item {h.item}: unknown class {h.cls!r}')
+        if abs(h.y - self.cell.belt.centre_y) > self._half_free + 1e-9:
+            raise ValueError(f'handed item {h.item}: y={h.y:.3f} is off the belt')
+        if h.item in self.records or any(h.item == a.item for _, a in self._arriving):
+            raise ValueError(f'handed item {h.item}: already on this belt')
+        self._arriving.append((float(at), h))
+
+    def on_belt(self) -> List[OnBelt]:
+        """Return the items resting on the belt now (what it carries on if the cell dies)."""
+        out = []
+        for rec in self.records.values():
+            if rec.state == 'belt':
+                x, y, _ = self._get_pose(rec.body)[0]
+                out.append(OnBelt(rec.id, rec.cls, float(x), float(y)))
+        return out
+
+    def pop_handoffs(self) -> List[Handoff]:
+        """Return the items handed on since the last call, in crossing order."""
+        out, self._handed = self._handed, []
+        return out
+
+    def _arrive(self, now: float) -> None:
+        belt = self.cell.belt
+        due = sorted((a for a in self._arriving if a[0] <= now + 1e-9),
+                     key=lambda a: (a[0], a[1].item))
+        if not due:
+            return
+        self._arriving = [a for a in self._arriving if a[0] > now + 1e-9]
+        z = belt.top_z + self.cell.item_size / 2.0
+        for at, h in due:
+            x = min(belt.x_start + (now - at) * belt.speed, belt.x_end)
+            rec = self.create_item(h.cls, (x, h.y, z), self.cell.item_mass, 'belt',
+                                   item_id=h.item)
+            self._set_vel(rec.body, [belt.speed, 0.0, 0.0], [0.0, 0.0, 0.0])
+            self.event('received', rec)
+
     # --- items ----------------------------------------------------------------------------
     def create_item(self, cls: str, pos, mass: float, state: str,
-                    size: Optional[float] = None) -> ItemRecord:
-        """Create an item body (the item size unless ``size``) at ``pos`` and record it."""
+                    size: Optional[float] = None, item_id: Optional[int] = None) -> ItemRecord:
+        """Create an item body (the item size unless ``size``) at ``pos`` and record it.
+
+        Its id is the next of this belt's own, or ``item_id`` (an item handed on from upstream).
+        """
         pb = self._pb
         colour = (*class_colour(cls, self.cell.item_classes), 1.0)
         if size is None:
@@ -216,8 +284,10 @@ class Conveyor:
         body = pb.createMultiBody(mass, shape, visual, [float(v) for v in pos],
                                   useMaximalCoordinates=True)
         pb.changeDynamics(body, -1, linearDamping=0.0, angularDamping=0.0)
-        rec = ItemRecord(self._next_id, body, cls, mass, state)
-        self._next_id += 1
+        if item_id is None:
+            item_id = self._next_id
+            self._next_id += 1
+        rec = ItemRecord(item_id, body, cls, mass, state)
         self.records[rec.id] = rec
         return rec
 
@@ -261,9 +331,12 @@ class Conveyor:
 
     def update(self) -> None:
         """Feed, carry items on the belt, detect missed / sorted / wrong_bin / dropped."""
-        if self.feed_interval > 0 and self._clock() >= self._next_feed - 1e-9:
+        now = self._clock()
+        if self.feed_interval > 0 and now >= self._next_feed - 1e-9:
             self._next_feed += self.feed_period
             self._feed()
+        if self._arriving:
+            self._arrive(now)
         belt = self.cell.belt
         carry = [belt.speed, 0.0, 0.0]
         zero = [0.0, 0.0, 0.0]
@@ -273,7 +346,10 @@ class Conveyor:
                 continue
             x, y, z = self._get_pose(rec.body)[0]
             if x > belt.x_end and rec.state == 'belt':  # carried off the end (maybe tipping)
-                self._remove(rec, 'missed')
+                if self.hand_on:
+                    self._handed.append(Handoff(rec.id, rec.cls, float(y),
+                                                now - (x - belt.x_end) / belt.speed))
+                self._remove(rec, 'handed_on' if self.hand_on else 'missed')
                 continue
             if on_belt(self.cell, (x, y, z)):
                 rec.state = 'belt'

@@ -1,0 +1,280 @@
+"""A line of cells: sections, handoffs, the frontier, and a two-cell line end to end.
+
+The core rules (:mod:`scara_collab.core.line`) without ROS; two PyBullet sections handing items
+on; the line's accounting (:mod:`scara_collab.records.line_report`); then
+``launch_cell.py --cells 2`` with handoff messages lost and repeated.
+"""
+import json
+import math
+import os
+from pathlib import Path
+import random
+import subprocess
+import sys
+
+import pytest
+
+from scara_collab.core.config import load_config
+from scara_collab.core.line import arm_extent, Handoff, Inbox, min_pitch, Outbox, Section, Share
+from scara_collab.core.model import load_cell
+from scara_collab.nodes import protocol as proto
+from scara_collab.records import line_report as lr
+from scara_collab.run.line import cell_argv
+
+ROOT = Path(__file__).resolve().parents[1]
+CELL = load_cell()
+
+
+def test_the_pitch_keeps_neighbouring_arms_a_margin_apart():
+    """At the least pitch, arms of neighbours at full reach are the safety margin apart."""
+    lo, hi = arm_extent(CELL)
+    arm = CELL.arms[0]
+    reach = arm.l1 + arm.l2 + arm.link_radius
+    assert lo == pytest.approx(arm.base[0, 3] - reach) and hi == pytest.approx(
+        arm.base[0, 3] + reach)
+    pitch = min_pitch(CELL)
+    assert pitch == pytest.approx(5.2)  # the issue's figure for today's links and capsules
+    assert (lo + pitch) - hi == pytest.approx(CELL.safety_margin)
+    s = Section(CELL)
+    assert s.transit == pytest.approx((pitch - 5.0) / CELL.belt.speed)
+    assert Section(CELL, 6.0).transit == pytest.approx(1.0 / CELL.belt.speed)
+    with pytest.raises(ValueError, match='below 5.200'):
+        Section(CELL, 5.1)
+    with pytest.raises(ValueError):
+        Section(CELL, float('nan'))
+
+
+def test_the_inbox_takes_each_item_once_and_never_moves_its_limit_back():
+    """Repeats change nothing, a late frontier keeps the limit, a lost item is counted."""
+    box = Inbox(Section(CELL))
+    assert box.limit() == -math.inf  # nothing heard: no step
+    h1, h2 = Handoff(1, 'red', 0.1, 3.0), Handoff(2, 'blue', -0.2, 3.5)
+    got = box.offer(4.0, [h2, h1], handed=2)
+    assert [h.item for h, _ in got] == [1, 2]  # in arrival order
+    assert got[0][1] == pytest.approx(3.0 + box.section.transit)
+    assert box.offer(4.02, [h1, h2], handed=2) == [] and box.repeats == 2
+    assert box.offer(3.5, [], handed=2) == [] and box.limit() == pytest.approx(
+        4.02 + box.section.transit)  # a late message: the limit stays
+    box.offer(6.0, [], handed=3)  # upstream handed on a third, never heard here
+    assert box.lost == 1 and box.received == 2
+
+
+def test_handoffs_survive_lost_and_repeated_messages():
+    """2,000 items through a channel losing 30 % and repeating 30 %: each arrives once, on time.
+
+    The downstream cell steps only to the limit its inbox allows; no item may arrive before
+    the time it has already reached (it would have passed it).
+    """
+    rng = random.Random(4)
+    section = Section(CELL)
+    out, box = Outbox(window=2.0), Inbox(section)
+    t, downstream, item = 0.0, 0.0, 0
+    arrivals = {}
+    while item < 2000:
+        t = round(t + 0.02, 6)  # a message per clock
+        while rng.random() < 0.06 and item < 2000:
+            item += 1
+            out.add(Handoff(item, rng.choice(('red', 'blue')), rng.uniform(-0.4, 0.4),
+                            t - rng.uniform(0.0, 0.02)))
+        sends = [] if rng.random() < 0.3 else [out.message(t)] * (2 if rng.random() < 0.3 else 1)
+        for hs in sends:
+            for h, at in box.offer(t, hs, out.handed):
+                assert at >= downstream - 1e-9, f'item {h.item} arrives in the past'
+                assert h.item not in arrivals
+                arrivals[h.item] = at
+        downstream = max(downstream, min(box.limit(), t))
+    box.offer(t + 1.0, out.message(t + 1.0), out.handed)  # the last one gets through
+    assert sorted(arrivals) == list(range(1, 2001))
+    assert box.lost == 0 and box.repeats > 0
+
+
+def test_handoff_records_are_checked_at_the_door():
+    """Malformed handoffs and messages are refused with a ProtocolError / ValueError."""
+    assert Handoff.from_list([3, 'red', 0.1, 2.0]) == Handoff(3, 'red', 0.1, 2.0)
+    for bad in ([3, 'red', 0.1], [-1, 'red', 0, 1], [True, 'red', 0, 1], [3, '', 0, 1],
+                [3, 'red', float('nan'), 1], [3, 'red', 0, 'x'], 'abc'):
+        with pytest.raises(ValueError):
+            Handoff.from_list(bad)
+    msg = proto.LineHandoff(0, 2.5, 1, [[3, 'red', 0.1, 2.4]]).to_msg()
+    assert proto.LineHandoff.from_msg(msg).handoffs() == [Handoff(3, 'red', 0.1, 2.4)]
+    bad = proto.LineHandoff(0, 2.5, 1, [[3, 'red', 'y', 2.4]])
+    with pytest.raises(proto.ProtocolError):
+        proto.LineHandoff.from_msg(bad.to_msg()).handoffs()
+    for kv in (('frontier', 'inf'), ('handed', '-1'), ('items', '{"a": 1}')):
+        msg = proto.LineHandoff(0, 2.5, 1, []).to_msg()
+        next(v for v in msg.values if v.key == kv[0]).value = kv[1]
+        with pytest.raises(proto.ProtocolError):
+            proto.LineHandoff.from_msg(msg)
+
+
+def test_two_sections_hand_items_on_with_id_class_and_place():
+    """Two PyBullet sections: items cross with their id, class and y, one transit later."""
+    from scara_collab.sim.cell_sim import CellSim
+    sim_cfg, ctl = load_config('simulation'), load_config('controllers')
+    up = CellSim(CELL, dict(sim_cfg, feed_interval=0.0), ctl)
+    down = CellSim(CELL, dict(sim_cfg, feed_interval=0.0), ctl)
+    try:
+        up.conveyor.join_line(True, 1)
+        down.conveyor.join_line(False, 1_000_001)
+        section = Section(CELL)
+        out, box = Outbox(), Inbox(section)
+        ids = [up.spawn_item('red', 0.3, 4.2), up.spawn_item('blue', -0.25, 4.35)]
+        ev_up, ev_down = up.pop_events(), down.pop_events()
+        crossing = {}
+        while up.time < 4.0:
+            up.step(10)
+            for h in up.conveyor.pop_handoffs():
+                out.add(h)
+                crossing[h.item] = h.time
+            for h, at in box.offer(up.time, out.message(up.time), out.handed):
+                down.conveyor.receive(h, at)
+            while down.time + 0.01 <= box.limit() + 1e-9:
+                down.step(10)
+            ev_up += up.pop_events()
+            ev_down += down.pop_events()
+        handed = {e.item: e for e in ev_up if e.kind == 'handed_on'}
+        got = {e.item: e for e in ev_down if e.kind == 'received'}
+        assert sorted(handed) == sorted(got) == sorted(ids)
+        assert not [e for e in ev_up if e.kind == 'missed']
+        assert crossing[ids[0]] == pytest.approx((4.5 - 4.2) / CELL.belt.speed, abs=0.011)
+        for i in ids:
+            assert got[i].time == pytest.approx(crossing[i] + section.transit, abs=0.011)
+        items = {it.id: it for it in down.items()}
+        assert items[ids[0]].cls == 'red' and items[ids[0]].position[1] == pytest.approx(0.3)
+        assert items[ids[1]].cls == 'blue'
+        assert down.spawn_item() == 1_000_001  # the cell's own items never meet handed ids
+        with pytest.raises(ValueError, match='already on this belt'):
+            down.conveyor.receive(Handoff(ids[0], 'red', 0.0, 1.0), down.time)
+        with pytest.raises(ValueError, match='unknown class'):
+            down.conveyor.receive(Handoff(77, 'green', 0.0, 1.0), down.time)
+    finally:
+        up.close()
+        down.close()
+
+
+def test_the_line_accounting_finds_lost_duplicated_and_foreign_items():
+    """The line check names an item never received, a foreign one and a changed class."""
+    ev = {0: [('5.0', 'handed_on', '1', 'red'), ('19.5', 'handed_on', '2', 'blue'),
+              ('6.0', 'handed_on', '3', 'red')],
+          1: [('6.0', 'received', '1', 'red'), ('7.0', 'received', '9', 'red'),
+              ('7.0', 'received', '3', 'blue')]}
+    check = lr.check_handoffs(ev, transit=1.0, end=20.0)
+    assert check['in_transit'] == 1 and check['handoffs'] == 3  # item 2: still on its way
+    assert check['problems'] == [
+        'cell 1 received item 9, which cell 0 never handed on',
+        'item 3 left cell 0 as red and came into cell 1 as blue']
+    ev[1] = ev[1][:1]
+    assert lr.check_handoffs(ev, 1.0, 20.0)['problems'] == [
+        'item 3, handed on by cell 0 at t=6.00 s, never came into cell 1']
+
+
+def test_each_cell_gets_the_lines_arguments_and_its_own_place():
+    """A cell's launcher gets the line's arguments, its index, folder and stall timeout."""
+    argv = ['--duration', '30', '--cells=3', '--output', 'x', '--quiet', '--seed', '4',
+            '--stall-timeout', '9']
+    assert cell_argv(argv, 2, 3, Path('/r'), 300.0) == [
+        '--duration', '30', '--seed', '4', '--cells', '3', '--line-cell', '2', '--output',
+        '/r/cell_2', '--quiet', '--stall-timeout', '300']
+
+
+def test_a_two_cell_line_hands_items_on_through_lost_and_repeated_messages(tmp_path):
+    """``launch_cell.py --cells 2``: cell 0 saturated, cell 1 sorts what it hands on.
+
+    A third of the handoff messages are lost and a third repeated: every item handed on is
+    received once, the items balance, the run exits 0 and says so per cell.
+    """
+    out = tmp_path / 'line'
+    env = dict(os.environ, PYTHONUNBUFFERED='1')
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / 'scripts' / 'launch_cell.py'), '--cells', '2',
+         '--one-process', '--duration', '45', '--feed-interval', '0.5', '--rtf', '0',
+         '--no-plots', '--output', str(out), '--fault', 'loss:/cell_0/line/handoff:0.3',
+         '--fault', 'repeat:/cell_0/line/handoff:0.3'],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    s = json.loads((out / 'summary.json').read_text())
+    assert [c['namespace'] for c in s['cells']] == ['/cell_0', '/cell_1']
+    c0, c1 = s['cells']
+    assert c0['handed_on'] > 0 and c1['received'] > 0 and c1['sorted'] > 0
+    assert c0['handed_on'] == c1['received'] + s['between_cells']
+    assert s['handoff_problems'] == [] and s['balanced']
+    assert s['spawned'] == c0['spawned'] and c1['spawned'] == 0  # only cell 0 is fed
+    assert 'line of 2 cells finished' in proc.stdout
+    log = (out / 'cell_0' / 'logs').glob('*.log')
+    assert any('fault injection: loss /cell_0/line/handoff' in p.read_text() for p in log)
+
+
+def test_the_line_accounting_lets_a_dead_cells_section_carry_items_on():
+    """Past a dead cell the next one takes what the dead section carried, not as a problem."""
+    ev = {0: [('5.0', 'handed_on', '1', 'red'), ('30.0', 'handed_on', '2', 'blue')],
+          1: [('6.0', 'received', '1', 'red')],
+          2: [('60.0', 'received', '2', 'blue'), ('40.0', 'received', '1', 'red')]}
+    check = lr.check_handoffs(ev, transit=1.0, end=80.0, died={1: 20.0})
+    assert check['ok'], check['problems']
+    assert check['through'] == 2 and check['into_dead'] == 1
+    assert not lr.check_handoffs(ev, 1.0, 80.0)['ok']  # without the death: problems
+
+
+def test_a_dead_cells_section_carries_its_items_to_the_next_cell(tmp_path):
+    """``--cells 3`` with cell 1's bridge crashed mid-run (a killed process).
+
+    Cell 2 takes cell 1 for dead once it stays silent, and sorts on: the items on cell 1's belt
+    and the ones cell 0 hands on after ride through the dead section to it. Cell 0 never
+    waits for anyone downstream. The line exits non-zero and its report names cell 1.
+    """
+    out = tmp_path / 'line'
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / 'scripts' / 'launch_cell.py'), '--cells', '3',
+         '--one-process', '--duration', '70', '--feed-interval', '0.5', '--rtf', '0',
+         '--no-plots', '--output', str(out), '--fault', 'crash:/cell_1/pybullet_bridge:35'],
+        cwd=ROOT, env=dict(os.environ), capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    s = json.loads((out / 'summary.json').read_text())
+    c0, c1, c2 = s['cells']
+    assert s['died'] == [1] and c1['died_at'] == pytest.approx(35.0, abs=0.05)
+    assert c0['exit_code'] == 0 and c0['sim_seconds'] == pytest.approx(70.0)
+    assert c2['exit_code'] == 0 and c2['sim_seconds'] == pytest.approx(70.0)
+    assert s['through_dead'] > 0 and s['handoff_problems'] == []
+    events = lr.read_events(out / 'cell_2')
+    after = [float(t) for t, kind, _, _ in events if kind == 'sorted' and float(t) > 40.0]
+    assert after, 'cell 2 sorted nothing after cell 1 died'
+    assert 'cell 1 DIED at sim t=35.0 s' in proc.stdout
+    assert 'taken for dead' in (out / 'cell_2' / 'logs' / 'cell.log').read_text()
+
+
+def test_below_saturation_each_cell_takes_its_share_so_the_load_is_even():
+    """Three cells at 30 items/min: each takes a third of the feed; saturated, all it can."""
+    shares = [Share(k, 3, capacity=40.0) for k in range(3)]
+    taken = [0, 0, 0]
+    t = 0.0
+    for item in range(1, 301):  # an item every 2 s, 10 sim min
+        t += 2.0
+        for k, share in enumerate(shares):
+            share.see([item], t)
+            if share.takes(item, t):
+                taken[k] += 1
+                break
+    assert taken == [100, 100, 100] and not shares[0].saturated(t)
+    last = Share(2, 3, capacity=40.0)
+    last.see(range(50), 0.0)
+    assert all(last.takes(i, 0.0) for i in range(50))  # the last cell never leaves one
+    busy = Share(0, 3, capacity=40.0)  # 150 items/min reach it: a third is more than it can
+    for i in range(300):
+        busy.see([i], i * 0.4)
+    assert busy.rate(120.0) == pytest.approx(150.0, rel=0.02) and busy.saturated(120.0)
+    assert all(busy.takes(i, 120.0) for i in range(300))  # it takes what it can
+    with pytest.raises(ValueError):
+        Share(3, 3, 40.0)
+
+
+def test_a_cells_place_in_the_line_is_checked_with_the_job_settings():
+    """``line_cell`` must be a cell of ``line_cells``; a lone cell has no share."""
+    from scara_collab.core.job import SortingJob
+    from scara_collab.core.job_settings import JobSettings
+    cfg = load_config('automation')
+    with pytest.raises(ValueError, match='line_cell 2 is not a cell of a line of 2'):
+        JobSettings.from_config(CELL, dict(cfg, line_cell=2, line_cells=2))
+    lone = SortingJob(CELL, JobSettings.from_config(CELL, cfg), lambda *a: None)
+    settings = JobSettings.from_config(CELL, dict(cfg, line_cell=0, line_cells=2))
+    in_line = SortingJob(CELL, settings, lambda *a: None)
+    assert lone.share is None and in_line.share.share == pytest.approx(0.5)
