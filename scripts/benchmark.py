@@ -8,7 +8,7 @@ Sections (``--only KEY``, repeatable or a comma list; default: the seven numbere
 - through the launcher, each run in its own ROS domain: ``protocol`` (20-25 min; ``--seeds
   --runs --hogs``), ``faults`` (``--cases``), ``soak`` (``--duration --warm``), blocks of
   ``RESULTS.md``; ``realtime`` (``--duration --seeds --conditions --capacity-duration``)
-  writes ``REALTIME.md``.
+  writes ``REALTIME.md``; ``line`` (``--cells --duration``) writes ``LINE.md``.
 
 ``--out``: the folder (default ``docs/``, a temporary one with ``--smoke``); a ``.md`` path
 names the real-time page. Exit status 1 if a section failed or missed its targets.
@@ -20,11 +20,12 @@ import shlex
 import sys
 import tempfile
 
-from scara_collab.bench import faults, protocol, realtime, report, soak
+from scara_collab.bench import faults, line, protocol, realtime, report, soak
 from scara_collab.bench.util import Progress
 
 ROOT = Path(__file__).resolve().parents[1]
-LAUNCHER = {'protocol': protocol, 'faults': faults, 'soak': soak, 'realtime': realtime}
+LAUNCHER = {'protocol': protocol, 'faults': faults, 'soak': soak, 'realtime': realtime,
+            'line': line}
 KEYS = [s.key for s in report.SECTIONS] + list(LAUNCHER)
 
 
@@ -61,6 +62,8 @@ def parse(argv=None) -> argparse.Namespace:
                    help='faults: case numbers, 1-based (default all)')
     p.add_argument('--runs', type=int, default=None, help='protocol: demo runs with hogs (5)')
     p.add_argument('--hogs', type=int, default=None, help='protocol: CPU hogs (2)')
+    p.add_argument('--cells', type=int, nargs='+', default=None,
+                   help='line: line lengths (2 3), each beside one cell')
     return p.parse_args(argv)
 
 
