@@ -147,6 +147,13 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
             down.conveyor.receive(Handoff(ids[0], 'red', 0.0, 1.0), down.time)
         with pytest.raises(ValueError, match='unknown class'):
             down.conveyor.receive(Handoff(77, 'green', 0.0, 1.0), down.time)
+        with pytest.raises(ValueError, match='off the belt'):
+            down.conveyor.receive(Handoff(78, 'red', 0.51, 1.0), down.time)
+        # pushed towards the edge upstream (a 3-cell benchmark run had one at y=-0.493): on
+        # the belt while its centre is, so it is taken
+        down.conveyor.receive(Handoff(79, 'red', -0.493, down.time), down.time)
+        down.step(10)
+        assert {e.item for e in down.pop_events() if e.kind == 'received'} == {79}
     finally:
         up.close()
         down.close()

@@ -5,7 +5,9 @@ feed, an item every 0.9 / N s. At 0.2 m/s that is denser than the belt can carry
 0.1 m), so the line runs at N times the belt speed, and one cell's capacity is measured at that
 speed and feed too (a share folder of its own with the faster belt: ``SCARA_COLLAB_SHARE``).
 Every run goes through the launcher, each cell in one process (``--one-process``), unthrottled
-in lockstep, so the figures do not depend on how busy the machine is. A run's row: items
+in lockstep, so the figures do not depend on how busy the machine is. Items per minute are
+counted at steady state, after the first :data:`WARM` sim seconds (the last cell of a line gets
+its first item only after the belt has carried it through the ones before). A run's row: items
 sorted per minute (line and per cell), handoffs checked, the minimum separation per cell, CPU
 s per sim s per cell, the exit code. Targets (SPEC section 5, "a line of cells"): line
 capacity >= 0.9 x N x one cell's, no cell below 0.85 x one cell's, the margin kept in every
@@ -24,8 +26,10 @@ import yaml
 
 from scara_collab.bench.util import Log
 from scara_collab.core.paths import share_dir
+from scara_collab.records.line_report import read_events
 
 SATURATING = 0.9  # s per item: one cell's saturating feed at 0.2 m/s
+WARM = 40.0  # sim s left out of the rates: three sections at 0.6 m/s, and the job's start
 
 
 def belt_share(speed: float, into: Path) -> Path:
@@ -50,22 +54,29 @@ def run(cells: int, speed: float, feed: float, duration: float, out: Path, log: 
            f'{feed:g}', '--seed', str(seed), '--output', str(out), '--no-plots', '--quiet']
     proc = subprocess.run(cmd, env=dict(os.environ, SCARA_COLLAB_SHARE=str(share)),
                           capture_output=True, text=True)
+    row = row_of(out, cells, speed, feed, duration, proc.returncode)
+    log(f'{cells} cell(s) at {speed:g} m/s, an item every {feed:g} s: exit '
+        f'{proc.returncode}, {row["items_per_minute"]:.1f} items/min '
+        f'({", ".join(f"{p:.1f}" for p in row["per_cell"])}), {row["handoffs"]} handoffs')
+    return row
+
+
+def row_of(out: Path, cells: int, speed: float, feed: float, duration: float,
+           code: int) -> Dict[str, object]:
+    """Return a run's row from its folder (items/min at steady state, after :data:`WARM`)."""
     s = json.loads((out / 'summary.json').read_text(encoding='utf-8'))
     rows = s.get('cells') or [dict(s, cell=0)]
-    per = [float(r.get('items_per_minute') or 0.0) for r in rows]
+    folders = [out / f'cell_{k}' for k in range(cells)] if cells > 1 else [out]
+    per = [sum(1 for t, kind, _, _ in read_events(f) if kind == 'sorted' and float(t) >= WARM)
+           * 60.0 / (duration - WARM) for f in folders]
     cpu = [r.get('cpu_s_per_sim_s') or (r.get('cpu_per_sim_s') or {}).get('total')
            for r in rows]
     seps = [r.get('min_separation_m') for r in rows]
-    row = {'cells': cells, 'belt_speed': speed, 'feed_interval': feed, 'duration': duration,
-           'exit_code': proc.returncode, 'items_per_minute': float(s.get('items_per_minute')
-                                                                   or 0.0),
-           'per_cell': per, 'cpu_per_cell': cpu, 'min_separation_m': seps,
-           'missed': s.get('missed'), 'handoffs': s.get('handoffs', 0),
-           'handoff_problems': len(s.get('handoff_problems') or [])}
-    log(f'{cells} cell(s) at {speed:g} m/s, an item every {feed:g} s: exit '
-        f'{proc.returncode}, {row["items_per_minute"]:.1f} items/min '
-        f'({", ".join(f"{p:.1f}" for p in per)}), {row["handoffs"]} handoffs')
-    return row
+    return {'cells': cells, 'belt_speed': speed, 'feed_interval': feed, 'duration': duration,
+            'exit_code': code, 'items_per_minute': round(sum(per), 2),
+            'per_cell': per, 'cpu_per_cell': cpu, 'min_separation_m': seps,
+            'missed': s.get('missed'), 'handoffs': s.get('handoffs', 0),
+            'handoff_problems': len(s.get('handoff_problems') or [])}
 
 
 def measure(lines: List[int], duration: float, log: Log) -> List[Dict[str, object]]:
@@ -92,7 +103,8 @@ def markdown(rows: List[Dict[str, object]], command: str) -> str:
     lines = ['# A line of cells', '', f'Measured with `{command}` (`scara_collab/bench/line.py`): '
              "each line fed N times one cell's saturating feed, at N times the belt speed, "
              'beside one cell at the same speed and feed; each cell in one process, '
-             'unthrottled, in lockstep.', '',
+             f'unthrottled, in lockstep; items per minute counted after the first {WARM:g} '
+             'sim s.', '',
              '| cells | belt m/s | item every s | one cell items/min | line items/min | '
              'ratio (>= 0.9) | worst cell / one (>= 0.85) | per cell | min separation m | '
              'CPU s per sim s per cell | handoffs (problems) | exit |',

@@ -226,7 +226,8 @@ class Conveyor:
         """
         if h.cls not in self.cell.item_classes:
             raise ValueError(f'handed item {h.item}: unknown class {h.cls!r}')
-        if abs(h.y - self.cell.belt.centre_y) > self._half_free + 1e-9:
+        # an item pushed towards an edge still rides the belt while its centre is on it
+        if abs(h.y - self.cell.belt.centre_y) > self.cell.belt.width / 2.0 + 1e-9:
             raise ValueError(f'handed item {h.item}: y={h.y:.3f} is off the belt')
         if h.item in self.records or any(h.item == a.item for _, a in self._arriving):
             raise ValueError(f'handed item {h.item}: already on this belt')
