@@ -554,18 +554,18 @@ class LineHandoff(_Status):
 
         :raises ProtocolError: an item that is not ``[id, class, y, time]``.
         """
-        try:
-            return [line.Handoff.from_list(v) for v in self.items]
-        except ValueError as exc:
-            raise ProtocolError(f'LineHandoff from cell {self.cell}: {exc}') from None
+        return self._read(line.Handoff, self.items)
 
     def on_belt(self) -> list:
         """Return ``belt`` as :class:`~scara_collab.core.line.OnBelt` records.
 
         :raises ProtocolError: an item that is not ``[id, class, x, y]``.
         """
+        return self._read(line.OnBelt, self.belt)
+
+    def _read(self, record, values: list) -> list:
         try:
-            return [line.OnBelt.from_list(v) for v in self.belt]
+            return [record.from_list(v) for v in values]
         except ValueError as exc:
             raise ProtocolError(f'LineHandoff from cell {self.cell}: {exc}') from None
 
