@@ -6,8 +6,8 @@ runs on sim time, at ``real_time_factor`` times real time, or as fast as the mac
 
 Publishes ``/clock``, ``/joint_states`` (all six joints, ``state_rate``), ``/conveyor/items``
 (MarkerArray), ``/conveyor/events`` (one :class:`~scara_collab.nodes.protocol.ItemEvent` per
-item event: spawned, grasped, released, sorted, wrong_bin, missed, dropped; the one source of
-the run's counts) and ``/<robot>/execution_status``
+item event, :data:`~scara_collab.core.sorting.ITEM_EVENTS`; the one source of the run's
+counts) and ``/<robot>/execution_status``
 (:class:`~scara_collab.nodes.protocol.ExecutionStatus` for the move named in the trajectory's
 ``header.frame_id``: accepted, refused, finished, preempted, held). Subscribes
 ``/<robot>/joint_trajectory`` (executed like ros2_control's joint trajectory controller: stamp
@@ -34,6 +34,11 @@ held (status ``held``, reason ``<node> silent ...: holding``) and trajectories a
 until it answers again (status ``cleared``). The nodes named in ``lockstep_expect`` are waited
 for from the start (as if they had answered sim time 0), so the first steps do not depend on
 how soon they answer; the launcher and the in-process job name the nodes they start.
+
+In a line of cells (``line_cell``, ``line_upstream``, ``line_downstream``, ``line_timeout``;
+:mod:`scara_collab.nodes.line_link`) the bridge hands on what passes its belt's end on
+``line/handoff``, takes what the cell upstream hands on, and never steps past the upstream
+frontier plus the transit between sections, together with its own lockstep gate.
 """
 import math
 import os
