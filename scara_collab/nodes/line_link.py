@@ -98,9 +98,14 @@ class LineLink:
         return self.inbox.limit()
 
     def publish(self, frontier: float) -> None:
-        """Hand on what passed the belt's end, with the frontier (called with each clock)."""
+        """Hand on what passed the belt's end, with the frontier (called with each clock).
+
+        The frontier is never later than the conveyor's last update: an item that crosses
+        after it is found at the next one (the bridge may stop between two updates).
+        """
         if self._pub is None:
             return
+        frontier = min(frontier, self.sim.conveyor.checked)
         for h in self.sim.conveyor.pop_handoffs():
             self.outbox.add(h)
         msg = proto.LineHandoff(self.cell, round(frontier, 9), self.outbox.handed,

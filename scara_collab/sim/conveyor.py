@@ -145,6 +145,7 @@ class Conveyor:
         self.records: Dict[int, ItemRecord] = {}
         self._next_id = 1
         self.hand_on = False  # a cell downstream takes what passes x_end (else: missed)
+        self.checked = clock()  # sim time of the last update: every crossing by then is known
         self._handed: List[Handoff] = []
         self._arriving: List[Tuple[float, Handoff]] = []  # (arrival at x_start, item)
         self._events: List[SimEvent] = []
@@ -333,6 +334,7 @@ class Conveyor:
     def update(self) -> None:
         """Feed, carry items on the belt, detect missed / sorted / wrong_bin / dropped."""
         now = self._clock()
+        self.checked = now
         if self.feed_interval > 0 and now >= self._next_feed - 1e-9:
             self._next_feed += self.feed_period
             self._feed()
