@@ -64,8 +64,6 @@ def nodes(context):
         namespace = base + graph.cell_namespace(k, cells)
         upstream = [base + ns for ns in graph.line_upstream(k, cells)]
         line = graph.line_params(k, cells)
-        if k > 0 and arg['mode'] != 'idle':
-            line.setdefault('pybullet_bridge', {})['feed_interval'] = '0.0'  # handed on
         placed = {'namespace': namespace, 'remappings': list(
             graph.remaps(namespace, upstream).items())} if namespace else {}
         for spec in graph.job_nodes(automation=arg['mode'] != 'idle',

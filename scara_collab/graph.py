@@ -147,17 +147,26 @@ def line_upstream(k: int, cells: int) -> List[str]:
 def line_params(k: int, cells: int) -> Dict[str, Dict[str, str]]:
     """Return the parameters of cell ``k`` of a line of ``cells``, per node (none when alone).
 
-    Every cell but the first is fed by the one upstream; every cell but the last hands on.
+    Every cell but the first is fed by the one upstream (its own feed off); every cell but the
+    last hands on.
 
     >>> line_params(1, 3)['pybullet_bridge']
-    {'line_cell': '1', 'line_upstream': 'true', 'line_downstream': 'true'}
+    {'line_cell': '1', 'line_upstream': 'true', 'line_downstream': 'true', 'feed_interval': '0.0'}
     """
     cell_namespace(k, cells)
     if cells == 1:
         return {}
-    return {'pybullet_bridge': {'line_cell': str(k), 'line_upstream': str(k > 0).lower(),
-                                'line_downstream': str(k < cells - 1).lower()},
+    bridge = {'line_cell': str(k), 'line_upstream': str(k > 0).lower(),
+              'line_downstream': str(k < cells - 1).lower()}
+    if k > 0:
+        bridge['feed_interval'] = '0.0'
+    return {'pybullet_bridge': bridge,
             'automation_manager': {'line_cell': str(k), 'line_cells': str(cells)}}
+
+
+def fed(k: int, cells: int) -> bool:
+    """Return True if cell ``k`` of a line of ``cells`` has a feed of its own (the first)."""
+    return 'feed_interval' not in line_params(k, cells).get('pybullet_bridge', {})
 
 
 @dataclass(frozen=True)

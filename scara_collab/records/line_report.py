@@ -26,11 +26,11 @@ True
 >>> check_handoffs(ev, transit=1.0, end=20.0)['problems']
 ['cell 1 received item 1 twice']
 """
-import csv
 import json
 from pathlib import Path
 from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
+from scara_collab.records.report import load_events
 from scara_collab.records.telemetry import EVENTS
 
 EXIT_HANDOFF = 7
@@ -50,13 +50,10 @@ def cell_folder(output: Union[str, Path], k: int) -> Path:
 
 
 def read_events(folder: Union[str, Path]) -> List[Event]:
-    """Return a cell's item events (``events.csv``), or [] if it wrote none."""
-    path = Path(folder) / EVENTS
-    if not path.exists():
+    """Return a cell's item events (``events.csv``, :func:`report.load_events`), or []."""
+    if not (Path(folder) / EVENTS).exists():
         return []
-    with open(path, encoding='utf-8', newline='') as f:
-        return [(r['time'], r['kind'], r['item'], r['class']) for r in csv.DictReader(f)
-                if r.get('time')]
+    return [(r['time'], r['kind'], r['item'], r['class']) for r in load_events(folder)]
 
 
 def check_handoffs(events: Mapping[int, Sequence[Event]], transit: float, end: float,

@@ -416,7 +416,8 @@ class Launcher:
             self.job_started = True
         t0 = self.recorder.start_job()
         release = {}
-        if self.args.mode != 'idle' and not getattr(self.args, 'line_cell', None):
+        if self.args.mode != 'idle' and graph.fed(getattr(self.args, 'line_cell', None) or 0,
+                                                  getattr(self.args, 'cells', 1)):
             # the belt starts feeding now (in a line, only cell 0's: the others are handed on)
             feed = getattr(self.args, 'feed_interval', None)
             release['feed_interval'] = float(load_config('simulation')['feed_interval']
