@@ -7,8 +7,8 @@ Sections (``--only KEY``, repeatable or a comma list; default: the seven numbere
   foresight, throughput (about 20 minutes on 2 cores; ``--smoke``: seconds, tiny sizes);
 - through the launcher, each run in its own ROS domain: ``protocol`` (20-25 min; ``--seeds
   --runs --hogs``), ``faults`` (``--cases``), ``soak`` (``--duration --warm``), blocks of
-  ``RESULTS.md``; ``realtime`` (``--duration --seeds --conditions --capacity-duration``)
-  writes ``REALTIME.md``; ``line`` (``--cells --duration``) writes ``LINE.md``.
+  ``RESULTS.md``; ``realtime`` (``--duration --seeds --conditions --capacity-duration
+  --one-process``) writes ``REALTIME.md``; ``line`` (``--cells --duration``) writes ``LINE.md``.
 
 ``--out``: the folder (default ``docs/``, a temporary one with ``--smoke``); a ``.md`` path
 names the real-time page. Exit status 1 if a section failed or missed its targets.
@@ -55,6 +55,8 @@ def parse(argv=None) -> argparse.Namespace:
                    help='seeds: realtime (1 2 3), protocol mirrored runs (11 12 13)')
     p.add_argument('--conditions', nargs='+', default=None, choices=list(realtime.CONDITIONS),
                    help='realtime conditions (default all)')
+    p.add_argument('--one-process', action='store_true',
+                   help='realtime: every node of the cell in one process, in every run')
     p.add_argument('--capacity-duration', type=float, default=None,
                    help='realtime: sim s per capacity run (240; 0: none)')
     p.add_argument('--warm', type=float, default=None, help='soak: sim s left out (300)')

@@ -1,8 +1,8 @@
 """The cell in real time, without lockstep, as against hardware: figures beside lockstep's.
 
-Every run goes through the launcher (one process per node) at ``--rtf 1``, where the nodes
-run against a clock that does not wait for them (``--lockstep off``), on the same seeds as a
-lockstep reference run:
+Every run goes through the launcher at ``--rtf 1`` (one process per node, or every node in one
+process with ``one_process``), where the nodes run against a clock that does not wait for them
+(``--lockstep off``), on the same seeds as a lockstep reference run:
 
 - ``lockstep``: the reference, ``--lockstep on`` (at ``--rtf 1`` too);
 - ``quiet``: ``--lockstep off`` on a quiet machine;
@@ -41,10 +41,10 @@ CONDITIONS = {
 
 
 def run(condition: str, out: Path, duration: float, seed: int, log: Log,
-        feed: Optional[float] = None) -> Dict[str, object]:
+        feed: Optional[float] = None, one_process: bool = False) -> Dict[str, object]:
     """Run the collaborative job in one of :data:`CONDITIONS`; return its row."""
     lockstep, hogs, faults = CONDITIONS[condition]
-    flags = ['--lockstep', 'on' if lockstep else 'off']
+    flags = ['--lockstep', 'on' if lockstep else 'off'] + ['--one-process'] * one_process
     for f in faults:
         flags += ['--fault', f]
     if feed is not None:
@@ -56,9 +56,9 @@ def run(condition: str, out: Path, duration: float, seed: int, log: Log,
 
 
 def capacity(out: Path, seeds: Sequence[int], duration: float, log: Log,
-             feed: float = 0.9) -> Dict[str, object]:
+             feed: float = 0.9, one_process: bool = False) -> Dict[str, object]:
     """Items per minute at a saturating feed, lockstep on and off (quiet); and their ratio."""
-    rows = {c: [run(c, out / 'capacity', duration, s, log, feed=feed) for s in seeds]
+    rows = {c: [run(c, out / 'capacity', duration, s, log, feed, one_process) for s in seeds]
             for c in ('lockstep', 'quiet')}
     mean = {c: sum(float(r['items_per_minute'] or 0.0) for r in rs) / len(rs)
             for c, rs in rows.items()}
@@ -75,13 +75,14 @@ COLUMNS = ('condition', 'seed', 'exit_code', 'sorted', 'missed', 'dropped', 'giv
 
 
 def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]],
-             command: str, duration: float) -> str:
+             command: str, duration: float, one_process: bool = False) -> str:
     """Return the runs and the capacity as a Markdown page."""
     def cell(v):
         return f'{v:.3f}' if isinstance(v, float) else ('' if v is None else str(v))
     lines = ['# Real time, without lockstep', '',
              f'Measured with `{command}`: the collaborative job through the launcher at '
-             f'`--rtf 1`, {duration:g} sim s a run, the rated feed (conditions: '
+             f'`--rtf 1`, {"one process" if one_process else "one process per node"}, '
+             f'{duration:g} sim s a run, the rated feed (conditions: '
              "`scara_collab/bench/realtime.py`). `own_moves`: stops caused by the job's own "
              'moves (a predicted conflict); `lost_s`: sim seconds the stops cost; `overspeed`: '
              'times a joint ran faster than its limit allows (the arm left its trajectory); '
@@ -114,7 +115,8 @@ def section(args, page: Path, command: str, log: Log) -> bool:
 
     Every run takes its duration in wall time (``--rtf 1``). ``args``: ``duration`` (sim s per
     run, default 600), ``seeds`` (default 1 2 3), ``conditions`` (default all),
-    ``capacity_duration`` (sim s per capacity run, default 240; 0: none).
+    ``capacity_duration`` (sim s per capacity run, default 240; 0: none), ``one_process``
+    (every node of the cell in one process, in every run; default one process per node).
 
     :return: False if a run broke the margin, missed or dropped an item, or stopped for the
         job's own moves (``two_hogs`` may stop, protectively), or the capacity ratio < 0.95.
@@ -123,11 +125,12 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     seeds = args.seeds or [1, 2, 3]
     runs = Path(tempfile.mkdtemp(prefix='scara_realtime_'))
     log(f'run folders in {runs}')
-    rows = [run(c, runs, duration, s, log) for s in seeds
+    one = bool(getattr(args, 'one_process', False))
+    rows = [run(c, runs, duration, s, log, one_process=one) for s in seeds
             for c in args.conditions or list(CONDITIONS)]
     cap_s = 240.0 if args.capacity_duration is None else args.capacity_duration
-    cap = capacity(runs, seeds, cap_s, log) if cap_s > 0 else None
-    text = markdown(rows, cap, command, duration)
+    cap = capacity(runs, seeds, cap_s, log, one_process=one) if cap_s > 0 else None
+    text = markdown(rows, cap, command, duration, one)
     print(text)
     page.write_text(text, encoding='utf-8')
     bad = [f'{r["condition"]} seed {r["seed"]}' for r in rows if _bad(r)]
