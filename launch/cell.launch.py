@@ -15,7 +15,8 @@ for nobody, as on hardware or in Gazebo: the bridge's ``lockstep_window`` 0), ``
 :func:`scara_collab.graph.remaps`, so cells in different namespaces share a domain; default
 none), ``cells`` (N > 1: a line of N cells along one belt, cell k under ``/cell_k`` with its
 bridge's line parameters and its upstream cells' handoff remaps, only cell 0 fed;
-:mod:`scara_collab.core.line`; with ``namespace`` the line goes under it, ``<ns>/cell_k``).
+:mod:`scara_collab.core.line`; with ``namespace`` the line goes under it, ``<ns>/cell_k``),
+``cell`` (with ``cells``: only cell K of the line, for one machine per cell; default all).
 """
 import os
 
@@ -29,7 +30,8 @@ from scara_collab import graph
 
 PACKAGE = 'scara_collab'
 ARGUMENTS = {'mode': 'collaborative', 'tf': 'false', 'viewer': 'false', 'rviz': 'false',
-             'auto_start': 'true', 'lockstep': 'true', 'namespace': '', 'cells': '1'}
+             'auto_start': 'true', 'lockstep': 'true', 'namespace': '', 'cells': '1',
+             'cell': ''}
 
 
 def _typed(value: str):
@@ -58,9 +60,14 @@ def nodes(context):
         cells = 0
     if cells < 1:
         raise ValueError(f"cells must be an integer >= 1, got {arg['cells']!r}")
+    which = list(range(cells))
+    if arg['cell'] != '':
+        if arg['cell'] not in map(str, which):
+            raise ValueError(f"cell must be one of 0..{cells - 1}, got {arg['cell']!r}")
+        which = [int(arg['cell'])]
     base = graph.namespace_of(arg['namespace'])
     out = []
-    for k in range(cells):
+    for k in which:
         namespace = base + graph.cell_namespace(k, cells)
         upstream = [base + ns for ns in graph.line_upstream(k, cells)]
         line = graph.line_params(k, cells)

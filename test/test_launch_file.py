@@ -148,3 +148,10 @@ def test_cells_3_starts_a_line_of_cells_in_their_namespaces(monkeypatch):
         'parameters'][-1]
     with pytest.raises(ValueError, match='cells must be an integer >= 1'):
         opaque.kwargs['function'](dict(module.ARGUMENTS, cells='0'))
+    # cell:=1: that cell alone, as on a machine of its own, with the same line parameters
+    one = opaque.kwargs['function'](dict(module.ARGUMENTS, cells='3', cell='1'))
+    assert len(one) == per_cell and {n.kwargs['namespace'] for n in one} == {'/cell_1'}
+    assert next(n for n in one if n.kwargs['name'] == 'pybullet_bridge').kwargs[
+        'parameters'][-1] == own[1]
+    with pytest.raises(ValueError, match='cell must be one of 0..2'):
+        opaque.kwargs['function'](dict(module.ARGUMENTS, cells='3', cell='3'))

@@ -188,7 +188,9 @@ def test_a_two_cell_line_hands_items_on_through_lost_and_repeated_messages(tmp_p
     """``launch_cell.py --cells 2``: cell 0 saturated, cell 1 sorts what it hands on.
 
     A third of the handoff messages are lost and a third repeated: every item handed on is
-    received once, the items balance, the run exits 0 and says so per cell.
+    received once, the items balance, the run exits 0 and says so per cell. Discovery goes
+    through a Fast DDS discovery server (``--discovery-server``): every cell's nodes are its
+    clients, the launchers its super clients.
     """
     out = tmp_path / 'line'
     env = dict(os.environ, PYTHONUNBUFFERED='1')
@@ -196,9 +198,13 @@ def test_a_two_cell_line_hands_items_on_through_lost_and_repeated_messages(tmp_p
         [sys.executable, str(ROOT / 'scripts' / 'launch_cell.py'), '--cells', '2',
          '--one-process', '--duration', '45', '--feed-interval', '0.5', '--rtf', '0',
          '--no-plots', '--output', str(out), '--fault', 'loss:/cell_0/line/handoff:0.3',
-         '--fault', 'repeat:/cell_0/line/handoff:0.3'],
+         '--fault', 'repeat:/cell_0/line/handoff:0.3', '--discovery-server'],
         cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    server = proc.stdout.split('[launch] Fast DDS discovery server on ', 1)[1].split()[0]
+    for k in (0, 1):
+        assert json.loads((out / f'cell_{k}' / 'launch.json').read_text())[
+            'ROS_DISCOVERY_SERVER'] == server
     s = json.loads((out / 'summary.json').read_text())
     assert [c['namespace'] for c in s['cells']] == ['/cell_0', '/cell_1']
     c0, c1 = s['cells']

@@ -98,6 +98,7 @@ from scara_collab.nodes.recorder import RunRecorder
 from scara_collab.nodes.runner import localhost_by_default, make_executor
 from scara_collab.records.report import format_progress, format_report
 from scara_collab.records.telemetry import CpuMeter
+from scara_collab.run import discovery
 from scara_collab.run.console import Console
 from scara_collab.run.graph_client import GraphClient
 from scara_collab.run.liveness import Liveness
@@ -160,7 +161,16 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    'processes and run folder <output>/cell_k; only cell 0 is fed, each cell '
                    'hands on what passes its belt to the next (scara_collab.run.line; '
                    'default: %(default)s, one cell in the root namespace)')
-    p.add_argument('--line-cell', type=int, default=None, help=argparse.SUPPRESS)
+    p.add_argument('--line-cell', type=int, default=None, metavar='K',
+                   help='with --cells N: run only cell K of the line, here (one machine per '
+                   'cell, every machine on the same ROS domain or discovery server; give the '
+                   'cells downstream a --stall-timeout long enough for the upstream ones to '
+                   'start)')
+    p.add_argument('--discovery-server', type=int, nargs='?', const=0, default=None,
+                   metavar='PORT', help="run Fast DDS's discovery server on this host (UDP "
+                   'PORT, default a free one) for the run, every node its client, instead of '
+                   'simple discovery; with ROS_DISCOVERY_SERVER set, that server is used '
+                   'without this option (scara_collab.run.discovery)')
     p.add_argument('--one-process', action='store_true',
                    help='run every node in one process on one executor (a component '
                    'container, scara_collab.run.container) instead of one process per node')
@@ -290,11 +300,14 @@ class Launcher:
         self.rtf_released = False
         self.t_launch = time.monotonic()
         self.context = rclpy.Context()
-        rclpy.init(args=[], context=self.context,
-                   signal_handler_options=SignalHandlerOptions.NO)
         self.namespace = getattr(args, 'namespace', '')
-        self.recorder = RunRecorder(output, args.mode, profile=args.profile,
-                                    context=self.context, namespace=self.namespace)
+        # the launcher asks the graph for every node: with a discovery server it must learn the
+        # whole graph (a super client); its participant is made with its first node
+        with discovery.super_client():
+            rclpy.init(args=[], context=self.context,
+                       signal_handler_options=SignalHandlerOptions.NO)
+            self.recorder = RunRecorder(output, args.mode, profile=args.profile,
+                                        context=self.context, namespace=self.namespace)
         self.recorder.extra['lockstep'] = getattr(args, 'lockstep', 'on')
         if getattr(args, 'record', False):  # raw subscriptions on the recorder; finish() closes
             from scara_collab.nodes.mcap_recorder import McapRecorder
@@ -368,8 +381,10 @@ class Launcher:
         self.console.say(f'[launch] mode {self.args.mode}, {self.args.duration:g} sim s, '
                          f'rtf {format_factor(self.rtf)}, lockstep '
                          f'{getattr(self.args, "lockstep", "on")}, output {self.output}')
+        server = os.environ.get(discovery.ENV)
         self.console.say(f'[launch] ROS_DOMAIN_ID {domain}, discovery '
-                         f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}'
+                         + (f'server {server} (the launcher a super client)' if server else
+                            f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}')
                          + (f', namespace {self.namespace}' if self.namespace else ''))
         if not self.with_automation:
             self.console.say(f'[launch] {AUTOMATION_MODULE} is not installed: idle graph '
@@ -516,6 +531,19 @@ class Launcher:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the cell; returns the exit status (see the module docstring)."""
     args = parse_args(argv)
+    if args.discovery_server is not None and args.line_cell is None:
+        try:
+            with discovery.server(args.discovery_server or None) as address:
+                print(f'[launch] Fast DDS discovery server on {address}', flush=True)
+                return run(args, argv)
+        except (FileNotFoundError, RuntimeError) as exc:
+            print(f'launch_cell: --discovery-server: {exc}', file=sys.stderr)
+            return EXIT_USAGE
+    return run(args, argv)
+
+
+def run(args: argparse.Namespace, argv: Optional[Sequence[str]]) -> int:
+    """Run the cell or the line ``args`` (parsed from ``argv``); return the exit status."""
     if args.cells > 1 and args.line_cell is None:  # a line: one launcher per cell
         from scara_collab.run.line import run_line
         return run_line(args, list(sys.argv[1:] if argv is None else argv))

@@ -35,7 +35,8 @@ from scara_collab.records import line_report as lr
 from scara_collab.records.report import write_summary
 
 #: the line launcher's own options (and how many values follow), not passed on to the cells
-_OWN = {'--output': 1, '--cells': 1, '--quiet': 0, '--stall-timeout': 1}
+#: the line's own options, not its cells': how many values follow (-1: an optional number)
+_OWN = {'--output': 1, '--cells': 1, '--quiet': 0, '--stall-timeout': 1, '--discovery-server': -1}
 LINE_STALL = 300.0  # wall s a cell's sim time may stand still (the others starting up)
 
 
@@ -45,13 +46,17 @@ def cell_argv(argv: List[str], k: int, cells: int, output: Path, stall: float) -
     >>> cell_argv(['--duration', '30', '--cells', '2', '--output', 'x'], 1, 2, Path('/r'), 60)
     ['--duration', '30', '--cells', '2', '--line-cell', '1', '--output', '/r/cell_1', '--quiet', \
 '--stall-timeout', '60']
+    >>> cell_argv(['--discovery-server', '--seed', '3', '--discovery-server', '7', '--rtf', '0'],
+    ...           0, 2, Path('/r'), 60)[:4]
+    ['--seed', '3', '--rtf', '0']
     """
     out, skip = [], 0
     for a in argv:
-        if skip:
-            skip -= 1
+        if skip and (skip > 0 or a.isdigit()):
+            skip = max(skip - 1, 0)
             continue
         key = a.split('=', 1)[0]
+        skip = 0
         if key in _OWN:
             skip = 0 if '=' in a else _OWN[key]
             continue

@@ -129,6 +129,7 @@ class Supervisor:
             'config_dir': str(self.config_dir),
             'ROS_DOMAIN_ID': os.environ.get('ROS_DOMAIN_ID'),
             'ROS_AUTOMATIC_DISCOVERY_RANGE': os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'),
+            'ROS_DISCOVERY_SERVER': os.environ.get('ROS_DISCOVERY_SERVER'),
             'commands': {c.stage.name: command(c.stage, self.config_dir)
                          for c in self.children},
         }
