@@ -17,9 +17,10 @@ retries, :mod:`scara_collab.nodes.protocol` for the statuses):
   ``/collab/target_trajectory`` or ``/collab/target``; either way the stamp is the requested
   start and the move's id (:mod:`scara_collab.nodes.protocol`); ``/<robot>/gripper`` calls
   (std_srvs/SetBool; each answer goes back to the job with its request's token, a lost one is
-  asked again). Its lockstep answer waits for the planners' status of each move it sent (at
-  most ``lockstep.REPLY_WAIT`` wall seconds), so the next ``/clock`` always finds the reply
-  taken (README, *Repeatable runs*).
+  asked again). Its lockstep answer waits for the planners' status of each move it sent and
+  for the bridge's answer to each gripper call (at most ``lockstep.REPLY_WAIT`` wall seconds
+  each): the bridge cannot step before it has gripped, so the next ``/clock`` always finds the
+  reply taken (README, *Repeatable runs*).
 
 Services ``~/start`` and ``~/stop`` (std_srvs/Trigger, idempotent: starting a running job
 succeeds; a start before every endpoint the job uses is matched is refused, naming what is
@@ -263,10 +264,17 @@ class AutomationManager(Node):
             if isinstance(cmd, MoveCommand):
                 self._send_move(cmd)
             elif isinstance(cmd, GripCommand):
+                key = ('gripper', cmd.robot, cmd.token)
+                if self.lockstep is not None:  # the grip acts before the bridge steps on
+                    self.lockstep.await_reply(key)
                 call_with_faults(self, self.faults, self.grippers[cmd.robot],
                                  SetBool.Request(data=cmd.grasp),
-                                 lambda res, t=cmd.token: self.job.on_grip(
-                                     t, res.success, res.message))
+                                 lambda res, t=cmd.token, k=key: self._on_grip(t, k, res))
+
+    def _on_grip(self, token: int, key: tuple, res: SetBool.Response) -> None:
+        self.job.on_grip(token, res.success, res.message)
+        if self.lockstep is not None:
+            self.lockstep.reply(key)
 
     def _send_move(self, cmd: MoveCommand) -> None:
         """Publish a move: the job's plan of it, else its target point."""
