@@ -8,7 +8,8 @@ Sections (``--only KEY``, repeatable or a comma list; default: the seven numbere
 - through the launcher, each run in its own ROS domain: ``protocol`` (20-25 min; ``--seeds
   --runs --hogs``), ``faults`` (``--cases``), ``soak`` (``--duration --warm``), blocks of
   ``RESULTS.md``; ``realtime`` (``--duration --seeds --conditions --capacity-duration
-  --one-process``) writes ``REALTIME.md``; ``line`` (``--cells --duration``) writes ``LINE.md``.
+  --one-process``) writes ``REALTIME.md``; ``line`` (``--cells --duration --scenarios``)
+  writes ``LINE.md``.
 
 ``--out``: the folder (default ``docs/``, a temporary one with ``--smoke``); a ``.md`` path
 names the real-time page. Exit status 1 if a section failed or missed its targets.
@@ -66,6 +67,9 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument('--hogs', type=int, default=None, help='protocol: CPU hogs (2)')
     p.add_argument('--cells', type=int, nargs='+', default=None,
                    help='line: line lengths (2 3), each beside one cell')
+    p.add_argument('--scenarios', nargs='+', default=None, choices=('capacity', 'rated', 'kill'),
+                   help='line: capacity (default), rated (N x the rated feed, lossy handoffs), '
+                   'kill (cell 1 of 3 killed at 300 sim s)')
     return p.parse_args(argv)
 
 

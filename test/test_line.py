@@ -252,7 +252,8 @@ def test_a_dead_cells_section_carries_its_items_to_the_next_cell(tmp_path):
     after = [float(t) for t, kind, _, _ in events if kind == 'sorted' and float(t) > 40.0]
     assert after, 'cell 2 sorted nothing after cell 1 died'
     assert 'cell 1 DIED at sim t=35.0 s' in proc.stdout
-    assert 'taken for dead' in (out / 'cell_2' / 'logs' / 'cell.log').read_text()
+    log = (out / 'cell_2' / 'logs' / 'cell.log').read_text()
+    assert 'taken for dead' in log and 'line: sorting again: item' in log  # the recovery, timed
 
 
 def test_below_saturation_each_cell_takes_its_share_so_the_load_is_even():
@@ -291,3 +292,32 @@ def test_a_cells_place_in_the_line_is_checked_with_the_job_settings():
     settings = JobSettings.from_config(CELL, dict(cfg, line_cell=0, line_cells=2))
     in_line = SortingJob(CELL, settings, lambda *a: None)
     assert lone.share is None and in_line.share.share == pytest.approx(0.5)
+
+
+def test_the_line_benchmark_writes_each_scenario_into_its_own_block(tmp_path):
+    """``--only line --scenarios ...``: a block per scenario; a rerun replaces only its own.
+
+    The killed-cell scenario reads the recovery from the logs' wall stamps: the kill in cell
+    1's log, the first sort after the takeover in cell 2's.
+    """
+    from scara_collab.bench import line as bench
+    from scara_collab.bench.report import write_block
+    page = tmp_path / 'LINE.md'
+    page.write_text('# A line of cells\n\nkept by hand\n')
+    rated = {'cells': 2, 'duration': 600.0, 'feed_interval': 0.9, 'missed': 0, 'dropped': 1,
+             'handoffs': 301, 'handoff_problems': 0, 'balanced': True,
+             'min_separation_m': [0.131, 0.142], 'exit_code': 0}
+    killed = dict(rated, cells=3, at=300.0, cell0_identical=True, sorting_again_wall_s=7.25,
+                  lookahead_s=1.0, named=True, died=[1], calm_exit=0, exit_code=1)
+    write_block(page, 'line:rated', 'At N times the rated feed', bench.rated_text([rated], 'a'))
+    write_block(page, 'line:kill', 'A killed cell', bench.kill_text(killed, 'b'))
+    write_block(page, 'line:rated', 'At N times the rated feed',
+                bench.rated_text([dict(rated, missed=2)], 'c'))
+    text = page.read_text()
+    assert 'kept by hand' in text and text.count('line:rated:begin') == 1
+    assert '| 2 | 600.0 | 0.9 | 2 | 1 | 301 | 0 | True | 0.131, 0.142 | 0 |' in text
+    assert '| True | 7.2 | 11.0 | True | [1] | 0, 1 |' in text and 'Measured with `b`' in text
+    logs = tmp_path / 'cell.log'
+    logs.write_text('[INFO] [1796198515.138241243] [x]: other\n'
+                    '[WARN] [1796198520.500000000] [pybullet_bridge]: line: sorting again: ...\n')
+    assert bench.wall_of(logs, 'line: sorting again') == pytest.approx(1796198520.5)

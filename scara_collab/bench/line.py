@@ -12,24 +12,41 @@ sorted per minute (line and per cell), handoffs checked, the minimum separation 
 s per sim s per cell, the exit code. Targets (SPEC section 5, "a line of cells"): line
 capacity >= 0.9 x N x one cell's, no cell below 0.85 x one cell's, the margin kept in every
 cell, every handoff received once.
+
+Two more scenarios (``--scenarios``; default ``capacity`` alone):
+
+- ``rated``: N cells at N times the rated feed (an item every 1.8 / N s) at the belt's own
+  speed, with a third of the handoff messages lost and a third repeated; target 0 missed at
+  the end of the line, every handoff received once, the items balanced;
+- ``kill``: three cells at three times the rated feed, twice: undisturbed, and with cell 1's
+  bridge killed (``crash:``) at 300 sim s; targets: cell 0's event log identical in both,
+  cell 2 sorting again within the lookahead plus 10 s wall of the kill (from the logs' wall
+  stamps), the report naming cell 1, a non-zero exit.
 """
 import json
 import os
 from pathlib import Path
+import re
 import shutil
 import subprocess
 import sys
 import tempfile
-from typing import Dict, List
+from typing import Dict, List, Sequence
 
 import yaml
 
-from scara_collab.bench.util import Log
+from scara_collab.bench.report import write_block
+from scara_collab.bench.util import Log, table
+from scara_collab.core.config import load_config
+from scara_collab.core.line import Section
+from scara_collab.core.model import load_cell
 from scara_collab.core.paths import share_dir
 from scara_collab.records.line_report import read_events
 
 SATURATING = 0.9  # s per item: one cell's saturating feed at 0.2 m/s
 WARM = 40.0  # sim s left out of the rates: three sections at 0.6 m/s, and the job's start
+LOSSY = ('loss:/cell_{k}/line/handoff:0.3', 'repeat:/cell_{k}/line/handoff:0.3')
+STAMP = re.compile(r'\[(\d+\.\d+)\]')  # a ROS log line's wall stamp
 
 
 def belt_share(speed: float, into: Path) -> Path:
@@ -46,14 +63,16 @@ def belt_share(speed: float, into: Path) -> Path:
 
 
 def run(cells: int, speed: float, feed: float, duration: float, out: Path, log: Log,
-        seed: int = 1) -> Dict[str, object]:
+        seed: int = 1, flags: Sequence[str] = ()) -> Dict[str, object]:
     """Run a line of ``cells`` (1: a lone cell) at ``speed`` and ``feed``; return its row."""
-    share = belt_share(speed, out.parent / f'share_{speed:g}')
+    env = dict(os.environ)
+    if speed != load_cell().belt.speed:
+        env['SCARA_COLLAB_SHARE'] = str(belt_share(speed, out.parent / f'share_{speed:g}'))
     cmd = [sys.executable, '-m', 'scara_collab.run.launcher', '--cells', str(cells),
            '--one-process', '--rtf', '0', '--duration', f'{duration:g}', '--feed-interval',
-           f'{feed:g}', '--seed', str(seed), '--output', str(out), '--no-plots', '--quiet']
-    proc = subprocess.run(cmd, env=dict(os.environ, SCARA_COLLAB_SHARE=str(share)),
-                          capture_output=True, text=True)
+           f'{feed:g}', '--seed', str(seed), '--output', str(out), '--no-plots', '--quiet',
+           *flags]
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
     row = row_of(out, cells, speed, feed, duration, proc.returncode)
     log(f'{cells} cell(s) at {speed:g} m/s, an item every {feed:g} s: exit '
         f'{proc.returncode}, {row["items_per_minute"]:.1f} items/min '
@@ -75,14 +94,49 @@ def row_of(out: Path, cells: int, speed: float, feed: float, duration: float,
     return {'cells': cells, 'belt_speed': speed, 'feed_interval': feed, 'duration': duration,
             'exit_code': code, 'items_per_minute': round(sum(per), 2),
             'per_cell': per, 'cpu_per_cell': cpu, 'min_separation_m': seps,
-            'missed': s.get('missed'), 'handoffs': s.get('handoffs', 0),
-            'handoff_problems': len(s.get('handoff_problems') or [])}
+            'missed': s.get('missed'), 'dropped': s.get('dropped'),
+            'handoffs': s.get('handoffs', 0), 'balanced': s.get('balanced'),
+            'handoff_problems': len(s.get('handoff_problems') or []), 'died': s.get('died')}
 
 
-def measure(lines: List[int], duration: float, log: Log) -> List[Dict[str, object]]:
+def rated(n: int, duration: float, folder: Path, log: Log) -> Dict[str, object]:
+    """N cells at N times the rated feed, handoff messages lost and repeated."""
+    feed = float(load_config('simulation')['feed_interval']) / n
+    flags = [a for k in range(n - 1) for f in LOSSY for a in ('--fault', f.format(k=k))]
+    return run(n, load_cell().belt.speed, feed, duration, folder / f'rated_{n}', log,
+               flags=flags)
+
+
+def wall_of(path: Path, text: str) -> float:
+    """Return the wall stamp (s) of the first line of the log ``path`` containing ``text``."""
+    line = next(ln for ln in path.read_text(errors='replace').splitlines() if text in ln)
+    return float(STAMP.search(line).group(1))
+
+
+def kill(duration: float, at: float, folder: Path, log: Log) -> Dict[str, object]:
+    """Three cells, undisturbed and with cell 1 killed at ``at``: what the others did."""
+    feed = float(load_config('simulation')['feed_interval']) / 3
+    speed = load_cell().belt.speed
+    calm = run(3, speed, feed, duration, folder / 'calm_3', log)
+    hit = run(3, speed, feed, duration, folder / 'kill_3', log,
+              flags=['--fault', f'crash:/cell_1/pybullet_bridge:{at:g}'])
+    same = [(folder / r / 'cell_0' / 'events.csv').read_bytes() for r in ('calm_3', 'kill_3')]
+    logs = folder / 'kill_3'
+    try:
+        again = (wall_of(logs / 'cell_2' / 'logs' / 'cell.log', 'line: sorting again')
+                 - wall_of(logs / 'cell_1' / 'logs' / 'cell.log', 'fault injection: crash'))
+    except (OSError, StopIteration, AttributeError):
+        again = None
+    report = (logs / 'line_report.txt').read_text(errors='replace') \
+        if (logs / 'line_report.txt').is_file() else ''
+    return dict(hit, at=at, cell0_identical=same[0] == same[1], sorting_again_wall_s=again,
+                lookahead_s=Section(load_cell()).transit, named='cell 1' in report,
+                calm_exit=calm['exit_code'])
+
+
+def measure(lines: List[int], duration: float, folder: Path,
+            log: Log) -> List[Dict[str, object]]:
     """Each line length beside one cell at the same belt speed and feed; the ratios."""
-    folder = Path(tempfile.mkdtemp(prefix='scara_line_'))
-    log(f'run folders in {folder}')
     out = []
     for n in lines:
         speed, feed = 0.2 * n, SATURATING / n
@@ -97,10 +151,10 @@ def measure(lines: List[int], duration: float, log: Log) -> List[Dict[str, objec
 
 
 def markdown(rows: List[Dict[str, object]], command: str) -> str:
-    """Return the runs as a Markdown page."""
+    """Return the capacity runs as a Markdown block."""
     def f(v, d=2):
         return '-' if v is None else f'{v:.{d}f}'
-    lines = ['# A line of cells', '', f'Measured with `{command}` (`scara_collab/bench/line.py`): '
+    lines = [f'Measured with `{command}` (`scara_collab/bench/line.py`): '
              "each line fed N times one cell's saturating feed, at N times the belt speed, "
              'beside one cell at the same speed and feed; each cell in one process, '
              f'unthrottled, in lockstep; items per minute counted after the first {WARM:g} '
@@ -120,19 +174,63 @@ def markdown(rows: List[Dict[str, object]], command: str) -> str:
     return '\n'.join(lines) + '\n'
 
 
-def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the line lengths (``--cells``, default 2 3; ``--duration``, default 240 sim s).
+def rated_text(rows: List[Dict[str, object]], command: str) -> str:
+    """Return the rated-feed runs as a Markdown block."""
+    head = ('cells', 'duration', 'feed_interval', 'missed', 'dropped', 'handoffs',
+            'handoff_problems', 'balanced', 'min_separation_m', 'exit_code')
+    return (f'Measured with `{command}`: N cells at N times the rated feed, the belt at its '
+            'own speed, a third of the handoff messages lost and a third repeated '
+            '(`loss:`, `repeat:`); `missed`: at the end of the line.\n\n'
+            + table([{k: ', '.join(f'{x:.3f}' for x in r[k]) if isinstance(r[k], list)
+                      else r[k] for k in head} for r in rows]) + '\n')
 
-    Writes ``LINE.md`` beside ``page``. :return: False if a target is missed.
+
+def kill_text(r: Dict[str, object], command: str) -> str:
+    """Return the killed-cell run as a Markdown block."""
+    again = r['sorting_again_wall_s']
+    return (f'Measured with `{command}`: three cells at three times the rated feed, '
+            f'{r["duration"]:g} sim s, undisturbed and with cell 1 killed at '
+            f'{r["at"]:g} sim s.\n\n' + table([{
+                "cell 0's events identical": r['cell0_identical'],
+                'cell 2 sorting again after the kill (wall s)':
+                    '-' if again is None else f'{again:.1f}',
+                'target (lookahead + 10 s)': f'{r["lookahead_s"] + 10.0:.1f}',
+                'report names cell 1': r['named'], 'died': r['died'],
+                'exit (undisturbed, killed)': f'{r["calm_exit"]}, {r["exit_code"]}'}]) + '\n')
+
+
+def section(args, page: Path, command: str, log: Log) -> bool:
+    """Run the scenarios (``--scenarios``, default capacity) into blocks of ``LINE.md``.
+
+    ``--cells``: the line lengths (default 2 3); ``--duration``: sim s per run (default 240;
+    kill: 330, the kill at 300). :return: False if a target is missed.
     """
-    rows = measure(args.cells or [2, 3], args.duration or 240.0, log)
-    text = markdown(rows, command)
-    print(text)
     target = page.parent / 'LINE.md'
-    target.write_text(text, encoding='utf-8')
-    bad = [r for r in rows if r['exit_code'] or r['handoff_problems'] or r['ratio'] < 0.9
-           or r['worst_cell_ratio'] < 0.85
-           or any(s is None or s < 0.10 for s in r['min_separation_m'])]
-    log(f'written {target}' + (f'; not met: {[r["cells"] for r in bad]}' if bad else
-                               '; all met'))
+    if not target.is_file():
+        target.write_text('# A line of cells\n', encoding='utf-8')
+    folder = Path(tempfile.mkdtemp(prefix='scara_line_'))
+    log(f'run folders in {folder}')
+    lines, bad = args.cells or [2, 3], []
+    for name in getattr(args, 'scenarios', None) or ['capacity']:
+        if name == 'capacity':
+            rows = measure(lines, args.duration or 240.0, folder, log)
+            text, heading = markdown(rows, command), 'Capacity'
+            bad += [f'capacity {r["cells"]}' for r in rows if r['exit_code']
+                    or r['handoff_problems'] or r['ratio'] < 0.9 or r['worst_cell_ratio'] < 0.85
+                    or any(s is None or s < 0.10 for s in r['min_separation_m'])]
+        elif name == 'rated':
+            rows = [rated(n, args.duration or 600.0, folder, log) for n in lines]
+            text, heading = rated_text(rows, command), 'At N times the rated feed'
+            bad += [f'rated {r["cells"]}' for r in rows if r['exit_code'] or r['missed']
+                    or r['handoff_problems'] or not r['balanced']]
+        else:
+            r = kill(args.duration or 330.0, 300.0, folder, log)
+            text, heading = kill_text(r, command), 'A killed cell'
+            again = r['sorting_again_wall_s']
+            if not (r['cell0_identical'] and r['named'] and r['exit_code'] and again is not None
+                    and again <= r['lookahead_s'] + 10.0):
+                bad.append('kill')
+        print(text)
+        write_block(target, f'line:{name}', heading, text)
+    log(f'written {target}' + (f'; not met: {", ".join(bad)}' if bad else '; all met'))
     return not bad

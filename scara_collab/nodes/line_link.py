@@ -67,6 +67,9 @@ class LineLink:
         self.bypass = Bypass(self.section)
         self.timeout = float(timeout)
         self.dead_upstream: Optional[str] = None  # why the cell upstream is taken for dead
+        self._dead_since: Optional[float] = None  # monotonic s it was taken for dead
+        #: wall s from the takeover to this cell's first item sorted after it (None: not yet)
+        self.sorting_again: Optional[float] = None
         self._on_news = on_news
         self._lost_said = 0
         self._heard: Optional[float] = None  # monotonic s of the last message from upstream
@@ -174,15 +177,27 @@ class LineLink:
                               f't={frontier:.2f} s')
         belt = last.on_belt() if last is not None else []
         through = self.bypass.takeover(frontier, belt)
+        self._dead_since = time.monotonic()
         self.node.get_logger().error(
             f'line: {self.dead_upstream}: taken for dead; its section is plain belt from '
             f'now on ({len(belt)} item(s) on it, {len(through) - len(belt)} on their way '
             f'into it)' + ('' if self.cell >= 2 else '; nothing more will come'))
         self._take(frontier, through, None, f'the dead cell {self.cell - 1}')
 
+    def on_event(self, kind: str, item: int, t: float) -> None:
+        """Take an item event of this cell: the first sort after a takeover is logged."""
+        if kind != 'sorted' or self._dead_since is None or self.sorting_again is not None:
+            return
+        self.sorting_again = time.monotonic() - self._dead_since
+        self.node.get_logger().warning(
+            f'line: sorting again: item {item} sorted at sim t={t:.2f} s, '
+            f'{self.sorting_again:.1f} s wall after cell {self.cell - 1} was taken for dead')
+
     def summary(self) -> str:
         """Return the cell's line counts, in words (for the bridge's last log line)."""
         dead = f'; {self.dead_upstream}' if self.dead_upstream else ''
+        if self.sorting_again is not None:
+            dead += f', sorting again {self.sorting_again:.1f} s wall after'
         return (f'line cell {self.cell}: {self.outbox.handed} handed on, '
                 f'{self.inbox.received} received ({self.inbox.repeats} repeats, '
                 f'{self.inbox.lost} lost){dead}')

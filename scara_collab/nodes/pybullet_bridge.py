@@ -405,6 +405,7 @@ class PyBulletBridge(Node):
             self.diagnostics.publish(self.status().to_msg())
             self._next['diagnostics'] += self._periods['diagnostics']
         for ev in self.sim.pop_events():
+            self.line.on_event(ev.kind, ev.item, ev.time)
             self.events_pub.publish(proto.ItemEvent(ev.kind, ev.item, ev.cls, ev.time, ev.robot,
                                                     ev.cause).to_msg())
         if self.actions is not None:
