@@ -386,6 +386,11 @@ class Launcher:
                          + (f'server {server} (the launcher a super client)' if server else
                             f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}')
                          + (f', namespace {self.namespace}' if self.namespace else ''))
+        if (getattr(self.args, 'lockstep', 'on') == 'off' and self.rtf != 0
+                and not getattr(self.args, 'one_process', False) and (os.cpu_count() or 1) <= 2):
+            self.console.say(f'[launch] note: real time on {os.cpu_count()} core(s): one process '
+                             'per node needs about 1.3 CPU s per sim s at 1x, --one-process about '
+                             '0.8 (docs/realtime.md)')
         if not self.with_automation:
             self.console.say(f'[launch] {AUTOMATION_MODULE} is not installed: idle graph '
                              'without the automation manager')
