@@ -83,11 +83,15 @@ def run(cells: int, speed: float, feed: float, duration: float, out: Path, log: 
 def row_of(out: Path, cells: int, speed: float, feed: float, duration: float,
            code: int) -> Dict[str, object]:
     """Return a run's row from its folder (items/min at steady state, after :data:`WARM`)."""
-    s = json.loads((out / 'summary.json').read_text(encoding='utf-8'))
+    try:
+        s = json.loads((out / 'summary.json').read_text(encoding='utf-8'))
+    except (OSError, ValueError):  # a run that never got going: its exit code says why
+        s = {}
     rows = s.get('cells') or [dict(s, cell=0)]
     folders = [out / f'cell_{k}' for k in range(cells)] if cells > 1 else [out]
     per = [sum(1 for t, kind, _, _ in read_events(f) if kind == 'sorted' and float(t) >= WARM)
-           * 60.0 / (duration - WARM) for f in folders]
+           * 60.0 / (duration - WARM) if (f / 'events.csv').is_file() else 0.0
+           for f in folders]
     cpu = [r.get('cpu_s_per_sim_s') or (r.get('cpu_per_sim_s') or {}).get('total')
            for r in rows]
     seps = [r.get('min_separation_m') for r in rows]
@@ -120,17 +124,17 @@ def kill(duration: float, at: float, folder: Path, log: Log) -> Dict[str, object
     calm = run(3, speed, feed, duration, folder / 'calm_3', log)
     hit = run(3, speed, feed, duration, folder / 'kill_3', log,
               flags=['--fault', f'crash:/cell_1/pybullet_bridge:{at:g}'])
-    same = [(folder / r / 'cell_0' / 'events.csv').read_bytes() for r in ('calm_3', 'kill_3')]
     logs = folder / 'kill_3'
     try:
+        same = [(folder / r / 'cell_0' / 'events.csv').read_bytes() for r in ('calm_3', 'kill_3')]
         again = (wall_of(logs / 'cell_2' / 'logs' / 'cell.log', 'line: sorting again')
                  - wall_of(logs / 'cell_1' / 'logs' / 'cell.log', 'fault injection: crash'))
     except (OSError, StopIteration, AttributeError):
-        again = None
-    report = (logs / 'line_report.txt').read_text(errors='replace') \
-        if (logs / 'line_report.txt').is_file() else ''
+        same, again = [b'', b'-'], None
+    report = logs / 'line_report.txt'
+    named = report.is_file() and 'cell 1 DIED' in report.read_text(errors='replace')
     return dict(hit, at=at, cell0_identical=same[0] == same[1], sorting_again_wall_s=again,
-                lookahead_s=Section(load_cell()).transit, named='cell 1' in report,
+                lookahead_s=Section(load_cell()).transit, named=named,
                 calm_exit=calm['exit_code'])
 
 
@@ -181,8 +185,8 @@ def rated_text(rows: List[Dict[str, object]], command: str) -> str:
     return (f'Measured with `{command}`: N cells at N times the rated feed, the belt at its '
             'own speed, a third of the handoff messages lost and a third repeated '
             '(`loss:`, `repeat:`); `missed`: at the end of the line.\n\n'
-            + table([{k: ', '.join(f'{x:.3f}' for x in r[k]) if isinstance(r[k], list)
-                      else r[k] for k in head} for r in rows]) + '\n')
+            + table([{k: ', '.join('-' if x is None else f'{x:.3f}' for x in r[k])
+                      if isinstance(r[k], list) else r[k] for k in head} for r in rows]) + '\n')
 
 
 def kill_text(r: Dict[str, object], command: str) -> str:
@@ -203,7 +207,8 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     """Run the scenarios (``--scenarios``, default capacity) into blocks of ``LINE.md``.
 
     ``--cells``: the line lengths (default 2 3); ``--duration``: sim s per run (default 240;
-    kill: 330, the kill at 300). :return: False if a target is missed.
+    rated: 600; kill: 330, the kill at 300 or 30 s before the end). :return: False if a target
+    is missed.
     """
     target = page.parent / 'LINE.md'
     if not target.is_file():
@@ -224,7 +229,8 @@ def section(args, page: Path, command: str, log: Log) -> bool:
             bad += [f'rated {r["cells"]}' for r in rows if r['exit_code'] or r['missed']
                     or r['handoff_problems'] or not r['balanced']]
         else:
-            r = kill(args.duration or 330.0, 300.0, folder, log)
+            duration = args.duration or 330.0
+            r = kill(duration, min(300.0, duration - 30.0), folder, log)
             text, heading = kill_text(r, command), 'A killed cell'
             again = r['sorting_again_wall_s']
             if not (r['cell0_identical'] and r['named'] and r['exit_code'] and again is not None

@@ -18,10 +18,12 @@ namespace has its own lockstep):
   oldest answer of the participants it has heard. A busy node therefore holds sim time
   (within ``window``) until it is done, as if the whole graph ran in one thread;
 * a participant may hold its answer until another node has replied to what it sent (the
-  automation manager, until a planner's status for the move it offered:
-  :meth:`LockstepParticipant.await_reply`), at most ``REPLY_WAIT`` wall seconds: sim time
-  then waits for the reply too, and the next ``/clock`` finds it taken, however the
-  processes were scheduled (README, *Repeatable runs*);
+  automation manager, until a planner's status for the move it offered and the bridge's
+  answer to a gripper call: :meth:`LockstepParticipant.await_reply`), at most ``REPLY_WAIT``
+  wall seconds: sim time then waits for the reply too, and the next ``/clock`` finds it
+  taken, however the processes were scheduled (README, *Repeatable runs*). A reply delayed
+  on sim time (a ``delay:`` or ``latency:`` fault) cannot come while sim time waits for it:
+  it costs ``REPLY_WAIT`` wall seconds, and the run is no longer repeatable;
 * a participant that leaves says so (stamp = the end of time), before its context shuts
   down (:func:`scara_collab.nodes.shutdown.before_shutdown`); one that keeps the bridge
   waiting for ``timeout`` wall seconds is dropped with a warning, and joins again with its

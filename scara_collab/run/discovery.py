@@ -23,8 +23,11 @@ import socket
 import subprocess
 import sys
 import sysconfig
+import tempfile
 import time
 from typing import Dict, Iterator, List, Optional, Tuple
+
+from scara_collab.run.child import die_with_parent
 
 ENV = 'ROS_DISCOVERY_SERVER'
 SUPER = 'ROS_SUPER_CLIENT'
@@ -56,43 +59,49 @@ def free_port(host: str = '127.0.0.1') -> int:
 
 
 @contextmanager
-def server(port: Optional[int] = None, host: str = '127.0.0.1',
-           log: Optional[Path] = None) -> Iterator[str]:
+def server(port: Optional[int] = None, host: str = '127.0.0.1') -> Iterator[str]:
     """Run a discovery server on ``host`` meanwhile; every process started inside uses it.
 
-    Sets ``ROS_DISCOVERY_SERVER`` in this process's environment (so the launcher and every
-    node it starts are its clients) and restores it after. Yields ``HOST:PORT``.
+    Sets ``ROS_DISCOVERY_SERVER`` in this process's environment, so the processes started
+    inside (the nodes, the cells' launchers) are its clients, and restores it after. The
+    server dies with this process (SIGTERM on its death). Yields ``HOST:PORT``.
 
-    :param port: UDP port (default: a free one); :param log: the server's output (default:
-        none).
-    :raises RuntimeError: if the server exits at once (the port is taken, say).
+    Fast DDS reads the variable once per process, with its first participant: a process that
+    made a participant inside stays a client of this server after it (the launcher makes
+    none after the run).
+
+    :param port: UDP port (default: a free one).
+    :raises RuntimeError: if the server exits at once (the port is taken, say), with its output.
     """
     port = port or free_port(host)
     cmd, env = server_command(port, host)
-    out = open(log, 'wb') if log else subprocess.DEVNULL
-    proc = subprocess.Popen(cmd, env=env, stdin=subprocess.DEVNULL, stdout=out,
-                            stderr=subprocess.STDOUT, start_new_session=True)
-    before = os.environ.get(ENV)
-    try:
-        time.sleep(0.3)
-        if proc.poll() is not None:
-            raise RuntimeError(f'{SERVER} on {host}:{port} exited at once (code '
-                               f'{proc.returncode}){f"; see {log}" if log else ""}')
-        os.environ[ENV] = f'{host}:{port}'
-        yield os.environ[ENV]
-    finally:
-        if before is None:
-            os.environ.pop(ENV, None)
-        else:
-            os.environ[ENV] = before
-        proc.terminate()
+    env.pop(ENV, None)
+    parent = os.getpid()
+    with tempfile.TemporaryFile() as out:
+        proc = subprocess.Popen(cmd, env=env, stdin=subprocess.DEVNULL, stdout=out,
+                                stderr=subprocess.STDOUT, start_new_session=True,
+                                preexec_fn=lambda: die_with_parent(parent))
+        before = os.environ.get(ENV)
         try:
-            proc.wait(timeout=5.0)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        if log:
-            out.close()
+            time.sleep(0.3)
+            if proc.poll() is not None:
+                out.seek(0)
+                said = out.read().decode(errors='replace').strip().splitlines()[-3:]
+                raise RuntimeError(f'{SERVER} on {host}:{port} exited at once (code '
+                                   f'{proc.returncode}): {" / ".join(said) or "no output"}')
+            os.environ[ENV] = f'{host}:{port}'
+            yield os.environ[ENV]
+        finally:
+            if before is None:
+                os.environ.pop(ENV, None)
+            else:
+                os.environ[ENV] = before
+            proc.terminate()
+            try:
+                proc.wait(timeout=5.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
 
 
 @contextmanager

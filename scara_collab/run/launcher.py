@@ -74,6 +74,7 @@ processes from the graph, :mod:`~scara_collab.run.supervisor` starts, watches an
 (:mod:`scara_collab.nodes.lockstep_watch`).
 """
 import argparse
+import contextlib
 import datetime
 import importlib.util
 import os
@@ -229,6 +230,11 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error('--cells must be >= 1')
     if args.line_cell is not None and not 0 <= args.line_cell < args.cells:
         p.error(f'--line-cell {args.line_cell} is not a cell of a line of {args.cells}')
+    if args.discovery_server is not None and not 0 <= args.discovery_server <= 65535:
+        p.error('--discovery-server: a UDP port, 1..65535 (or none: a free one)')
+    if args.discovery_server is not None and args.line_cell is not None:
+        p.error('--discovery-server starts a server for a whole line; for one cell of a line '
+                "on a machine of its own, set ROS_DISCOVERY_SERVER to the line's server")
     if args.cells > 1 and args.namespace:
         p.error('--namespace and --cells: a line puts cell k under /cell_k')
     if args.cells > 1 and (args.viewer is not None or args.gui):
@@ -303,7 +309,7 @@ class Launcher:
         self.namespace = getattr(args, 'namespace', '')
         # the launcher asks the graph for every node: with a discovery server it must learn the
         # whole graph (a super client); its participant is made with its first node
-        with discovery.super_client():
+        with discovery.super_client() as self.super_client:
             rclpy.init(args=[], context=self.context,
                        signal_handler_options=SignalHandlerOptions.NO)
             self.recorder = RunRecorder(output, args.mode, profile=args.profile,
@@ -383,14 +389,16 @@ class Launcher:
                          f'{getattr(self.args, "lockstep", "on")}, output {self.output}')
         server = os.environ.get(discovery.ENV)
         self.console.say(f'[launch] ROS_DOMAIN_ID {domain}, discovery '
-                         + (f'server {server} (the launcher a super client)' if server else
+                         + (f'server {server} (the launcher '
+                            f'{"a super client" if self.super_client else "a plain client"})'
+                            if server else
                             f'{os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE")}')
                          + (f', namespace {self.namespace}' if self.namespace else ''))
         if (getattr(self.args, 'lockstep', 'on') == 'off' and self.rtf != 0
                 and not getattr(self.args, 'one_process', False) and (os.cpu_count() or 1) <= 2):
-            self.console.say(f'[launch] note: real time on {os.cpu_count()} core(s): one process '
-                             'per node needs about 1.3 CPU s per sim s at 1x, --one-process about '
-                             '0.8 (docs/realtime.md)')
+            self.console.say(f'[launch] note: real time on {os.cpu_count() or 1} core(s): one '
+                             'process per node needs about 1.3 CPU s per sim s at 1x, '
+                             '--one-process about 0.8 (docs/realtime.md)')
         if not self.with_automation:
             self.console.say(f'[launch] {AUTOMATION_MODULE} is not installed: idle graph '
                              'without the automation manager')
@@ -536,15 +544,15 @@ class Launcher:
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run the cell; returns the exit status (see the module docstring)."""
     args = parse_args(argv)
-    if args.discovery_server is not None and args.line_cell is None:
-        try:
-            with discovery.server(args.discovery_server or None) as address:
-                print(f'[launch] Fast DDS discovery server on {address}', flush=True)
-                return run(args, argv)
-        except (FileNotFoundError, RuntimeError) as exc:
-            print(f'launch_cell: --discovery-server: {exc}', file=sys.stderr)
-            return EXIT_USAGE
-    return run(args, argv)
+    with contextlib.ExitStack() as stack:
+        if args.discovery_server is not None:
+            try:
+                address = stack.enter_context(discovery.server(args.discovery_server or None))
+            except (FileNotFoundError, RuntimeError) as exc:
+                print(f'launch_cell: --discovery-server: {exc}', file=sys.stderr)
+                return EXIT_USAGE
+            print(f'[launch] Fast DDS discovery server on {address}', flush=True)
+        return run(args, argv)
 
 
 def run(args: argparse.Namespace, argv: Optional[Sequence[str]]) -> int:
