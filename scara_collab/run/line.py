@@ -34,8 +34,8 @@ from scara_collab.core.model import load_cell
 from scara_collab.records import line_report as lr
 from scara_collab.records.report import write_summary
 
-#: the line launcher's own options (and how many values follow), not passed on to the cells
-#: the line's own options, not its cells': how many values follow (-1: an optional number)
+#: the line launcher's own options, not passed on to the cells, and how many values follow
+#: (-1: an optional number)
 _OWN = {'--output': 1, '--cells': 1, '--quiet': 0, '--stall-timeout': 1, '--discovery-server': -1}
 LINE_STALL = 300.0  # wall s a cell's sim time may stand still (the others starting up)
 
