@@ -330,7 +330,7 @@ def test_an_arm_in_the_way_parks_and_a_deadlock_is_broken_by_the_follower(cell):
     job = make_job(cell)
     pick = first_pick(cell, job)
     assert job.phases() == {lead: 'to_item', foll: 'idle'}
-    job.items = {}  # nothing for the right arm to take meanwhile
+    job.on_items([])  # nothing for the right arm to take meanwhile
     job.on_planner(lead, pick.request, 'waiting', None, None, 'scara_right blocks it')
     job.tick(0.1)
     assert job.phases()[foll] == 'idle'  # not yet: unblock_after

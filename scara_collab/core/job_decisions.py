@@ -1,0 +1,270 @@
+"""What the sorting job decides: which item an idle arm takes, and what follows each event.
+
+:class:`LaneDecisions` is the job's judgement, apart from its bookkeeping
+(:class:`scara_collab.core.job.SortingJob` takes the observations and runs the clock):
+
+- an idle lane picks its next item (:meth:`LaneDecisions.pick_next`, ranked by
+  :func:`scara_collab.core.sorting.rank_by_cycle` as the mode's :class:`Picking` says);
+- a lane event (:class:`scara_collab.core.lanes.LaneEvent`) is followed by the next step:
+  after a move, grasp, lift, carry, release or chase again (:meth:`LaneDecisions.arrived`);
+  after a grip, carry or try another item (:meth:`LaneDecisions.gripped`); after a failure,
+  give up, park, or carry a held item to its bin again (:meth:`LaneDecisions.give_up`);
+- an arm that waits for the other is unblocked as the belt sharing says
+  (:meth:`LaneDecisions.unblock`).
+
+The moves it decides on are asked through :class:`scara_collab.core.job_moves.JobMoves`.
+No ROS here.
+"""
+from dataclasses import dataclass
+from typing import Callable, Dict, List, Optional, Sequence
+
+import numpy as np
+
+from scara_collab.core import line, sharing, sorting
+from scara_collab.core.job_moves import JobMoves
+from scara_collab.core.job_settings import JobSettings
+from scara_collab.core.lanes import Lane, LaneEvent, LaneProtocol, MOVING
+from scara_collab.core.model import CellModel
+from scara_collab.core.sharing import Unblock
+
+#: s an idle arm that found nothing to take waits before it looks again (the items move 2 cm)
+LOOK_AGAIN = 0.1
+#: urgent items an arm can still save by taking them first, most urgent first; with more, the
+#: feed is faster than the arm and it takes the item that makes the shortest cycle
+SAVABLE = 2
+
+
+@dataclass(frozen=True)
+class Picking:
+    """How a mode chooses an arm's next item.
+
+    ``own``: prefer items on the arm's half of the belt (None: the whole belt is its own);
+    ``half``: take only items on the arm's half, and claim each one's mirror partner for the
+    follower (mirrored pairs); ``by_cycle``: rank the candidates by cycle
+    (:func:`scara_collab.core.sorting.rank_by_cycle`), else by urgency alone.
+    """
+
+    own: Optional[bool]
+    half: bool
+    by_cycle: bool
+
+
+#: each mode's :class:`Picking`
+PICKING = {'single': Picking(own=None, half=False, by_cycle=True),
+           'collaborative': Picking(own=True, half=False, by_cycle=True),
+           'mirrored': Picking(own=True, half=True, by_cycle=False)}
+
+
+class ItemNotes:
+    """The job's last word on each item on the belt, so that a missed item says why.
+
+    Kept per item until it leaves the belt: ranked among an arm's candidates, not met (no
+    intercept, or the way not clear), claimed, given up.
+    """
+
+    def __init__(self):
+        """No item noted yet."""
+        self._notes: Dict[int, str] = {}
+
+    def note(self, item: int, now: float, text: str) -> None:
+        """Note ``text`` about ``item`` at sim time ``now``."""
+        self._notes[item] = f'{text} at t={now:.2f} s'
+
+    def ranked(self, robot: str, order: Sequence, now: float) -> None:
+        """Note each item's place among ``robot``'s candidates (``(group, item)`` pairs)."""
+        for k, (_, item) in enumerate(order):
+            self.note(item.id, now, f'{robot} ranked it #{k + 1} of {len(order)}')
+
+    def close(self, item: int) -> str:
+        """Forget ``item`` (it left the belt); return the last note, or say there was none."""
+        return self._notes.pop(item, 'never a candidate of either arm')
+
+
+class LaneDecisions:
+    """The job's decisions for its lanes (see the module docstring).
+
+    :param items: the items resting on the belt now, by id (the job keeps it current);
+    :param claimed: the arm each item is claimed by; :param notes: the job's notes;
+    :param share: in a line of cells, the items this cell leaves downstream (or None);
+    :param log: ``log(level, text)``.
+    """
+
+    def __init__(self, cell: CellModel, settings: JobSettings, lanes: List[Lane],
+                 protocol: LaneProtocol, moves: JobMoves, items: Dict[int, sorting.SeenItem],
+                 claimed: Dict[int, str], notes: 'ItemNotes', share: Optional[line.Share],
+                 log: Callable[[str, str], None]):
+        """No give-up yet."""
+        self.cell, self.settings, self.lanes, self.protocol, self.moves = (
+            cell, settings, lanes, protocol, moves)
+        self.items, self.claimed, self.notes, self.share, self.log = (
+            items, claimed, notes, share, log)
+        self.picking = PICKING[settings.mode]
+        self.give_ups = 0
+        self.last_give_up = ''
+
+    def decide(self, event: LaneEvent, now: float) -> None:
+        """Take the next step of the lane whose wait ``event`` ended."""
+        if event.kind == 'arrived':
+            self.arrived(event.lane, now)
+        elif event.kind == 'gripped':
+            self.gripped(event.lane, now)
+        else:
+            self.give_up(event.lane, now, event.why)
+
+    # --- after a move -----------------------------------------------------------------------
+    def arrived(self, lane: Lane, now: float) -> None:
+        """Go on after every arm of ``lane`` arrived: grasp, lift, carry, release or chase."""
+        if lane.phase == 'to_park':
+            lane.idle()
+        elif lane.phase == 'to_bin':
+            self.moves.grip(lane, False, now)
+        elif lane.phase == 'lift':
+            self.moves.to_bin(lane, now)
+        elif lane.phase == 'via':
+            if lane.route:  # the next leg of a detour
+                phase, target = lane.route.pop(0)
+                self.moves.move(lane, phase, target, self.moves.asap_start(lane, now), now)
+            elif lane.holding:
+                self.moves.to_bin(lane, now)
+            elif not self.moves.chase(lane, self.items.get(lane.item.id, lane.item), now):
+                self.give_up(lane, now, f'item {lane.item.id} got away (after a detour)')
+        else:  # at the item? a late start (the arm yielded) leaves it short of the item
+            seen = self.items.get(lane.item.id)
+            if seen is None:
+                return self.give_up(lane, now, f'item {lane.item.id} is no longer on the belt')
+            # where the item will be when the grasp takes hold (the gripper call's latency)
+            off = sorting.predict(self.cell, seen, now + self.protocol.grasp_lead)[:2] \
+                - lane.target[:2]
+            if np.hypot(*off) <= self.settings.grasp_reach:
+                self.moves.grip(lane, True, now)
+            elif not self.moves.chase(lane, seen, now):
+                self.give_up(lane, now, f'item {seen.id} got away ({np.hypot(*off):.3f} m)')
+
+    # --- picking --------------------------------------------------------------------------
+    def pick_next(self, lane: Lane, now: float) -> None:
+        """Send the idle ``lane`` after the best item it can meet, or look again later."""
+        s, how = self.settings, self.picking
+        arm = self.cell.arm(lane.robot)
+        others_busy = any(o.phase != 'idle' for o in self.lanes if o is not lane)
+        free = [it for i, it in self.items.items()
+                if i not in self.claimed and lane.failures.get(i, 0) < 2
+                and (self.share is None or self.share.takes(i, now))]
+        if how.half:  # the leader takes its half; the partner is mirrored
+            side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
+            free = [it for it in free if np.sign(it.position[1]) == side]
+        order = sorting.order_candidates(self.cell, arm, free, now + s.decision_lead,
+                                         s.pick_z, how.own, steal=others_busy,
+                                         other_cycle=s.steal_cycle or None, groups=True)
+        if how.by_cycle:  # the shortest cycles first, urgent savable items first
+            order = sorting.rank_by_cycle(self.cell, arm, self.protocol.q[lane.robot], order,
+                                          now + s.decision_lead, s.pick_z,
+                                          s.drop_clearance, sharing.URGENT_SLACK, SAVABLE)
+        self.notes.ranked(lane.robot, order, now)
+        for item in [it for _, it in order[:2]]:
+            if not self.moves.chase(lane, item, now):
+                self.notes.note(item.id, now, f'{lane.robot} could not meet it (or not yet)')
+                continue
+            self.notes.note(item.id, now, f'{lane.robot} chased it')
+            self.claimed[item.id] = lane.robot
+            if how.half:
+                partner = sorting.mirror_partner(self.cell, item, list(self.items.values()))
+                if partner is not None:
+                    self.claimed[partner.id] = self.cell.follower.name
+            return
+        lane.next_look = now + LOOK_AGAIN  # each look plans: not at every tick
+
+    # --- after a grip -----------------------------------------------------------------------
+    def gripped(self, lane: Lane, now: float) -> None:
+        """Go on after every gripper of ``lane`` answered: carry, lift first, or try again."""
+        s = self.settings
+        main = lane.grips[lane.robot]
+        for robot, track in lane.grips.items():
+            if robot != lane.robot and not track.ok:
+                self.log('warn', f'{robot} gripper: {track.message}')
+        if lane.phase == 'releasing':
+            if lane.item is not None:
+                self.claimed.pop(lane.item.id, None)
+            if not main.ok:
+                self.log('warn', f'{lane.robot}: release failed ({main.message})')
+            lane.idle()
+        elif not main.ok:
+            item = lane.item
+            lane.failures[item.id] = lane.failures.get(item.id, 0) + 1
+            self.claimed.pop(item.id, None)
+            self.log('info', f'{lane.robot}: grasp of item {item.id} failed ({main.message})')
+            lane.idle()
+        elif s.carry_z > s.pick_z + 1e-6 and self.moves.would_sweep(lane, self.items, now):
+            up = np.array([lane.target[0], lane.target[1], s.carry_z])
+            lane.bin_tries, lane.holding = 0, True
+            self.moves.move(lane, 'lift', up, self.moves.asap_start(lane, now), now)
+        else:
+            lane.bin_tries, lane.holding = 0, True
+            self.moves.to_bin(lane, now)
+
+    # --- out of the way ---------------------------------------------------------------------
+    def unblock(self, how: Optional[Unblock], now: float) -> None:
+        """Do what the belt sharing asks for an arm that waits for the other (or nothing)."""
+        if how is None:
+            return
+        lane = how.lane
+        if how.action == 'park':
+            self.log('info', f'{lane.robot}: parks to clear the way for {how.other.robot}')
+            self.moves.park(lane, now)
+        elif how.action == 'reaim':
+            self.aim_elsewhere(lane, how.other, now)
+        elif how.action == 'give_way':
+            self.give_up(lane, now, how.why)
+        else:  # back out to the waypoint, then on to the bin
+            drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls,
+                                      self.settings.drop_clearance)
+            self.log('info', f'{lane.robot}: both arms hold items and wait for each other: '
+                     f'{lane.robot} backs out to y={how.via[1]:.2f} first')
+            lane.route = [('to_bin', drop)]
+            self.moves.move(lane, 'via', how.via, self.moves.asap_start(lane, now), now)
+
+    def aim_elsewhere(self, lane: Lane, other: Lane, now: float) -> None:
+        """Ask again for the item an arm waits to meet, where the belt has carried it by now.
+
+        The planner holds a waiting move until the other arm's next move clears the way (the
+        other arm waits at an item or its bin while it grips), then plans the target it has:
+        by then the item has moved on. Asking again every ``unblock_after`` keeps the target
+        current, so the arm meets the item as soon as the way is clear; the item's deadline
+        is the belt's end (the intercept no longer exists: give up).
+        """
+        seen = self.items.get(lane.item.id)
+        if seen is None:  # not seen resting on the belt just now: the move's deadline holds
+            return
+        if lane.reaims == 0:
+            self.log('info', f'{lane.robot}: waits for {other.robot} ({other.phase}); '
+                     f're-aims at item {seen.id} while it waits')
+        if not self.moves.chase(lane, seen, now):
+            return self.give_up(lane, now, f'item {seen.id} got away while {lane.robot} '
+                                f'waited for {other.robot}')
+        lane.reaims += 1
+
+    # --- endings --------------------------------------------------------------------------
+    def give_up(self, lane: Lane, now: float, why: str) -> None:
+        """End ``lane``'s attempt for ``why``: a held item goes to its bin, else it parks."""
+        self.log('warn', f'{lane.robot}: {why}')
+        self.give_ups += 1
+        self.last_give_up = f't={now:.2f} s {lane.robot} {lane.phase}: {why}'
+        if lane.item is not None:
+            self.notes.note(lane.item.id, now, f'{lane.robot} gave it up ({why})')
+        phase = lane.phase
+        lane.route = []
+        if lane.holding and phase in MOVING:  # never put an item down off the bin
+            lane.bin_tries += 1
+            if lane.bin_tries <= self.settings.bin_retries:
+                self.moves.to_bin(lane, now)
+                return
+            self.log('warn', f'{lane.robot}: releasing item {lane.item.id} where it is after '
+                     f'{lane.bin_tries} bin moves')
+            self.moves.grip(lane, False, now)
+            return
+        if lane.item is not None:
+            self.claimed.pop(lane.item.id, None)
+            lane.failures[lane.item.id] = lane.failures.get(lane.item.id, 0) + 1
+        lane.idle()
+        if phase == 'to_park':  # the park move itself failed: stay idle, do not loop
+            return
+        self.moves.park(lane, now)

@@ -1,0 +1,140 @@
+"""The moves the sorting job asks for: to an item, to a bin, to park, round a mirrored pair.
+
+:class:`JobMoves` turns the job's decisions into requests: it asks each move of the request
+protocol (:class:`scara_collab.core.lanes.LaneProtocol`) and books it on the belt sharing
+(:mod:`scara_collab.core.sharing`), so the other lane decides around it; it times the move
+that meets an item (:func:`scara_collab.core.sorting.intercept`, then around the other arm's
+booked moves), and sends a mirrored pair round a waypoint when its arms would come within the
+planners' margin (:mod:`scara_collab.core.pairing`). The commands collect in :attr:`out`, in
+the order they are to be sent. No ROS here.
+"""
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from scara_collab.core import pairing, sorting
+from scara_collab.core.job_settings import JobSettings
+from scara_collab.core.lanes import Command, Lane, LaneProtocol, PlanMemo
+from scara_collab.core.model import CellModel
+from scara_collab.core.trajectory import Trajectory
+
+
+class JobMoves:
+    """Ask the job's moves and grips, and book them on the belt (see the module docstring).
+
+    :param belt: the belt sharing (:class:`~scara_collab.core.sharing.SharedBelt` or
+        :class:`~scara_collab.core.sharing.SoloBelt`).
+    """
+
+    def __init__(self, cell: CellModel, settings: JobSettings, protocol: LaneProtocol, belt,
+                 plan: PlanMemo):
+        """Nothing asked yet."""
+        self.cell, self.settings, self.protocol, self.belt, self.plan = (
+            cell, settings, protocol, belt, plan)
+        self.out: List[Command] = []  # the commands asked since the caller last took them
+
+    def move(self, lane: Lane, phase: str, target, start: float, now: float,
+             traj: Optional[Trajectory] = None) -> None:
+        """Ask the protocol for ``lane``'s move and book it on the belt."""
+        self.out.append(self.protocol.move(lane, phase, target, start, now, traj))
+        self.belt.asked(lane)
+
+    def grip(self, lane: Lane, grasp: bool, now: float) -> None:
+        """Ask ``lane``'s grippers to grasp (True) or release."""
+        self.out += self.protocol.grip(lane, grasp, now)
+
+    def asap_start(self, lane: Lane, now: float) -> float:
+        """Return the earliest start of ``lane``'s next move asked now, s."""
+        return self.protocol.asap_start(lane, now)
+
+    def chase(self, lane: Lane, item: sorting.SeenItem, now: float) -> bool:
+        """Ask for the move that meets ``item``; return False if the arm cannot."""
+        s = self.settings
+        # a mirrored pair's move takes one hop more (the replication manager) to both planners
+        start = now + s.decision_lead + (s.pair_lead if lane.mirrored else 0.0)
+        arm = self.cell.arm(lane.robot)
+        q = self.protocol.q
+        aim = pairing.pair_aim(self.cell, item, s.pair_offset) if lane.mirrored else item
+        lead = self.protocol.grasp_lead
+        hit = sorting.intercept(self.cell, arm, q[lane.robot], aim, start, s.pick_z,
+                                lambda q0, p: self.plan(lane.robot, q0, p), lead=lead)
+        if hit is not None:
+            hit = self.belt.unhindered(lane, aim, hit, now, q, lead)
+        if hit is None:
+            return False
+        lane.item = item
+        if lane.mirrored and not pairing.pair_clear(self.cell, lane.robot, hit.traj,
+                                                    s.pair_margin):
+            route = pairing.detour(self.cell, self.plan, lane.robot, q[lane.robot],
+                                   hit.target, s.carry_z, s.pair_margin)
+            if route:  # go round first, then meet the item from there
+                self.move(lane, 'via', route[0], start, now)
+                lane.route = [('via', p) for p in route[1:]]
+                return True
+        self.move(lane, 'to_item', hit.target, hit.start, now, hit.traj)
+        return True
+
+    def to_bin(self, lane: Lane, now: float) -> None:
+        """Carry the item ``lane`` holds to the bin of its class."""
+        drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls,
+                                  self.settings.drop_clearance)
+        self.move_safely(lane, 'to_bin', drop, self.asap_start(lane, now), now)
+
+    def park(self, lane: Lane, now: float) -> None:
+        """Wait clear of the shared zone, above the first bin, so the other arm is free."""
+        park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
+                                  self.settings.drop_clearance)
+        self.move_safely(lane, 'to_park', park, self.asap_start(lane, now), now)
+
+    def park_unused(self, robots: List[str], now: float) -> None:
+        """Send arms no lane uses to wait above their first bin, off the belt."""
+        for robot in robots:
+            park = sorting.drop_point(self.cell, robot, self.cell.item_classes[0],
+                                      self.settings.drop_clearance)
+            self.out.append(self.protocol.move_once(
+                robot, park, now + self.settings.decision_lead, 'park'))
+
+    def move_safely(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
+        """Ask for a move like :meth:`move`; a mirrored pair may go round by a waypoint.
+
+        A pair that would come within the planners' margin goes round, so the follower need
+        not yield and both arms start together.
+        """
+        if lane.mirrored:
+            q0 = self.protocol.q[lane.robot]
+            margin = self.settings.pair_margin
+            try:
+                clear = pairing.pair_clear(self.cell, lane.robot,
+                                           self.plan(lane.robot, q0, target), margin)
+            except ValueError:
+                clear = True  # the planner will refuse it with the reason
+            route = [] if clear else pairing.detour(self.cell, self.plan, lane.robot, q0,
+                                                    target, self.settings.carry_z, margin)
+            if route:
+                lane.route = [('via', p) for p in route[1:]] + [(phase, np.asarray(target))]
+                self.move(lane, 'via', route[0], start, now)
+                return
+        self.move(lane, phase, target, start, now)
+
+    def would_sweep(self, lane: Lane, items: Dict[int, sorting.SeenItem], now: float) -> bool:
+        """Return True if the item just grasped would touch one of ``items`` on its way.
+
+        Then it is lifted clear first: the move to the bin, planned as the job will offer it
+        to the planner (the plan memo keeps it for that request), is checked against every
+        other item's predicted position with ``carry_clearance`` to spare
+        (:func:`scara_collab.core.sorting.carry_sweeps`; in mirrored mode the follower's
+        mirror image too), over every start up to the worst start lateness measured lately
+        (a late move meets the items further down the belt). Checking costs about a
+        millisecond; lifting costs a move.
+        """
+        s = self.settings
+        drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls, s.drop_clearance)
+        try:
+            traj = self.plan(lane.robot, self.protocol.q[lane.robot], drop)
+        except ValueError:
+            return True
+        others = [it for it in items.values() if it.id != lane.item.id]
+        spare = s.carry_z - s.pick_z - self.cell.item_size  # = carry_clearance
+        return bool(others) and sorting.carry_sweeps(
+            self.cell, traj.p, self.asap_start(lane, now) + traj.t, others, s.pick_z, spare,
+            mirrored=lane.mirrored, late=self.protocol.start_lag.worst)
