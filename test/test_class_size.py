@@ -10,8 +10,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1] / 'scara_collab'
 LIMIT = 250
 #: classes still over the limit, and the most lines each may have
-OVER = {'core/arm_planner.py:ArmPlanner': 268, 'core/lanes.py:LaneProtocol': 281,
-        'nodes/collision_monitor.py:CollisionMonitor': 281,
+OVER = {'nodes/collision_monitor.py:CollisionMonitor': 260,
         'nodes/pybullet_bridge.py:PyBulletBridge': 326, 'records/record.py:RunRecord': 260,
         'run/launcher.py:Launcher': 260, 'sim/cell_sim.py:CellSim': 260,
         'sim/conveyor.py:Conveyor': 295}

@@ -55,7 +55,7 @@ def test_a_state_before_the_first_clock_does_not_trip_the_watchdog(graph):
     assert g.spin_until(lambda: g.monitor.last is not None)
     tick(g, 12.0)  # the launch: sim time jumps to the bridge's clock
     g.spin_until(lambda: False, timeout=0.3)
-    assert not g.monitor.stopped, g.monitor.reason
+    assert not g.monitor.stopped, g.monitor.stops.reason
 
 
 def test_fails_closed_on_a_nan_state_and_on_silence_then_resumes_by_itself(graph):
@@ -70,7 +70,8 @@ def test_fails_closed_on_a_nan_state_and_on_silence_then_resumes_by_itself(graph
     tick(g, 1.0)
     g.states.publish(state(g.cell, 1.0, HOME, nan=True))
     assert g.spin_until(lambda: g.monitor.stopped)
-    assert g.monitor.kind == 'protective' and 'unusable joint state' in g.monitor.reason
+    stop = g.monitor.stops
+    assert stop.kind == 'protective' and 'unusable joint state' in stop.reason
     # fresh, valid, separated states at rest: the stop ends by itself after resume_after
     for k in range(1, 40):
         t = round(1.0 + 0.01 * k, 3)
@@ -90,7 +91,8 @@ def test_fails_closed_on_a_nan_state_and_on_silence_then_resumes_by_itself(graph
     for t in (1.5, 1.6, 1.7, 1.8, 1.9):
         tick(g, t)
     assert g.spin_until(lambda: g.monitor.stopped, timeout=5.0)
-    assert g.monitor.kind == 'protective' and 'no valid joint state' in g.monitor.reason
+    stop = g.monitor.stops
+    assert stop.kind == 'protective' and 'no valid joint state' in stop.reason
     st = g.monitor.status()
     assert st.stopped and st.minimum is not None and st.minimum > 0.1
     assert (st.protective, st.emergency) == (2, 0)
@@ -111,13 +113,13 @@ def test_an_outside_emergency_stop_holds_until_cleared(graph):
     assert g.spin_until(lambda: g.monitor.last is not None)
     pub = g.probe.create_publisher(Bool, '/emergency_stop', LATCHED)
     pub.publish(Bool(data=True))
-    assert g.spin_until(lambda: g.monitor.kind == 'emergency')
+    assert g.spin_until(lambda: g.monitor.stops.kind == 'emergency')
     for k in range(1, 60):  # calm states do not release it
         t = round(1.0 + 0.01 * k, 3)
         tick(g, t)
         g.states.publish(state(g.cell, t, HOME))
         assert g.spin_until(lambda: abs(g.monitor.last_time - t) < 1e-9)
-    assert g.monitor.kind == 'emergency'
+    assert g.monitor.stops.kind == 'emergency'
     res = g.call(Trigger, '/collision_monitor/clear', Trigger.Request())
     assert res.success and not g.monitor.stopped, res.message
 
@@ -165,8 +167,9 @@ def test_an_accepted_heard_before_its_trajectory_still_times_the_prediction(grap
         g.spin_until(lambda: g.monitor.stopped, timeout=0.05)
         if g.monitor.stopped:
             break
-    assert g.monitor.stopped and g.monitor.reason.startswith('predicted'), g.monitor.reason
-    assert g.monitor.kind == 'protective'
+    reason = g.monitor.stops.reason
+    assert g.monitor.stopped and reason.startswith('predicted'), reason
+    assert g.monitor.stops.kind == 'protective'
     assert g.monitor.minimum > 0.1  # stopped before the margin, not at it
 
 
@@ -183,18 +186,18 @@ def test_a_late_turn_of_the_monitor_is_not_mistaken_for_missing_states(graph):
     assert g.spin_until(lambda: g.monitor.last_time is not None)
     tick(g, 1.35)
     g.monitor._watch()  # the timer's turn comes before the queued state's
-    assert not g.monitor.stopped, g.monitor.reason
+    assert not g.monitor.stopped, g.monitor.stops.reason
     g.states.publish(state(g.cell, 1.35, HOME))
     assert g.spin_until(lambda: g.monitor.last_time == pytest.approx(1.35))
     tick(g, 1.45)
     g.monitor._watch()
-    assert not g.monitor.stopped, g.monitor.reason
+    assert not g.monitor.stopped, g.monitor.stops.reason
     tick(g, 1.6)  # now they are missing: stale at this look and the next
     g.monitor._watch()
     assert not g.monitor.stopped
     tick(g, 1.7)
     g.monitor._watch()
-    assert g.monitor.stopped and 'no valid joint state' in g.monitor.reason
+    assert g.monitor.stopped and 'no valid joint state' in g.monitor.stops.reason
 
 
 @pytest.mark.parametrize('overrides, message', [

@@ -177,11 +177,11 @@ def test_a_slow_gripper_answer_counts_and_the_timeout_grows_with_what_is_measure
     job.on_grip(first, True, 'grasped (slow)')  # the first call's answer, late
     nxt = moves(job.tick(t + slow + 0.02))
     assert nxt and nxt[0].purpose == 'to_bin'
-    assert job.protocol.grip_lag.worst == pytest.approx(slow)
+    assert job.protocol.grips.lag.worst == pytest.approx(slow)
     # a job that measured it meets the item where it will be when the grasp takes hold
     # (that far downstream), and waits grip_timeout plus it before asking again
     job2 = make_job(cell)
-    job2.protocol.grip_lag.add(slow)
+    job2.protocol.grips.lag.add(slow)
     pick2 = first_pick(cell, job2)
     # (the meeting time moves a little too: a move to another point takes another time)
     lead = job2.protocol.grasp_lead

@@ -165,14 +165,14 @@ def test_grips_are_asked_again_and_any_attempts_answer_counts(cell):
     assert event is None and len(sent) == 1 and sent[0].token != calls[0].token
     proto.now = proto.settings.grip_timeout + 0.05
     proto.on_grip(calls[0].token, True, 'grasped (slow)')  # the first call's answer
-    assert proto.grip_lag.worst == pytest.approx(proto.settings.grip_timeout + 0.05)
+    assert proto.grips.lag.worst == pytest.approx(proto.settings.grip_timeout + 0.05)
     sent, event = proto.tick(lane, 0.4)
     assert sent == [] and event.kind == 'gripped' and lane.grips[lane.robot].ok
     # no answer at all: bounded calls, then the grip is over, failed
     proto.grip(lane, False, 1.0)
     t = 1.0
     for _ in range(proto.settings.grip_retries + 1):
-        t += proto.settings.grip_timeout + proto.grip_lag.worst + 0.01
+        t += proto.settings.grip_timeout + proto.grips.lag.worst + 0.01
         sent, event = proto.tick(lane, t)
     assert event.kind == 'gripped' and lane.grips[lane.robot].ok is False
     assert 'no answer after' in lane.grips[lane.robot].message

@@ -235,8 +235,8 @@ def test_a_raw_crossing_trajectory_is_refused_at_the_door(cell):
     assert st.state == 'refused' and 'within 0.11 m of scara_left' in st.reason, st.reason
     run_until(cell, cell.bridge.sim.time + 1.0)
     np.testing.assert_allclose(cell.bridge.sim.arm_state('scara_right')[0], q0, atol=2e-3)
-    assert not cell.monitor.stopped and cell.monitor.counts == {'protective': 0,
-                                                                'emergency': 0}
+    assert not cell.monitor.stopped
+    assert cell.monitor.stops.counts == {'protective': 0, 'emergency': 0}
 
 
 @pytest.fixture
@@ -264,17 +264,17 @@ def test_the_monitor_stops_a_crossing_the_door_let_through_and_resumes(open_door
     executions = _send_raw(g, through, 'raw/1')
     raw = g.raw
     assert g.spin_until(lambda: g.monitor.stopped, timeout=60)
-    assert g.monitor.kind == 'protective' and g.monitor.reason.startswith('predicted')
+    assert g.monitor.stops.kind == 'protective' and g.monitor.stops.reason.startswith('predicted')
     assert g.spin_until(lambda: not g.monitor.stopped, timeout=60)  # released by itself
     low = min(m.data for m in g.distance)
     print(f'\nraw crossing move, door open: min separation {low:.3f} m')
     assert low >= margin and g.monitor.status().minimum >= margin
     assert np.abs(g.bridge.sim.arm_state('scara_right')[1]).max() < AT_REST_CHECK
-    assert g.monitor.counts == {'protective': 1, 'emergency': 0}
+    assert g.monitor.stops.counts == {'protective': 1, 'emergency': 0}
 
     estop = g.probe.create_publisher(Bool, '/emergency_stop', LATCHED)
     estop.publish(Bool(data=True))
-    assert g.spin_until(lambda: g.bridge.sim.estop and g.monitor.kind == 'emergency')
+    assert g.spin_until(lambda: g.bridge.sim.estop and g.monitor.stops.kind == 'emergency')
     q = g.right.q.copy()
     from scara_collab.core.trajectory import joint_move
     closer = joint_move(right, q, q + 0.3 * (through.q[-1] - q))  # towards the left arm
@@ -304,7 +304,7 @@ def test_a_nan_state_then_a_target_leaves_the_planner_planning(cell):
     stamp = cell.bridge.sim.time + 0.005  # in order and on the clock: only the values are bad
     pub.publish(conv.joint_state(stamp, names, [float('nan')] * 6, [0.0] * 6, [0.0] * 6))
     assert cell.spin_until(lambda: cell.monitor.stopped)
-    assert 'unusable joint state' in cell.monitor.reason
+    assert 'unusable joint state' in cell.monitor.stops.reason
     assert np.all(np.isfinite(cell.left.q))
     np.testing.assert_allclose(cell.left.q, q_before, atol=1e-3)
     publish(cell, '/scara_left/target', [2.4, -0.6, 0.5])

@@ -211,6 +211,47 @@ class Answers:
         return self._last.get(request)
 
 
+class Outbox:
+    """What a planner decided, in order, and the last status of each request (:class:`Answers`).
+
+    >>> out = Outbox()
+    >>> out.report('queued', 7); out.repeat(7), out.repeat(8)
+    (True, False)
+    >>> [(c.state, c.repeated) for c in out.take()], out.take()
+    ([('queued', False), ('queued', True)], [])
+    """
+
+    def __init__(self, history: int = HISTORY):
+        """Nothing decided yet."""
+        self.answers = Answers(history)
+        self._commands: List[Command] = []
+
+    def send(self, command: Command) -> None:
+        """Add ``command`` to what is to be sent."""
+        self._commands.append(command)
+
+    def report(self, state: str, request: int, reason: str = '', plan: Optional[Plan] = None,
+               kind: str = '') -> None:
+        """Send and keep the status ``state`` of ``request`` (``plan``: its start, end, delay)."""
+        status = Status(state, request, reason, None if plan is None else plan.start,
+                        None if plan is None else plan.end,
+                        0.0 if plan is None else plan.delay, kind)
+        self.answers.keep(status)
+        self._commands.append(status)
+
+    def repeat(self, request: int) -> bool:
+        """Send the last status of ``request`` again; return False if it is new."""
+        last = self.answers.last(request)
+        if last is not None:
+            self._commands.append(replace(last, repeated=True))
+        return last is not None
+
+    def take(self) -> List[Command]:
+        """Return the commands decided since the last call, in order, and forget them."""
+        out, self._commands = self._commands, []
+        return out
+
+
 class ArmPlanner:
     """The planner of one arm (see the module docstring): observations in, commands out.
 
@@ -238,8 +279,7 @@ class ArmPlanner:
         self.blocked: Optional[MoveRequest] = None      # waiting for the other arm to move
         self.start_lateness = Lateness()                # how late the bridge starts our moves
         self.other_motion = Heard(other_arm.name, dt=dt)  # the other arm's commitments
-        self.answers = Answers()
-        self._out: List[Command] = []
+        self.out = Outbox()  # the commands decided, and the last answer to each request
 
     # --- observations -------------------------------------------------------------------------
     def on_joint_state(self, joints: ArrayLike, other_joints: ArrayLike,
@@ -252,7 +292,7 @@ class ArmPlanner:
                                         or self.joints_time >= self.committed.plan.end):
             queued, self.queued = self.queued, None
             self._plan_and_schedule(queued)
-        return self._commands()
+        return self.out.take()
 
     def on_target(self, stamp_ns: int, stamp: float, target: ArrayLike, frame: str,
                   frame_error: str = '') -> List[Command]:
@@ -265,10 +305,10 @@ class ArmPlanner:
             request is refused with it.
         """
         request = self._request_of(stamp_ns)
-        if not self._answered(request):
+        if not self.out.repeat(request):
             self._take_request(request, np.asarray(target, dtype=float), frame, stamp,
                                frame_error)
-        return self._commands()
+        return self.out.take()
 
     def on_offer(self, stamp_ns: int, stamp: float, t: Optional[ArrayLike] = None,
                  q: Optional[ArrayLike] = None, qd: Optional[ArrayLike] = None,
@@ -279,18 +319,18 @@ class ArmPlanner:
         the joint limits, ``error``: why the message could not be read) is refused.
         """
         request = self._request_of(stamp_ns)
-        if self._answered(request):
-            return self._commands()
+        if self.out.repeat(request):
+            return self.out.take()
         if not error:
             try:
                 offer = offered_move(self.arm, t, q, qd, qdd)
             except ValueError as exc:
                 error = str(exc)
         if error:
-            self._report('refused', request, f'offered trajectory: {error}')
+            self.out.report('refused', request, f'offered trajectory: {error}')
         else:
             self._take_request(request, fk(self.arm, offer.q[-1]), 'world', stamp, offer=offer)
-        return self._commands()
+        return self.out.take()
 
     def on_other_trajectory(self, move_id: str, stamp: float, t: ArrayLike,
                             q: ArrayLike) -> List[Command]:
@@ -301,20 +341,20 @@ class ArmPlanner:
         """
         now = self.clock()
         if self.other_motion.trajectory(move_id, stamp, t, q, now, self.other_joints) is None:
-            return self._commands()  # it would have ended: the bridge refuses it
+            return self.out.take()  # it would have ended: the bridge refuses it
         if self.blocked is not None:  # the other arm moves: maybe it clears the way
             blocked = self.blocked
             self._plan_and_schedule(blocked._replace(wanted=0.0), wanted=blocked.wanted)
         elif (not self.leader and self.committed is not None
               and self.committed.plan.start > now + self.start_lateness.worst):
             self._make_way(now)
-        return self._commands()
+        return self.out.take()
 
     def on_other_execution(self, state: str, move_id: str,
                            start: Optional[float] = None) -> List[Command]:
         """Take the bridge's status of the other arm's move (:meth:`.motion.Heard.status`)."""
         self.other_motion.status(state, move_id, self.clock(), start, self.other_joints)
-        return self._commands()
+        return self.out.take()
 
     def on_own_execution(self, state: str, request: int, start: Optional[float] = None,
                          stamped: bool = False, late: float = 0.0) -> List[Command]:
@@ -328,51 +368,51 @@ class ArmPlanner:
         request is planned at once, except a refused re-time: the move it re-timed stays.
         """
         if self.committed is None or request != self.committed.request:
-            return self._commands()  # not the arm's current move
+            return self.out.take()  # not the arm's current move
         if state == 'accepted' and stamped:
             self.start_lateness.add(late)
         retimed = self.committed.retimed
         if state == 'accepted' and retimed is not None:
             if start is not None and start < self.committed.plan.start - 1e-6:
-                return self._commands()  # the first one's word, heard after the re-time left
+                return self.out.take()  # the first one's word, heard after the re-time left
             self.committed = self.committed._replace(retimed=None)
         if state == 'accepted' and late > 0:
             plan = self.committed.plan
             self.committed = self.committed._replace(plan=Plan(plan.traj, start,
                                                                plan.delay + late))
-            last = self.answers.last(request)
-            self._report('planned', request, f'started {late:.3f} s late by the bridge',
-                         self.committed.plan, '' if last is None else last.kind)
+            last = self.out.answers.last(request)
+            self.out.report('planned', request, f'started {late:.3f} s late by the bridge',
+                            self.committed.plan, '' if last is None else last.kind)
         elif state == 'refused' and retimed is not None:
             # the bridge keeps the move it was to re-time (one that had started, most likely)
             self.committed = CommittedMove(retimed, self.committed.asked)
         elif state in NOT_RUNNING:
             self.committed = None
-        return self._commands()
+        return self.out.take()
 
     # --- decisions ----------------------------------------------------------------------------
     def _take_request(self, request: int, target: np.ndarray, frame: str, stamp: float,
                       frame_error: str = '', offer: Optional[Trajectory] = None) -> None:
         """Plan, queue or refuse the move ``request`` to ``target`` (``offer``: a plan of it)."""
         if self.joints is None or self.other_joints is None:
-            self._report('refused', request, 'no joint state yet (is the bridge up?)')
+            self.out.report('refused', request, 'no joint state yet (is the bridge up?)')
             return
         if not np.all(np.isfinite(target)):
-            self._report('refused', request, f'non-finite target {target.tolist()}')
+            self.out.report('refused', request, f'non-finite target {target.tolist()}')
             return
         if frame_error:
-            self._report('refused', request, frame_error)
+            self.out.report('refused', request, frame_error)
             return
         for held in (self.blocked, self.queued):  # a new request supersedes them
             if held is not None:
-                self._report('superseded', held.request, f'replaced by request {request}')
+                self.out.report('superseded', held.request, f'replaced by request {request}')
         self.blocked = self.queued = None
         asked = MoveRequest(target, frame, stamp, offer, request)
         if self.committed is not None and self.committed.plan.end > self.clock():
             # the bridge replaces a running trajectory: hold this one until ours has ended
             self.queued = asked
-            self._report('queued', request, 'behind the running move (ends '
-                         f't={self.committed.plan.end:.3f} s)')
+            self.out.report('queued', request, 'behind the running move (ends '
+                            f't={self.committed.plan.end:.3f} s)')
             return
         self._plan_and_schedule(asked)
 
@@ -396,7 +436,7 @@ class ArmPlanner:
                 traj = plan_path(self.arm, self.joints, asked.target, asked.frame, s.mode,
                                  **path_options(s.trajectory))
             except (IKError, ValueError) as exc:
-                self._report('refused', asked.request, str(exc))
+                self.out.report('refused', asked.request, str(exc))
                 return
         now = self.clock()
         start = max(start, now + s.send_margin + late)  # planning took (sim) time too
@@ -427,7 +467,7 @@ class ArmPlanner:
                         leader=False, max_delay=s.max_delay)
         if plan is None:
             self.committed = None
-            self._out.append(HoldArm(self.joints.copy()))
+            self.out.send(HoldArm(self.joints.copy()))
             self._wait(move.asked)
         elif plan.delay > 0:
             self._send(Plan(plan.traj, plan.start, plan.start - move.asked.wanted), move.asked,
@@ -439,43 +479,24 @@ class ArmPlanner:
         waited = self.clock() - asked.wanted
         if waited > s.max_wait:
             self.blocked = None
-            self._report('refused', asked.request, f'{self.other_arm.name} has blocked the '
-                         f'move for {waited:.1f} s')
+            self.out.report('refused', asked.request, f'{self.other_arm.name} has blocked the '
+                            f'move for {waited:.1f} s')
             return
         first = self.blocked is None or self.blocked.request != asked.request
         self.blocked = asked
         if first:
-            self._report('waiting', asked.request, f'{self.other_arm.name} blocks it: no start '
-                         f'within {s.max_delay:.0f} s keeps {s.margin:.2f} m')
+            self.out.report('waiting', asked.request, f'{self.other_arm.name} blocks it: no start '
+                            f'within {s.max_delay:.0f} s keeps {s.margin:.2f} m')
 
     def _send(self, plan: Plan, asked: MoveRequest, note: str = '',
               retimed: Optional[Plan] = None) -> None:
         """Commit the arm to ``plan`` for ``asked`` (re-timing ``retimed``): send it, report it."""
         self.committed = CommittedMove(plan, asked, retimed)
-        self._out.append(SendMove(asked.request, plan))
+        self.out.send(SendMove(asked.request, plan))
         kind = 'line' if path_metrics(plan.traj).max_deviation < LINE_DEVIATION else 'joint move'
-        self._report('planned', asked.request, note, plan, kind)
+        self.out.report('planned', asked.request, note, plan, kind)
 
     # --- answers ------------------------------------------------------------------------------
     def _request_of(self, stamp_ns: int) -> int:
         # the receipt time in ns: the clock's s * 1e9 rounds back to the exact ns up to ~1e5 s
-        return self.answers.request_of(int(stamp_ns), round(self.clock() * 1e9))
-
-    def _answered(self, request: int) -> bool:
-        """Send the last status of ``request`` again; return False if it is new."""
-        last = self.answers.last(request)
-        if last is not None:
-            self._out.append(replace(last, repeated=True))
-        return last is not None
-
-    def _report(self, state: str, request: int, reason: str = '', plan: Optional[Plan] = None,
-                kind: str = '') -> None:
-        status = Status(state, request, reason, None if plan is None else plan.start,
-                        None if plan is None else plan.end,
-                        0.0 if plan is None else plan.delay, kind)
-        self.answers.keep(status)
-        self._out.append(status)
-
-    def _commands(self) -> List[Command]:
-        out, self._out = self._out, []
-        return out
+        return self.out.answers.request_of(int(stamp_ns), round(self.clock() * 1e9))

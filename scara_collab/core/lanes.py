@@ -7,7 +7,8 @@ its token, attempts, outcome), turns the observations into that state, and enfor
 deadline of the table in :mod:`scara_collab.core.job`. It decides nothing about items: asked
 for a move or a grip it returns the command to send; ticked, it returns the commands it sends
 again and the :class:`LaneEvent` that ends the lane's wait (``arrived``, ``gripped`` or
-``failed``), which the job decides on.
+``failed``), which the job decides on. The grips are a part of their own (:class:`Grips`:
+their tokens, retries and measured answer times), which the protocol asks and ticks.
 
 Every observation names what it is about (a move by its request, a grip by its token), so a
 late, duplicated or unknown one is ignored. Move requests are identified by their requested
@@ -228,28 +229,29 @@ class LaneProtocol:
         self.lanes = list(lanes)
         #: the arms' measured joints ``(3,)`` by name
         self.q: Dict[str, np.ndarray] = {}
-        #: requests and gripper calls sent again so far
-        self.retries = 0
+        #: move requests sent again so far
+        self.move_retries = 0
         #: sim s of the latest tick (answers are timed against it)
         self.now = 0.0
         self._last_request: Dict[str, int] = {a.name: 0 for a in cell.arms}
-        self._token = 0
         # how long answers have lately taken (sim s): added to the timeouts, so a slow graph
         # (real time, a busy machine) is waited for as it measures, not as lockstep would be
         self.answer_lag = Lateness()
-        self.grip_lag = Lateness()
+        #: the lanes' gripper calls
+        self.grips = Grips(settings, self.lanes, log)
         #: how late the bridge started the job's moves after the start they asked for (sim s):
         #: what a move asked for "as soon as possible" allows for on top of the lead
         self.start_lag = Lateness()
 
     @property
     def grasp_lead(self) -> float:
-        """Return how long after the tool's arrival a grasp takes hold, as measured, s.
+        """Return how long after the tool's arrival a grasp takes hold, s (:attr:`Grips.lead`)."""
+        return self.grips.lead
 
-        The typical gripper answer time (a round trip: seeing the arrival, then the call), at
-        most ``GRASP_LEAD``; 0 in lockstep, where the call is answered within the tick.
-        """
-        return min(self.grip_lag.typical, GRASP_LEAD)
+    @property
+    def retries(self) -> int:
+        """Requests and gripper calls sent again so far."""
+        return self.move_retries + self.grips.retries
 
     def knows_every_arm(self) -> bool:
         """Return True once every arm's joints have been measured."""
@@ -308,21 +310,17 @@ class LaneProtocol:
             track.state, track.reason = new, reason or new
         return None
 
+    def grip(self, lane: Lane, grasp: bool, now: float) -> List[GripCommand]:
+        """Call every gripper of ``lane`` (:meth:`Grips.ask`); return the calls to make."""
+        return self.grips.ask(lane, grasp, now)
+
     def on_grip(self, token: int, ok: bool, message: str = '') -> None:
-        """Take a gripper response for request ``token``: any attempt of a grip still open."""
-        for lane in self.lanes:
-            for track in lane.grips.values():
-                if track.ok is None and (token == track.token or token in track.calls):
-                    track.ok, track.message = bool(ok), message
-                    self.grip_lag.add(self.now - track.calls.get(token, track.sent))
+        """Take a gripper response for request ``token`` (:meth:`Grips.on_response`)."""
+        self.grips.on_response(token, ok, message, self.now)
 
     def confirm_grip(self, kind: str, robot: str) -> None:
-        """Take a bridge item event: ``grasped`` or ``released`` answers a lost response."""
-        phase = {'grasped': 'grasping', 'released': 'releasing'}.get(kind)
-        for lane in self.lanes:
-            track = lane.grips.get(robot)
-            if lane.phase == phase and track is not None and track.ok is None:
-                track.ok, track.message = True, f'{kind} event'
+        """Take a bridge item event that confirms a grip (:meth:`Grips.confirm`)."""
+        self.grips.confirm(kind, robot)
 
     def open_track(self, robot: str, request: int) -> Optional[MoveTrack]:
         """Return the track of ``robot``'s current move ``request``, None if unknown or over."""
@@ -412,7 +410,7 @@ class LaneProtocol:
         if lane.phase in MOVING:
             return self._tick_move(lane, now)
         if lane.phase in ('grasping', 'releasing'):
-            return self._tick_grip(lane, now)
+            return self.grips.tick(lane, now)
         return [], None
 
     def _tick_move(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
@@ -435,7 +433,7 @@ class LaneProtocol:
                                           f'after {lane.sends} requests')
                 lane.sends += 1
                 lane.sent = now
-                self.retries += 1
+                self.move_retries += 1
                 self.log('info', f'{robot}: no planner answer for request {lane.request} in '
                          f'{s.answer_timeout:g} s; asking again ({lane.sends})')
                 out.append(self._command(lane))
@@ -457,8 +455,33 @@ class LaneProtocol:
             return out, LaneEvent('arrived', lane)
         return out, None
 
-    # --- gripper ------------------------------------------------------------------------------
-    def grip(self, lane: Lane, grasp: bool, now: float) -> List[GripCommand]:
+
+class Grips:
+    """The lanes' gripper calls: asked, answered (by a response or a bridge event), retried.
+
+    :param lanes: the job's lanes (their :class:`GripTrack` per arm is kept in them).
+    """
+
+    def __init__(self, settings: JobSettings, lanes: Sequence[Lane],
+                 log: Callable[[str, str], None]):
+        """No call made yet."""
+        self.settings, self.lanes, self.log = settings, lanes, log
+        #: how long gripper answers have lately taken, sim s (added to the timeout)
+        self.lag = Lateness()
+        #: gripper calls made again so far
+        self.retries = 0
+        self._token = 0
+
+    @property
+    def lead(self) -> float:
+        """Return how long after the tool's arrival a grasp takes hold, as measured, s.
+
+        The typical gripper answer time (a round trip: seeing the arrival, then the call), at
+        most ``GRASP_LEAD``; 0 in lockstep, where the call is answered within the tick.
+        """
+        return min(self.lag.typical, GRASP_LEAD)
+
+    def ask(self, lane: Lane, grasp: bool, now: float) -> List[GripCommand]:
         """Call every gripper of ``lane`` (``grasp`` or release); return the calls to make."""
         lane.phase = 'grasping' if grasp else 'releasing'
         lane.since = now
@@ -470,12 +493,29 @@ class LaneProtocol:
             out.append(GripCommand(robot, grasp, self._token))
         return out
 
-    def _tick_grip(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
+    def on_response(self, token: int, ok: bool, message: str, now: float) -> None:
+        """Take a gripper response for request ``token``: any attempt of a grip still open."""
+        for lane in self.lanes:
+            for track in lane.grips.values():
+                if track.ok is None and (token == track.token or token in track.calls):
+                    track.ok, track.message = bool(ok), message
+                    self.lag.add(now - track.calls.get(token, track.sent))
+
+    def confirm(self, kind: str, robot: str) -> None:
+        """Take a bridge item event: ``grasped`` or ``released`` answers a lost response."""
+        phase = {'grasped': 'grasping', 'released': 'releasing'}.get(kind)
+        for lane in self.lanes:
+            track = lane.grips.get(robot)
+            if lane.phase == phase and track is not None and track.ok is None:
+                track.ok, track.message = True, f'{kind} event'
+
+    def tick(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
+        """Call again the grippers of ``lane`` that did not answer in time; see the event."""
         s = self.settings
         out: List[Command] = []
         grasp = lane.phase == 'grasping'
         for robot, track in lane.grips.items():
-            if track.ok is None and now - track.sent > s.grip_timeout + self.grip_lag.worst:
+            if track.ok is None and now - track.sent > s.grip_timeout + self.lag.worst:
                 if track.attempts > s.grip_retries:
                     track.ok, track.message = False, f'no answer after {track.attempts} calls'
                     continue

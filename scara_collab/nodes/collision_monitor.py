@@ -28,7 +28,7 @@ minimum separation. Capsule markers coloured by distance go to ``~/capsules`` wh
 subscribes to it. Its own parameters (:data:`PARAMETERS`) are checked at start and on every
 change; only ``marker_rate``, ``stop_latency`` and ``resume_after`` may change while it runs.
 """
-from typing import Optional
+from typing import List, Optional
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Point
@@ -44,6 +44,7 @@ from scara_collab.core import collision, safety
 from scara_collab.core.config import load_config, Rule
 from scara_collab.core.model import load_cell
 from scara_collab.core.motion import Heard, Lateness
+from scara_collab.core.stops import StopChange, StopLatch
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
@@ -94,6 +95,7 @@ class CollisionMonitor(Node):
         margin = float(params['safety_margin'])
         self.margin = self.cell.safety_margin if margin < 0 else margin
         self.stale_after = float(params['stale_after'])
+        self.stops = StopLatch(float(params['resume_after']))  # the standing stop, its counts
         self._set_params(params)
         # what the bridge runs, per arm, as heard (the committed-motion model's rules)
         dt = 1.0 / float(load_config('simulation')['physics_rate'])
@@ -103,11 +105,6 @@ class CollisionMonitor(Node):
         self._predict_again = True
         self._started = ()
         self._lines: list = []  # (move id, Timeline) per arm the breach was predicted from
-        self.kind = ''          # the standing stop's kind, '' if none
-        self.reason = ''
-        self.stop_since: Optional[float] = None
-        self.counts = {'protective': 0, 'emergency': 0}
-        self._calm_since: Optional[float] = None  # valid, at rest, apart since (sim s)
         # how old the states are when they come (sim s): added to stop_latency
         self.state_age = Lateness(window=50)
         self.last: Optional[float] = None
@@ -149,60 +146,41 @@ class CollisionMonitor(Node):
         """Take the values of the dynamic parameters (at start and on a change)."""
         self.marker_period = 1.0 / float(params['marker_rate'])
         self.latency = float(params['stop_latency'])
-        self.resume_after = float(params['resume_after'])
+        self.stops.resume_after = float(params['resume_after'])
 
     @property
     def stopped(self) -> bool:
         """True while a stop (either kind) stands."""
-        return bool(self.kind)
+        return self.stops.stopped
 
     def _stop(self, kind: str, text: str) -> None:
         """Stop both arms: ``kind`` protective or emergency (an emergency overrides the other)."""
-        if self.kind == 'emergency' or self.kind == kind:
-            return
-        now = conv.now(self)
-        if self.kind == 'protective':  # becomes an emergency: the protective one ends here
-            self._end_stop('overridden by an emergency stop')
-        self.kind, self.reason, self.stop_since = kind, text, now
-        self._calm_since = None
-        self.counts[kind] += 1
-        (self.estop_pub if kind == 'emergency' else self.protective_pub).publish(Bool(data=True))
-        self.stops_pub.publish(proto.StopEvent(kind, 'begin', round(now, 6), text).to_msg())
-        log = self.get_logger().error if kind == 'emergency' else self.get_logger().warning
-        log(f'{text}; {kind} stop')
-        self._publish_status()
+        self._publish_stops(self.stops.stop(kind, text, conv.now(self)))
 
     def _end_stop(self, why: str) -> None:
         """Release the standing stop (its end goes to ``~/stops``)."""
-        kind, since = self.kind, self.stop_since
-        self.kind, self.reason, self.stop_since = '', '', None
-        self._predict_again = True
-        (self.estop_pub if kind == 'emergency' else self.protective_pub).publish(Bool(data=False))
-        now = conv.now(self)
-        self.stops_pub.publish(proto.StopEvent(kind, 'end', round(now, 6), why,
-                                               since).to_msg())
-        self.get_logger().info(f'{kind} stop released: {why}')
-        self._publish_status()
+        self._publish_stops(self.stops.end(why, conv.now(self)))
+
+    def _publish_stops(self, changes: List[StopChange]) -> None:
+        """Say each stop that begins or ends: the latched flag, ``~/stops``, the log, status."""
+        for c in changes:
+            pub = self.estop_pub if c.kind == 'emergency' else self.protective_pub
+            pub.publish(Bool(data=c.state == 'begin'))
+            self.stops_pub.publish(proto.StopEvent(c.kind, c.state, round(c.time, 6), c.text,
+                                                   c.since).to_msg())
+            if c.state == 'begin':
+                log = self.get_logger().error if c.kind == 'emergency' else \
+                    self.get_logger().warning
+                log(f'{c.text}; {c.kind} stop')
+            else:
+                self._predict_again = True
+                self.get_logger().info(f'{c.kind} stop released: {c.text}')
+            self._publish_status()
 
     def _on_estop(self, msg: Bool) -> None:
         """Take an emergency stop asked for by anyone (an outside request)."""
-        if msg.data and self.kind != 'emergency':
+        if msg.data and self.stops.kind != 'emergency':
             self._stop('emergency', 'emergency stop requested on /emergency_stop')
-
-    def _resume_if_calm(self, now: float, d: float, qd) -> None:
-        """End a protective stop once the states are valid and the arms at rest and apart, a while.
-
-        The bridge dropped the arms' moves when it held them, so nothing committed carries the
-        arms back into the conflict; the job plans again from where they stand.
-        """
-        calm = d >= self.margin and all(np.max(np.abs(v)) < AT_REST for v in qd)
-        if not calm:
-            self._calm_since = None
-        elif self._calm_since is None:
-            self._calm_since = now
-        elif now - self._calm_since >= self.resume_after:
-            self._end_stop(f'valid states, arms at rest {d:.3f} m apart for '
-                           f'{now - self._calm_since:.2f} s')
 
     # --- what the bridge runs --------------------------------------------------------------
     def _on_trajectory(self, robot: str, msg: JointTrajectory) -> None:
@@ -262,7 +240,7 @@ class CollisionMonitor(Node):
             qb, vb = conv.joint_state_arrays(msg, b.joint_names)
         except conv.MessageError as exc:  # fail closed: a state we cannot check stops the arms
             self._stop('protective', f'unusable joint state: {exc}')
-            self._calm_since = None
+            self.stops.unsettled()
             return
         pairs = collision.arm_pair_distances(a, qa, b, qb)
         d = float(pairs.min())
@@ -287,8 +265,9 @@ class CollisionMonitor(Node):
             why = self._predicted_stop(stamp, (qa, qb), (va, vb))
             if why is not None:
                 self._stop('protective', why)
-        elif self.kind == 'protective':
-            self._resume_if_calm(stamp, d, (va, vb))
+        elif self.stops.kind == 'protective':
+            at_rest = all(np.max(np.abs(v)) < AT_REST for v in (va, vb))
+            self._publish_stops(self.stops.calm(stamp, d >= self.margin, at_rest, d))
         if stamp >= self._next_marker:
             self._next_marker = stamp + self.marker_period
             if self.marker_pub.get_subscription_count():  # markers only for a listener
@@ -310,7 +289,7 @@ class CollisionMonitor(Node):
         elif now > self._stale_since:
             self._stop('protective', f'no valid joint state for {now - self.last_time:.3f} s '
                        '(sim)')
-            self._calm_since = None
+            self.stops.unsettled()
 
     def _on_clear(self, req: Trigger.Request, res: Trigger.Response) -> Trigger.Response:
         fresh = self.last_time is not None and conv.now(self) - self.last_time <= self.stale_after
@@ -322,7 +301,7 @@ class CollisionMonitor(Node):
                            else f'arms still {self.last:.3f} m apart (< {self.margin} m); '
                            'not cleared')
         else:
-            kind = self.kind
+            kind = self.stops.kind
             self._end_stop('cleared on request (/collision_monitor/clear)')
             res.success, res.message = True, f'{kind} stop cleared'
             self.get_logger().info(res.message)
@@ -332,9 +311,10 @@ class CollisionMonitor(Node):
     def status(self) -> proto.MonitorStatus:
         """Return the monitor's figures so far."""
         return proto.MonitorStatus(round(conv.now(self), 6), self.last, self.minimum,
-                                   self.minimum_time, self.margin, self.stopped, self.reason,
-                                   self.kind, self.counts['protective'],
-                                   self.counts['emergency'])
+                                   self.minimum_time, self.margin, self.stopped,
+                                   self.stops.reason, self.stops.kind,
+                                   self.stops.counts['protective'],
+                                   self.stops.counts['emergency'])
 
     def _publish_status(self) -> None:
         self.diagnostics.publish(self.status().to_msg())
