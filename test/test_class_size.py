@@ -10,8 +10,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1] / 'scara_collab'
 LIMIT = 250
 #: classes still over the limit, and the most lines each may have
-OVER = {'nodes/collision_monitor.py:CollisionMonitor': 260,
-        'nodes/pybullet_bridge.py:PyBulletBridge': 326, 'records/record.py:RunRecord': 260,
+OVER = {'nodes/pybullet_bridge.py:PyBulletBridge': 326, 'records/record.py:RunRecord': 260,
         'run/launcher.py:Launcher': 260, 'sim/cell_sim.py:CellSim': 260,
         'sim/conveyor.py:Conveyor': 295}
 

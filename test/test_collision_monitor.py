@@ -155,10 +155,10 @@ def test_an_accepted_heard_before_its_trajectory_still_times_the_prediction(grap
     assert g.spin_until(lambda: g.monitor.last is not None)
     status.publish(ExecutionStatus(right.name, 'accepted', 'raw/crossing', t0, start=start,
                                    end=start + move.t[-1], stamp=0.0).to_msg())
-    assert g.spin_until(lambda: 'raw/crossing' in g.monitor.heard[right.name]._early)
+    assert g.spin_until(lambda: 'raw/crossing' in g.monitor.forecast.heard[right.name]._early)
     traj.publish(conv.trajectory_msg(right.joint_names, move.t, move.q, move.qd, move.qdd,
                                      frame_id='raw/crossing'))
-    heard = g.monitor.heard[right.name].arm
+    heard = g.monitor.forecast.heard[right.name].arm
     assert g.spin_until(lambda: (heard.waiting or heard.running) is not None)
     assert (heard.waiting or heard.running).start == pytest.approx(start)
     for k, t in enumerate(start + move.t):  # the arm as the bridge runs it

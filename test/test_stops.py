@@ -1,7 +1,9 @@
-"""The collision monitor's standing stop alone (core/stops.py): begin, override, resume, clear."""
+"""The collision monitor's decisions alone (core/stops.py): the forecast, the standing stop."""
+import numpy as np
 import pytest
 
-from scara_collab.core.stops import StopLatch
+from scara_collab.core.mirror import mirror_joints
+from scara_collab.core.stops import BreachForecast, StopLatch
 
 
 def test_a_stop_of_the_kind_that_stands_changes_nothing_and_counts_once():
@@ -49,3 +51,28 @@ def test_an_unknown_kind_is_refused():
     """Only protective and emergency stops exist."""
     with pytest.raises(ValueError, match='unknown stop kind'):
         StopLatch(0.3).stop('soft', 'x', 0.0)
+
+
+def test_the_forecast_stops_a_committed_move_into_the_other_arm_before_the_breach(cell):
+    """A move heard to run into the other arm gives a reason to stop before the breach."""
+    lead = cell.leader
+    home, into = np.array([0.0, 1.5708, 0.0]), np.array([1.0, 0.0, 0.0])
+    q_foll = mirror_joints(into)  # the follower waits over the belt's middle, where ``into`` is
+    forecast = BreachForecast(cell.arms, cell.safety_margin, dt=0.001)
+    rest = np.zeros(3)
+    assert forecast.reason_to_stop(0.0, (home, q_foll), (rest, rest), 0.05) is None
+    t = np.linspace(0.0, 2.0, 21)
+    path = home + np.outer(t / 2.0, into - home)
+    forecast.on_trajectory(lead.name, 'scara_left/1', 0.0, t, path, 0.0, home)
+    velocity = (into - home) / 2.0
+    why, when = None, None
+    for stamp in np.arange(0.0, 2.0, 0.01):
+        q = home + (stamp / 2.0) * (into - home)
+        why = forecast.reason_to_stop(stamp, (q, q_foll), (velocity, rest), 0.05)
+        if why is not None:
+            when = stamp
+            break
+    assert why is not None and why.startswith('predicted: the commanded moves (scara_left')
+    assert forecast.breach is not None and when < forecast.breach
+    # an arm that does not follow the heard move is no ground for a prediction
+    assert forecast.reason_to_stop(when + 0.01, (home, q_foll), (rest, rest), 0.05) is None

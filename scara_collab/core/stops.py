@@ -1,6 +1,10 @@
-"""The collision monitor's standing stop, without ROS: begun, made an emergency, resumed, cleared.
+"""The collision monitor's decisions, without ROS: when to stop, and the stop that stands.
 
-One stop stands at a time, of one of two kinds:
+:class:`BreachForecast` predicts from the arms' committed motion (as heard: the committed-motion
+model, :class:`scara_collab.core.motion.Heard`) whether the margin will break sooner than the
+arms can brake, and says why (:meth:`BreachForecast.reason_to_stop`).
+
+:class:`StopLatch` keeps the stop that stands. One stands at a time, of one of two kinds:
 
 - **protective**: the arms are held where they are (a predicted breach, an unusable or missing
   joint state); it ends by itself once the states are valid and the arms at rest and apart for
@@ -20,9 +24,18 @@ publish (``emergency_stop`` / ``protective_stop``, ``~/stops``) and log.
 ('emergency', {'protective': 1, 'emergency': 1})
 """
 from dataclasses import dataclass
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from scara_collab.core import safety
+from scara_collab.core.model import ArmModel
+from scara_collab.core.motion import Heard
 
 KINDS = ('protective', 'emergency')
+#: rad or m: a prediction is used only while both arms are this close to it
+TRACKING = 0.02
 
 
 @dataclass(frozen=True)
@@ -101,3 +114,69 @@ class StopLatch:
             return self.end(f'valid states, arms at rest {distance:.3f} m apart for '
                             f'{now - self._calm_since:.2f} s', now)
         return []
+
+
+class BreachForecast:
+    """The first breach the arms' committed motion predicts, checked at every joint state.
+
+    :param arms: the two arms; :param margin: m; :param dt: the physics step, s (the bridge's
+        start rule, as :class:`~scara_collab.core.motion.Heard` applies it).
+    """
+
+    def __init__(self, arms: Sequence[ArmModel], margin: float, dt: float):
+        """Nothing heard yet: both arms hold."""
+        self.arms = tuple(arms)
+        self.margin = float(margin)
+        #: what the bridge runs, per arm, as heard (the committed-motion model's rules)
+        self.heard = {arm.name: Heard(arm.name, dt=dt) for arm in self.arms}
+        self.breach: Optional[float] = None  # sim s of the predicted first breach, or None
+        self.again = True  # predict again at the next state
+        self._started: Tuple = ()
+        self._lines: list = []  # (move id, Timeline) per arm the breach was predicted from
+
+    def on_trajectory(self, robot: str, move_id: str, stamp: float, t: ArrayLike,
+                      q: ArrayLike, now: float, q_now: Optional[ArrayLike]) -> None:
+        """Take a trajectory sent to ``robot``, as the bridge takes it (its status corrects it)."""
+        self.heard[robot].trajectory(move_id, stamp, t, q, now, q_now)
+        self.again = True
+
+    def on_status(self, robot: str, state: str, move_id: str, now: float,
+                  start: Optional[float], q_now: Optional[ArrayLike]) -> None:
+        """Take the bridge's status of a move of ``robot`` (an unknown arm is ignored)."""
+        heard = self.heard.get(robot)
+        if heard is not None and heard.status(state, move_id, now, start, q_now):
+            self.again = True
+
+    def reason_to_stop(self, stamp: float, q: Sequence[np.ndarray], qd: Sequence[np.ndarray],
+                       latency: float) -> Optional[str]:
+        """Return why the arms must stop now to stay out of the margin, or None.
+
+        :param q: both arms' joints measured at ``stamp``; :param qd: their velocities.
+        :param latency: s from a state's measurement to the arms braking.
+        """
+        a, b = self.arms
+        # a move counts from its start: until then a follower may still re-time it for a new
+        # leader move (the priority rule); from then on the bridge runs it
+        for arm in (a, b):
+            self.heard[arm.name].arm.advance(stamp)
+        running = [self.heard[arm.name].arm.running for arm in (a, b)]
+        started = tuple(None if m is None else (m.id, m.start) for m in running)
+        if self.again or started != self._started:
+            self.again, self._started = False, started
+            lines = [self.heard[arm.name].current(stamp, q[k]) for k, arm in enumerate((a, b))]
+            self.breach = safety.first_breach(a, lines[0], b, lines[1], self.margin, stamp)
+            self._lines = [('' if m is None else m.id, tl) for m, tl in zip(running, lines)]
+        # predict only from what the arms do: a lost or late status must not fake a stop (the
+        # measured distance against the margin still stands behind this)
+        if any(np.max(np.abs(tl.at(stamp) - q[k])) > TRACKING for k, (_, tl)
+               in enumerate(self._lines)):
+            self.again = True
+            return None
+        stopping = max(safety.stopping_time(a, qd[0]), safety.stopping_time(b, qd[1]))
+        if not safety.stop_due(stamp, self.breach, stopping, latency):
+            return None
+        moves = ', '.join(f'{arm.name} {m or "holding"} t={tl.start:.3f}..{tl.end:.3f} s'
+                          for arm, (m, tl) in zip((a, b), self._lines))
+        return (f'predicted: the commanded moves ({moves}) bring {a.name} and {b.name} within '
+                f'{self.margin} m at t={self.breach:.3f} s, and braking takes '
+                f'{stopping:.3f} s (+{latency:.3f} s latency) from t={stamp:.3f} s')

@@ -40,11 +40,11 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
-from scara_collab.core import collision, safety
+from scara_collab.core import collision
 from scara_collab.core.config import load_config, Rule
 from scara_collab.core.model import load_cell
-from scara_collab.core.motion import Heard, Lateness
-from scara_collab.core.stops import StopChange, StopLatch
+from scara_collab.core.motion import Lateness
+from scara_collab.core.stops import BreachForecast, StopChange, StopLatch
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
@@ -74,8 +74,6 @@ RULES = (Rule('profile', 'text'), Rule('safety_margin', 'number'),
 DYNAMIC = ('marker_rate', 'stop_latency', 'resume_after')
 #: rad/s or m/s: an arm this slow on every joint is at rest (a protective stop may end)
 AT_REST = 0.02
-#: rad or m: a prediction is used only while both arms are this close to it
-TRACKING = 0.02
 
 
 class CollisionMonitor(Node):
@@ -97,14 +95,9 @@ class CollisionMonitor(Node):
         self.stale_after = float(params['stale_after'])
         self.stops = StopLatch(float(params['resume_after']))  # the standing stop, its counts
         self._set_params(params)
-        # what the bridge runs, per arm, as heard (the committed-motion model's rules)
         dt = 1.0 / float(load_config('simulation')['physics_rate'])
-        self.heard = {arm.name: Heard(arm.name, dt=dt) for arm in self.cell.arms}
+        self.forecast = BreachForecast(self.cell.arms, self.margin, dt)
         self._q = {arm.name: None for arm in self.cell.arms}  # the last valid state
-        self._breach: Optional[float] = None
-        self._predict_again = True
-        self._started = ()
-        self._lines: list = []  # (move id, Timeline) per arm the breach was predicted from
         # how old the states are when they come (sim s): added to stop_latency
         self.state_age = Lateness(window=50)
         self.last: Optional[float] = None
@@ -173,7 +166,7 @@ class CollisionMonitor(Node):
                     self.get_logger().warning
                 log(f'{c.text}; {c.kind} stop')
             else:
-                self._predict_again = True
+                self.forecast.again = True
                 self.get_logger().info(f'{c.kind} stop released: {c.text}')
             self._publish_status()
 
@@ -188,47 +181,13 @@ class CollisionMonitor(Node):
             stamp, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
         except conv.MessageError:
             return  # the bridge refuses it too
-        # taken as the bridge takes it; its execution status corrects this when it comes
-        self.heard[robot].trajectory(msg.header.frame_id, stamp, t, q, conv.now(self),
-                                     self._q[robot])
-        self._predict_again = True
+        self.forecast.on_trajectory(robot, msg.header.frame_id, stamp, t, q, conv.now(self),
+                                    self._q[robot])
 
     def _on_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
-        heard = self.heard.get(st.robot)
-        if heard is not None and heard.status(st.state, st.move, conv.now(self), st.start,
-                                              self._q[st.robot]):
-            self._predict_again = True
-
-    def _predicted_stop(self, stamp: float, q, qd) -> Optional[str]:
-        """Return why the arms must stop now to stay out of the margin, or None."""
-        a, b = self.cell.arms
-        # a move counts from its start: until then a follower may still re-time it for a new
-        # leader move (the priority rule); from then on the bridge runs it
-        for arm in (a, b):
-            self.heard[arm.name].arm.advance(stamp)
-        running = [self.heard[arm.name].arm.running for arm in (a, b)]
-        started = tuple(None if m is None else (m.id, m.start) for m in running)
-        if self._predict_again or started != self._started:
-            self._predict_again, self._started = False, started
-            lines = [self.heard[arm.name].current(stamp, q[k]) for k, arm in enumerate((a, b))]
-            self._breach = safety.first_breach(a, lines[0], b, lines[1], self.margin, stamp)
-            self._lines = [('' if m is None else m.id, tl) for m, tl in zip(running, lines)]
-        # predict only from what the arms do: a lost or late status must not fake a stop (the
-        # measured distance against the margin still stands behind this)
-        if any(np.max(np.abs(tl.at(stamp) - q[k])) > TRACKING for k, (_, tl)
-               in enumerate(self._lines)):
-            self._predict_again = True
-            return None
-        stopping = max(safety.stopping_time(a, qd[0]), safety.stopping_time(b, qd[1]))
-        latency = self.latency + self.state_age.worst  # as configured, plus what is measured
-        if not safety.stop_due(stamp, self._breach, stopping, latency):
-            return None
-        moves = ', '.join(f'{arm.name} {m or "holding"} t={tl.start:.3f}..{tl.end:.3f} s'
-                          for arm, (m, tl) in zip((a, b), self._lines))
-        return (f'predicted: the commanded moves ({moves}) bring {a.name} and {b.name} within '
-                f'{self.margin} m at t={self._breach:.3f} s, and braking takes '
-                f'{stopping:.3f} s (+{latency:.3f} s latency) from t={stamp:.3f} s')
+        self.forecast.on_status(st.robot, st.state, st.move, conv.now(self), st.start,
+                                self._q.get(st.robot))
 
     # --- the watch ---------------------------------------------------------------------------
     def _on_state(self, msg: JointState) -> None:
@@ -262,7 +221,8 @@ class CollisionMonitor(Node):
             self._stop('emergency', f'margin broken: {a.name} {PARTS[i]} to {b.name} '
                        f'{PARTS[j]} {d:.4f} m < {self.margin} m at t={stamp:.3f} s')
         elif not self.stopped:
-            why = self._predicted_stop(stamp, (qa, qb), (va, vb))
+            latency = self.latency + self.state_age.worst  # as configured, and as measured
+            why = self.forecast.reason_to_stop(stamp, (qa, qb), (va, vb), latency)
             if why is not None:
                 self._stop('protective', why)
         elif self.stops.kind == 'protective':
