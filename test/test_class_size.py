@@ -10,9 +10,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1] / 'scara_collab'
 LIMIT = 250
 #: classes still over the limit, and the most lines each may have
-OVER = {'nodes/pybullet_bridge.py:PyBulletBridge': 326, 'records/record.py:RunRecord': 260,
-        'run/launcher.py:Launcher': 260, 'sim/cell_sim.py:CellSim': 260,
-        'sim/conveyor.py:Conveyor': 295}
+OVER = {'records/record.py:RunRecord': 260,
+        'run/launcher.py:Launcher': 260, 'sim/cell_sim.py:CellSim': 260}
 
 
 def class_lengths(root: Path = ROOT) -> dict:

@@ -3,7 +3,7 @@ import numpy as np
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from scara_collab.core.config import load_config
-from scara_collab.nodes.execution import Execution
+from scara_collab.nodes.execution import Execution, Holds
 from scara_collab.nodes.pybullet_bridge import Pacer
 from scara_collab.sim import CellSim
 
@@ -57,3 +57,33 @@ def test_the_pacer_keeps_the_rate_and_says_when_its_tick_changes(monkeypatch):
     wall[0] += 1.0  # the machine fell 1000 steps behind: one chunk, and count from here
     assert p.due(5.0) == 10 and p.due(5.01) == 0
     assert np.isclose(p.rtf, 1.0)
+
+
+def test_a_stop_holds_both_arms_until_the_last_stop_ends_and_a_guard_blocks_moves(cell):
+    """A stop drops both arms' moves till the last one ends; a missing guard blocks moves."""
+    reports, absent = [], {}
+    cfg = dict(load_config('simulation'), feed_interval=0.0)
+    with CellSim(cell, cfg) as sim:
+        ex = Execution(cell, sim, lambda *a, **k: reports.append(a), lambda text: None)
+        holds = Holds(cell, sim, ex, lambda: absent, lambda text: None)
+        ex.blocked = holds.blocked
+        robot = cell.leader.name
+        assert ex.run(robot, _small_move(sim, robot)) is not None
+        holds.on_stop('protective', True)
+        assert sim.estop and [r[:2] for r in reports[-2:]] == [(robot, 'held'),
+                                                               (cell.follower.name, 'held')]
+        assert reports[-2][2] == 'm1' and reports[-2][3] == 'protective stop: holding'
+        n = len(reports)
+        holds.on_stop('emergency', True)  # a second stop: nothing new to say
+        holds.on_stop('protective', False)  # the emergency still stands
+        assert sim.estop and len(reports) == n
+        holds.on_stop('emergency', False)
+        assert not sim.estop and [r[1] for r in reports[n:]] == ['cleared', 'cleared']
+        absent['/collision_monitor'] = 'stopped answering'
+        holds.on_guard('/collision_monitor', False, 'stopped answering')
+        assert [r[1] for r in reports[-2:]] == ['held', 'held']
+        assert holds.blocked().startswith('/collision_monitor stopped answering')
+        assert ex.run(robot, _small_move(sim, robot, 'm2')) is None
+        del absent['/collision_monitor']
+        holds.on_guard('/collision_monitor', True, 'answers again')
+        assert holds.blocked() == '' and [r[1] for r in reports[-2:]] == ['cleared', 'cleared']

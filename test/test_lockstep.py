@@ -350,7 +350,7 @@ def test_without_a_window_the_bridge_holds_the_arms_for_a_guard_left_behind():
         # unthrottled, the clock may pass the timeout before the guard's first answer: that
         # absence ends with its first answer; the one that counts comes while it works
         assert g.spin_until(lambda: busy.working and '/busy' in g.bridge.gate.absent, 20.0)
-        assert 'no move until it answers again' in g.bridge._unguarded()
+        assert 'no move until it answers again' in g.bridge.holds.blocked()
         assert busy.window is None, 'held while the guard was still busy'
         # (an answer sent before the work may still clear it meanwhile: it was within the timeout)
         assert g.spin_until(lambda: busy.window is not None and not g.bridge.gate.absent,

@@ -111,3 +111,59 @@ class Execution:
     def drop(self, robot: str, reason: str) -> None:
         """Forget ``robot``'s move (the simulator already holds the arm): ``held``."""
         self.report(robot, 'held', self.running.pop(robot, ('', 0.0))[0], reason)
+
+
+class Holds:
+    """What holds both arms: a standing stop, or a lockstep guard that is missing.
+
+    A stop (emergency or protective, from the collision monitor or anyone) brakes both arms
+    at their acceleration limits and drops their moves (status ``held``); while one stands the
+    simulator runs only a move that parts the arms. A missing guard holds both arms the same
+    way, and no move may start until every guard answers again (:meth:`blocked`). Each end is
+    said to both arms (status ``cleared``).
+
+    :param absent: returns the missing guards, name -> why (the lockstep gate's).
+    :param warn: logs a warning.
+    """
+
+    def __init__(self, cell: CellModel, sim: CellSim, execution: Execution,
+                 absent: Callable[[], Dict[str, str]], warn: Callable[[str], None]):
+        """No stop stands, no guard is missing."""
+        self.cell, self.sim, self.execution = cell, sim, execution
+        self.absent, self.warn = absent, warn
+        self.stops = {'emergency': False, 'protective': False}
+
+    def on_stop(self, kind: str, on: bool) -> None:
+        """Take the latched flag of a stop of ``kind``: hold the arms, or say it is over."""
+        self.stops[kind] = bool(on)
+        on = any(self.stops.values())
+        if on == self.sim.estop:
+            return
+        self.sim.set_estop(on)
+        standing = ' and '.join(k for k, v in self.stops.items() if v)
+        for arm in self.cell.arms:
+            if on:
+                self.execution.drop(arm.name, f'{standing} stop: holding')
+            else:
+                self.execution.report(arm.name, 'cleared', '', f'{kind} stop released')
+
+    def on_guard(self, name: str, present: bool, why: str) -> None:
+        """Hold both arms when a guard is missing; say so again when every guard is back."""
+        if present and self.absent():
+            return  # another guard is still missing
+        self.warn(f'lockstep: guard {name} {why}: ' + (
+            'trajectories are accepted again' if present
+            else 'holding both arms, refusing trajectories'))
+        for arm in self.cell.arms:
+            if present:
+                self.execution.report(arm.name, 'cleared', '', f'{name} {why}')
+            else:  # braked at the acceleration limits, as for an e-stop
+                self.execution.hold(arm.name, f'{name} {why}: holding')
+
+    def blocked(self) -> str:
+        """Return why no move may start (a guard is missing), or ''."""
+        absent = self.absent()
+        if not absent:
+            return ''
+        name, why = next(iter(absent.items()))
+        return f'{name} {why}: no move until it answers again'

@@ -50,23 +50,17 @@ import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
-from rosgraph_msgs.msg import Clock as ClockMsg
-from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory
-from visualization_msgs.msg import MarkerArray
 
 from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import within_limits
 from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.model import load_cell
-from scara_collab.graph import CLOCK
-from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
-from scara_collab.nodes.diagnostics import Diagnostics
-from scara_collab.nodes.execution import Execution
+from scara_collab.nodes.bridge_outputs import BridgeOutputs
+from scara_collab.nodes.execution import Execution, Holds
 from scara_collab.nodes.faults import CRASH_EXIT, declare_faults, FaultyPublisher
 from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.line_link import LineLink
@@ -78,7 +72,6 @@ from scara_collab.nodes.sim_control import SimControl
 from scara_collab.nodes.trajectory_action import FollowJointTrajectory, TrajectoryActions
 from scara_collab.sim.cell_sim import CellSim
 
-STATE_QOS = QoSProfile(depth=10)
 #: the bridge's own parameters (the config files' keys come from ``declare_config``)
 PARAMETERS = {
     'profile': '',
@@ -143,6 +136,14 @@ class Pacer:
         return max(due, 0)
 
 
+def busy(sim: CellSim) -> str:
+    """Return why the arms cannot be reset now (a move runs, an item is held), or ''."""
+    why = [f'{r} is executing a move' for r in sim.robots if sim.active(r)]
+    why += [f'{r} holds item {sim.grippers.held_item(r)}' for r in sim.robots
+            if sim.grippers.held_item(r) is not None]
+    return '; '.join(why)
+
+
 class PyBulletBridge(Node):
     """The simulator node. ``sim`` is the :class:`CellSim` it owns."""
 
@@ -187,25 +188,21 @@ class PyBulletBridge(Node):
                                  f'limits of {arm.name}')
             self.sim.reset_arm(arm.name, self.home[arm.name])
         self.dt = 1.0 / float(sim_cfg['physics_rate'])
-        self._periods = {
-            'state': 1.0 / float(sim_cfg['state_rate']),
-            'clock': 1.0 / float(sim_cfg['clock_rate']),
-            'markers': 1.0 / float(params['markers_rate']),
-            'diagnostics': 1.0,
-        }
-        self._next = {k: 0.0 for k in self._periods}
         self.pacer = Pacer(float(sim_cfg['real_time_factor']), self.dt,
                            max(1, int(round(float(params['step_chunk']) / self.dt))))
 
         self.faults = declare_faults(self)
         self.execution = Execution(self.cell, self.sim, self._report, self.get_logger().warning,
-                                   blocked=self._unguarded)
-        self.clock_pub = self.create_publisher(ClockMsg, CLOCK, STATE_QOS)
-        self.state_pub = FaultyPublisher(self, self.faults, self.create_publisher(
-            JointState, 'joint_states', STATE_QOS))  # direct when no fault names it
-        self.items_pub = self.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
+                                   blocked=lambda: self.holds.blocked())
+        self.holds = Holds(self.cell, self.sim, self.execution, lambda: self.gate.absent,
+                           self.get_logger().warning)
+        self.outputs = BridgeOutputs(
+            self, self.cell, self.sim, {'clock': float(sim_cfg['clock_rate']),
+                                        'state': float(sim_cfg['state_rate']),
+                                        'markers': float(params['markers_rate'])},
+            self.faults, lambda: self.status().to_msg(),
+            on_clock=lambda: self.line.publish(self.sim.time))
         self.events_pub = self.create_publisher(DiagnosticStatus, 'conveyor/events', EVENTS)
-        self.diagnostics = Diagnostics(self)
         self.status_pub: Dict[str, object] = {}
         for arm in self.cell.arms:
             name = arm.name
@@ -217,22 +214,20 @@ class PyBulletBridge(Node):
             self.create_service(
                 SetBool, f'{name}/gripper',
                 guarded(self, lambda req, res, n=name: self._on_gripper(n, req, res), True))
-        self._stops = {'emergency': False, 'protective': False}
-        self.create_subscription(Bool, 'emergency_stop', guarded(
-            self, lambda msg: self._on_stop('emergency', msg)), LATCHED)
-        self.create_subscription(Bool, 'protective_stop', guarded(
-            self, lambda msg: self._on_stop('protective', msg)), LATCHED)
+        for kind in self.holds.stops:
+            self.create_subscription(Bool, f'{kind}_stop', guarded(
+                self, lambda msg, k=kind: self.holds.on_stop(k, msg.data)), LATCHED)
         window = float(params['lockstep_window'])
-        if 0 < window < self._periods['clock'] - 1e-9:
+        if 0 < window < self.outputs.periods['clock'] - 1e-9:
             raise ValueError(f'lockstep_window {window} s is shorter than the clock period '
-                             f'{self._periods["clock"]} s: the clock could never advance')
+                             f'{self.outputs.periods["clock"]} s: the clock could never advance')
         self.gate = LockstepGate(
             self, window, float(params['lockstep_timeout']),
             on_answer=self._wake,
             timeouts=parse_timeouts(self.get_parameter('lockstep_timeouts').value or [],
                                     self.get_namespace()),
             guards=[g for g in self.get_parameter('lockstep_guards').value or [] if g.strip()],
-            on_guard=self._on_guard,
+            on_guard=self.holds.on_guard,
             expect=[n for n in self.get_parameter('lockstep_expect').value or [] if n.strip()])
         if params['line_cell'] < 0:
             raise ValueError(f'line_cell must be >= 0, got {params["line_cell"]}')
@@ -244,7 +239,7 @@ class PyBulletBridge(Node):
         self._timer = self.create_timer(self.pacer.period, self._tick, clock=self._steady)
         self._parked = False  # the stepping timer is off while the bridge waits for answers
         self.control = SimControl(self, self.sim, self.home, self._advance, self._on_pause,
-                                  self._busy)
+                                  lambda: busy(self.sim))
         if self.control.paused:  # started paused: /sim/resume starts the stepping timer
             self._timer.cancel()
         self.actions = (TrajectoryActions(self, self.cell, self.sim, self.execution)
@@ -252,7 +247,7 @@ class PyBulletBridge(Node):
         if self.gate.enabled or self.line.upstream:  # re-arm now and then (a silent
             # participant times out; a late frontier from upstream is looked at again)
             self.create_timer(0.25, self._look, clock=self._steady)
-        self._publish_all()
+        self._publish_due(every=True)
         self.get_logger().info(
             f'cell ready: {len(self.sim.joint_state()[0])} joints, physics '
             f'{sim_cfg["physics_rate"]:.0f} Hz, control {ctl_cfg["control_mode"]}, '
@@ -268,7 +263,7 @@ class PyBulletBridge(Node):
                 self._parked = False
                 if self.control.paused:
                     self._timer.cancel()
-            if float(tree['feed_interval']) != self.sim.conveyor.feed_interval:
+            if float(tree['feed_interval']) != self.sim.conveyor.feed.interval:
                 self.sim.conveyor.set_feed(float(tree['feed_interval']))
 
     def _look(self) -> None:
@@ -279,7 +274,7 @@ class PyBulletBridge(Node):
         and be dropped from the lockstep as silent. The same time again changes nothing else.
         """
         if self._parked and not self.control.paused:
-            self._publish_clock()
+            self.outputs.clock()
         self._wake()
 
     def _wake(self) -> None:
@@ -290,27 +285,6 @@ class PyBulletBridge(Node):
             else:
                 self._parked = False
                 self._timer.reset()
-
-    # --- lockstep guards: the arms never move unwatched -----------------------------------
-    def _on_guard(self, name: str, present: bool, why: str) -> None:
-        """Hold both arms when a guard is missing; say so again when every guard is back."""
-        if present and self.gate.absent:
-            return  # another guard is still missing
-        self.get_logger().warning(
-            f'lockstep: guard {name} {why}: ' + ('trajectories are accepted again' if present
-                                                 else 'holding both arms, refusing trajectories'))
-        for arm in self.cell.arms:
-            if present:
-                self._report(arm.name, 'cleared', '', f'{name} {why}')
-            else:  # braked at the acceleration limits, as for an e-stop
-                self.execution.hold(arm.name, f'{name} {why}: holding')
-
-    def _unguarded(self) -> str:
-        """Return why no move may start (a guard is missing), or ''."""
-        if not self.gate.absent:
-            return ''
-        name, why = next(iter(self.gate.absent.items()))
-        return f'{name} {why}: no move until it answers again'
 
     def _tick(self) -> None:
         """Step what is due and the lockstep allows; wait for the answers without spinning.
@@ -350,9 +324,7 @@ class PyBulletBridge(Node):
         if left is not None:
             due = min(due, left)
         while due > 0:
-            t = self.sim.time
-            to_next = min(self._next.values()) - t
-            n = min(due, max(1, int(math.ceil(to_next / self.dt - 1e-6))))
+            n = min(due, self.outputs.steps_to_next(self.dt))
             self.sim.step(n)
             due -= n
             self._publish_due()
@@ -360,9 +332,7 @@ class PyBulletBridge(Node):
                 self.get_logger().error(f'fault injection: crash at sim t={self.sim.time:.3f} s')
                 os._exit(CRASH_EXIT)  # killed: no goodbye, no lockstep leave, no files
         if left is not None and self.control.steps_to_pause(self.dt) == 0:
-            for key, publish in (('clock', self._publish_clock), ('state', self._publish_state)):
-                if self._next[key] - self._periods[key] < self.sim.time - 1e-9:
-                    publish()  # the instant it pauses at, even off the period's grid
+            self.outputs.publish_off_grid()  # the instant it pauses at, even off the grid
             self.control.pause_here()
 
     def _on_pause(self, paused: bool) -> None:
@@ -372,7 +342,7 @@ class PyBulletBridge(Node):
             self.pacer.restart()
             self._parked = False
             self._timer.reset()
-        self.diagnostics.publish(self.status().to_msg())  # no sim second passes while paused
+        self.outputs.diagnostics.publish(self.status().to_msg())  # no sim s passes while paused
 
     def status(self) -> proto.SimStatus:
         """Return the simulator's state now (:class:`~scara_collab.nodes.protocol.SimStatus`)."""
@@ -381,29 +351,9 @@ class PyBulletBridge(Node):
             sum(self.sim.active(r) for r in self.sim.robots), len(self.sim.items()),
             ', '.join(self.gate.absent))
 
-    def _busy(self) -> str:
-        """Return why the arms cannot be reset now (a move runs, an item is held), or ''."""
-        why = [f'{r} is executing a move' for r in self.sim.robots if self.sim.active(r)]
-        why += [f'{r} holds item {self.sim.grippers.held_item(r)}' for r in self.sim.robots
-                if self.sim.grippers.held_item(r) is not None]
-        return '; '.join(why)
-
-    def _publish_due(self) -> None:
-        t = self.sim.time + 1e-9
-        if t >= self._next['clock']:
-            self._publish_clock()
-            self._next['clock'] += self._periods['clock']
-            self.line.publish(self.sim.time)
-        if t >= self._next['state']:
-            self._publish_state()
-            self._next['state'] += self._periods['state']
-        if t >= self._next['markers']:
-            self.items_pub.publish(conv.item_markers(self.sim.items(), self.cell.item_classes,
-                                                     self.cell.item_size, self.sim.time))
-            self._next['markers'] += self._periods['markers']
-        if t >= self._next['diagnostics']:
-            self.diagnostics.publish(self.status().to_msg())
-            self._next['diagnostics'] += self._periods['diagnostics']
+    def _publish_due(self, every: bool = False) -> None:
+        """Publish what is due (``every``: everything, now), the item events; poll the moves."""
+        (self.outputs.publish_all if every else self.outputs.publish_due)()
         for ev in self.sim.pop_events():
             self.line.on_event(ev.kind, ev.item, ev.time)
             self.events_pub.publish(proto.ItemEvent(ev.kind, ev.item, ev.cls, ev.time, ev.robot,
@@ -411,18 +361,6 @@ class PyBulletBridge(Node):
         if self.actions is not None:
             self.actions.tick()
         self.execution.poll()
-
-    def _publish_clock(self) -> None:
-        self.clock_pub.publish(ClockMsg(clock=conv.to_time(self.sim.time)))
-
-    def _publish_state(self) -> None:
-        names, pos, vel, eff = self.sim.joint_state()
-        self.state_pub.publish(conv.joint_state(self.sim.time, names, pos, vel, eff))
-
-    def _publish_all(self) -> None:
-        for k in self._next:
-            self._next[k] = self.sim.time
-        self._publish_due()
 
     # --- callbacks ------------------------------------------------------------------------
     def _report(self, robot: str, state: str, move: str, reason: str = '',
@@ -439,24 +377,6 @@ class PyBulletBridge(Node):
         if not ok:
             self.get_logger().warning(f'{robot} gripper: {res.message}')
         return res
-
-    def _on_stop(self, kind: str, msg: Bool) -> None:
-        """Hold both arms while an emergency or a protective stop stands; say when it is over.
-
-        Either kind brakes both arms at their acceleration limits and drops their moves
-        (status ``held``); while one stands only a move that parts the arms is run.
-        """
-        self._stops[kind] = bool(msg.data)
-        on = any(self._stops.values())
-        if on == self.sim.estop:
-            return
-        self.sim.set_estop(on)
-        standing = ' and '.join(k for k, v in self._stops.items() if v)
-        for arm in self.cell.arms:
-            if on:
-                self.execution.drop(arm.name, f'{standing} stop: holding')
-            else:
-                self._report(arm.name, 'cleared', '', f'{kind} stop released')
 
     def destroy_node(self) -> bool:
         """Close the simulator with the node (also after a refused start)."""

@@ -110,6 +110,107 @@ class ItemRecord:
         self.cause = ''  # what knocked it off the belt (it was never grasped)
 
 
+def build_belt(pb, belt: BeltBox) -> int:
+    """Build the belt as a static, frictionless rigid box; return its PyBullet body."""
+    box = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=list(belt.half_extents))
+    body = pb.createMultiBody(0.0, box, -1, list(belt.position), list(belt.orientation),
+                              useMaximalCoordinates=True)
+    pb.changeDynamics(body, -1, lateralFriction=0.0, rollingFriction=0.0, spinningFriction=0.0)
+    return body
+
+
+class Feed:
+    """The automatic feed: how often items come, in which pattern, and when they are due.
+
+    >>> feed = Feed(2.0, 'mirror_pairs', now=0.0)
+    >>> feed.period, feed.due(3.9), feed.due(4.0), feed.next
+    (4.0, False, True, 8.0)
+    """
+
+    def __init__(self, interval: float, pattern: str, now: float):
+        """Feed from ``now`` on (``interval`` s per item, 0: none): the first one period later."""
+        self.interval, self.pattern = 0.0, 'random'
+        self.set(interval, pattern, now)
+
+    def set(self, interval: Optional[float], pattern: Optional[str], now: float) -> None:
+        """Change the feed (None: keep that part); the next items come one period from ``now``.
+
+        :param interval: s of sim time between items, ``0`` = no automatic feed.
+        :param pattern: ``'random'`` (one item, random class and lateral offset) or
+            ``'mirror_pairs'`` (two items of one class at ``y`` and ``-y`` about the belt
+            centre line, same ``x``).
+        :raises ValueError: for a negative or non-finite interval or an unknown pattern.
+        """
+        if interval is not None:
+            if not (math.isfinite(interval) and interval >= 0):
+                raise ValueError(f'feed interval must be a number >= 0, got {interval!r}')
+            self.interval = float(interval)
+        if pattern is not None:
+            if pattern not in FEED_PATTERNS:
+                raise ValueError(f'feed pattern must be one of {FEED_PATTERNS}, got {pattern!r}')
+            self.pattern = pattern
+        self.next = now + self.period
+
+    @property
+    def period(self) -> float:
+        """Return the seconds between feeds.
+
+        ``interval`` is per item, so mirror pairs (two items) come every two intervals and
+        every pattern delivers the same items per minute.
+        """
+        return self.interval * (2.0 if self.pattern == 'mirror_pairs' else 1.0)
+
+    def due(self, now: float) -> bool:
+        """Return True if items are due at ``now`` (then the next ones are one period later)."""
+        if self.interval > 0 and now >= self.next - 1e-9:
+            self.next += self.period
+            return True
+        return False
+
+
+class SectionEnds:
+    """Where a belt meets its neighbours in a line of cells: items coming on, items handed on.
+
+    :ivar hand_on: a cell downstream takes what passes ``x_end`` (else it is missed).
+    """
+
+    def __init__(self, cell: CellModel):
+        """Not in a line: nothing comes on, nothing is handed on."""
+        self.cell = cell
+        self.hand_on = False
+        self.handed: List[Handoff] = []
+        self._arriving: List[Tuple[float, Handoff]] = []  # (arrival at x_start, item)
+
+    def expect(self, h: Handoff, at: float, known: Callable[[int], bool]) -> None:
+        """Take the item ``h`` to come on at ``x_start`` at sim time ``at``.
+
+        :param known: tells if the belt has an item of that id already.
+        :raises ValueError: an unknown class, a lateral position off the belt, or an id the
+            belt already has (or expects).
+        """
+        if h.cls not in self.cell.item_classes:
+            raise ValueError(f'handed item {h.item}: unknown class {h.cls!r}')
+        # an item pushed towards an edge still rides the belt while its centre is on it
+        if abs(h.y - self.cell.belt.centre_y) > self.cell.belt.width / 2.0 + 1e-9:
+            raise ValueError(f'handed item {h.item}: y={h.y:.3f} is off the belt')
+        if known(h.item) or any(h.item == a.item for _, a in self._arriving):
+            raise ValueError(f'handed item {h.item}: already on this belt')
+        self._arriving.append((float(at), h))
+
+    def arrivals(self, now: float) -> List[Tuple[float, Handoff]]:
+        """Return the items due by ``now`` (arrival time, item), in order; forget them."""
+        due = sorted((a for a in self._arriving if a[0] <= now + 1e-9),
+                     key=lambda a: (a[0], a[1].item))
+        if due:
+            self._arriving = [a for a in self._arriving if a[0] > now + 1e-9]
+        return due
+
+    def pop_handoffs(self) -> List[Handoff]:
+        """Return the items handed on since the last call, in crossing order."""
+        out, self.handed = self.handed, []
+        return out
+
+
 class Conveyor:
     """The belt, its feed, the items on it and the bins, in a PyBullet world.
 
@@ -135,7 +236,7 @@ class Conveyor:
         self._pb, self.cell, self.cfg, self._clock = pb, cell, sim_cfg, clock
         self._cell_body, self._link_names = cell_body, link_names
         self._rng = np.random.default_rng(int(seed))
-        self._build_belt(belt_box)
+        self.belt_body = build_belt(pb, belt_box)
         self._item_shape = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=[size / 2] * 3)
         self._item_visual: Dict[str, int] = {}
         inner = cell.config['bins']['size']
@@ -144,56 +245,21 @@ class Conveyor:
                      for (robot, cls), p in cell.bins.items()]
         self.records: Dict[int, ItemRecord] = {}
         self._next_id = 1
-        self.hand_on = False  # a cell downstream takes what passes x_end (else: missed)
         self.checked = clock()  # sim time of the last update: every crossing by then is known
-        self._handed: List[Handoff] = []
-        self._arriving: List[Tuple[float, Handoff]] = []  # (arrival at x_start, item)
+        self.ends = SectionEnds(cell)  # in a line of cells: what comes on, what is handed on
         self._events: List[SimEvent] = []
         self._get_pose = pb.getBasePositionAndOrientation
         self._get_vel = pb.getBaseVelocity
         self._set_vel = pb.resetBaseVelocity
-        self.set_feed(float(sim_cfg['feed_interval']), sim_cfg['feed_pattern'])
-
-    def _build_belt(self, belt: BeltBox) -> None:
-        """Build the belt as a static, frictionless rigid box."""
-        pb = self._pb
-        box = pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=list(belt.half_extents))
-        self.belt_body = pb.createMultiBody(0.0, box, -1, list(belt.position),
-                                            list(belt.orientation), useMaximalCoordinates=True)
-        pb.changeDynamics(self.belt_body, -1, lateralFriction=0.0, rollingFriction=0.0,
-                          spinningFriction=0.0)
+        self.feed = Feed(float(sim_cfg['feed_interval']), sim_cfg['feed_pattern'], clock())
 
     # --- the feed -------------------------------------------------------------------------
     def set_feed(self, interval: Optional[float] = None, pattern: Optional[str] = None) -> None:
-        """Change the automatic feed; the next item comes one ``interval`` from now.
-
-        :param interval: s of sim time between feeds, ``0`` = no automatic feed.
-        :param pattern: ``'random'`` (one item, random class and lateral offset) or
-            ``'mirror_pairs'`` (two items of one class at ``y`` and ``-y`` about the belt
-            centre line, same ``x``).
-        :raises ValueError: for a negative or non-finite interval or an unknown pattern.
-        """
-        if interval is not None:
-            if not (math.isfinite(interval) and interval >= 0):
-                raise ValueError(f'feed interval must be a number >= 0, got {interval!r}')
-            self.feed_interval = float(interval)
-        if pattern is not None:
-            if pattern not in FEED_PATTERNS:
-                raise ValueError(f'feed pattern must be one of {FEED_PATTERNS}, got {pattern!r}')
-            self.feed_pattern = pattern
-        self._next_feed = self._clock() + self.feed_period
-
-    @property
-    def feed_period(self) -> float:
-        """Return the seconds between feeds.
-
-        ``feed_interval`` is per item, so mirror pairs (two items) come every two intervals
-        and every pattern delivers the same items per minute.
-        """
-        return self.feed_interval * (2.0 if self.feed_pattern == 'mirror_pairs' else 1.0)
+        """Change the automatic feed from now on (:meth:`Feed.set`)."""
+        self.feed.set(interval, pattern, self._clock())
 
     def _feed(self) -> None:
-        if self.feed_pattern == 'random':
+        if self.feed.pattern == 'random':
             self.spawn_item()
             return
         classes = self.cell.item_classes
@@ -213,7 +279,7 @@ class Conveyor:
         :param first_id: the id of this cell's first own item (the automatic feed, a spawn
             service), so that its ids never meet those handed on from upstream.
         """
-        self.hand_on = bool(hand_on)
+        self.ends.hand_on = bool(hand_on)
         self._next_id = max(self._next_id, int(first_id))
 
     def receive(self, h: Handoff, at: float) -> None:
@@ -225,14 +291,7 @@ class Conveyor:
         :raises ValueError: an unknown class, a lateral position off the belt, or an id this
             belt already has.
         """
-        if h.cls not in self.cell.item_classes:
-            raise ValueError(f'handed item {h.item}: unknown class {h.cls!r}')
-        # an item pushed towards an edge still rides the belt while its centre is on it
-        if abs(h.y - self.cell.belt.centre_y) > self.cell.belt.width / 2.0 + 1e-9:
-            raise ValueError(f'handed item {h.item}: y={h.y:.3f} is off the belt')
-        if h.item in self.records or any(h.item == a.item for _, a in self._arriving):
-            raise ValueError(f'handed item {h.item}: already on this belt')
-        self._arriving.append((float(at), h))
+        self.ends.expect(h, at, lambda item: item in self.records)
 
     def on_belt(self) -> List[OnBelt]:
         """Return the items resting on the belt now (what it carries on if the cell dies)."""
@@ -245,18 +304,12 @@ class Conveyor:
 
     def pop_handoffs(self) -> List[Handoff]:
         """Return the items handed on since the last call, in crossing order."""
-        out, self._handed = self._handed, []
-        return out
+        return self.ends.pop_handoffs()
 
     def _arrive(self, now: float) -> None:
         belt = self.cell.belt
-        due = sorted((a for a in self._arriving if a[0] <= now + 1e-9),
-                     key=lambda a: (a[0], a[1].item))
-        if not due:
-            return
-        self._arriving = [a for a in self._arriving if a[0] > now + 1e-9]
         z = belt.top_z + self.cell.item_size / 2.0
-        for at, h in due:
+        for at, h in self.ends.arrivals(now):
             x = min(belt.x_start + (now - at) * belt.speed, belt.x_end)
             rec = self.create_item(h.cls, (x, h.y, z), self.cell.item_mass, 'belt',
                                    item_id=h.item)
@@ -335,11 +388,9 @@ class Conveyor:
         """Feed, carry items on the belt, detect missed / sorted / wrong_bin / dropped."""
         now = self._clock()
         self.checked = now
-        if self.feed_interval > 0 and now >= self._next_feed - 1e-9:
-            self._next_feed += self.feed_period
+        if self.feed.due(now):
             self._feed()
-        if self._arriving:
-            self._arrive(now)
+        self._arrive(now)
         belt = self.cell.belt
         carry = [belt.speed, 0.0, 0.0]
         zero = [0.0, 0.0, 0.0]
@@ -349,10 +400,10 @@ class Conveyor:
                 continue
             x, y, z = self._get_pose(rec.body)[0]
             if x > belt.x_end and rec.state == 'belt':  # carried off the end (maybe tipping)
-                if self.hand_on:
-                    self._handed.append(Handoff(rec.id, rec.cls, float(y),
-                                                now - (x - belt.x_end) / belt.speed))
-                self._remove(rec, 'handed_on' if self.hand_on else 'missed')
+                if self.ends.hand_on:
+                    self.ends.handed.append(Handoff(rec.id, rec.cls, float(y),
+                                                    now - (x - belt.x_end) / belt.speed))
+                self._remove(rec, 'handed_on' if self.ends.hand_on else 'missed')
                 continue
             if on_belt(self.cell, (x, y, z)):
                 rec.state = 'belt'
