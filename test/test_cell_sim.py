@@ -283,11 +283,11 @@ def test_the_fixed_links_are_merged_and_the_belt_is_its_own_box(cell):
 def test_belt_carries_items_at_belt_speed(cell):
     """An item on the belt moves at the belt speed, in x only, and stays on the belt."""
     with _make(cell) as sim:
-        item = sim.spawn_item('red', y=0.1)
+        item = sim.conveyor.spawn_item('red', y=0.1)
         sim.step(200)  # settle
-        x0, t0 = next(i for i in sim.items() if i.id == item).position[0], sim.time
+        x0, t0 = next(i for i in sim.conveyor.items() if i.id == item).position[0], sim.time
         sim.step(1000)
-        it = next(i for i in sim.items() if i.id == item)
+        it = next(i for i in sim.conveyor.items() if i.id == item)
         speed = (it.position[0] - x0) / (sim.time - t0)
         print(f'\nbelt: item speed {speed:.5f} m/s (belt {cell.belt.speed} m/s)')
         assert speed == pytest.approx(cell.belt.speed, rel=0.02)
@@ -298,28 +298,28 @@ def test_belt_carries_items_at_belt_speed(cell):
 def test_item_reaching_the_belt_end_is_missed(cell):
     """An item passing the belt end is removed with a ``missed`` event."""
     with _make(cell) as sim:
-        item = sim.spawn_item('blue', x=cell.belt.x_end - 0.05)
+        item = sim.conveyor.spawn_item('blue', x=cell.belt.x_end - 0.05)
         sim.step(500)
-        events = sim.pop_events()
+        events = sim.conveyor.pop_events()
         assert [e.kind for e in events] == ['spawned', 'missed']
         assert events[1].item == item and events[1].cls == 'blue'
-        assert sim.items() == []
+        assert sim.conveyor.items() == []
 
 
 def test_spawn_refuses_items_off_the_belt(cell):
     """Items off the belt and unknown item classes are refused."""
     with _make(cell) as sim:
         with pytest.raises(ValueError, match='off the belt'):
-            sim.spawn_item('red', y=cell.belt.centre_y + cell.belt.width)
+            sim.conveyor.spawn_item('red', y=cell.belt.centre_y + cell.belt.width)
         with pytest.raises(ValueError, match='unknown item class'):
-            sim.spawn_item('green')
+            sim.conveyor.spawn_item('green')
 
 
 def test_automatic_feed_mirror_pairs(cell):
     """The mirror-pairs feed spawns same-class pairs mirrored across the belt centre."""
     with _make(cell, feed_interval=0.5, feed_pattern='mirror_pairs') as sim:
         sim.step(2050)  # 0.5 s per item: a pair every 1.0 s, as many items/min as 'random'
-        items = sim.items()
+        items = sim.conveyor.items()
         assert len(items) == 4
         by_x = sorted(items, key=lambda i: (round(i.position[0], 3), i.position[1]))
         for a, b in (by_x[:2], by_x[2:]):
@@ -327,7 +327,7 @@ def test_automatic_feed_mirror_pairs(cell):
             assert a.position[0] == pytest.approx(b.position[0], abs=1e-6)
             assert a.position[1] == pytest.approx(-b.position[1], abs=1e-6)
             assert abs(a.position[1]) >= cell.item_size - 1e-9
-        assert [e.kind for e in sim.pop_events()] == ['spawned'] * 4
+        assert [e.kind for e in sim.conveyor.pop_events()] == ['spawned'] * 4
 
 
 def test_automatic_feed_random(cell):
@@ -335,14 +335,14 @@ def test_automatic_feed_random(cell):
     jitter = load_config('simulation')['lateral_jitter']
     with _make(cell, feed_interval=0.5, feed_pattern='random') as sim:
         sim.step(1050)
-        items = sim.items()
+        items = sim.conveyor.items()
         assert len(items) == 2 and {i.state for i in items} == {'belt'}
         for it in items:
             assert it.cls in cell.item_classes
             assert abs(it.position[1] - cell.belt.centre_y) <= jitter + 1e-9
         sim.conveyor.set_feed(0.0)
         sim.step(1000)
-        assert len(sim.items()) == 2
+        assert len(sim.conveyor.items()) == 2
 
 
 def test_simulation_rates_must_divide_the_physics_rate(cell):
@@ -355,7 +355,7 @@ def test_simulation_rates_must_divide_the_physics_rate(cell):
 def test_grasp_refuses_without_an_item_and_release_without_a_hold(cell):
     """Grasping with no item under the tool and releasing with none held are refused."""
     with _make(cell) as sim:
-        sim.spawn_item('red', x=2.5, y=0.0)
+        sim.conveyor.spawn_item('red', x=2.5, y=0.0)
         ok, why = sim.grippers.grasp(LEFT)
         assert not ok and 'nothing to grasp within 0.06 m' in why
         ok, why = sim.grippers.release(LEFT)
@@ -365,7 +365,7 @@ def test_grasp_refuses_without_an_item_and_release_without_a_hold(cell):
 
 def _pick(sim, robot, cls, xy):
     """Put an item at ``xy`` on the (stopped) belt and pick it up to 0.25 m above it."""
-    item = sim.spawn_item(cls, x=xy[0], y=xy[1])
+    item = sim.conveyor.spawn_item(cls, x=xy[0], y=xy[1])
     _home(sim, robot, [xy[0] + 0.3, xy[1] - 0.3, 0.5])
     top = sim.cell.belt.top_z + sim.cell.item_size
     _move(sim, robot, [xy[0], xy[1], top])
@@ -398,22 +398,22 @@ def test_grasp_lift_release(still_cell):
     """
     with _make(still_cell) as sim:
         item = _pick(sim, LEFT, 'red', (2.5, -0.2))
-        it = sim.items()[0]
+        it = sim.conveyor.items()[0]
         assert it.state == 'held'
         tip = sim.grippers.tool_tip(LEFT)
         npt.assert_allclose(it.position + [0, 0, still_cell.item_size / 2], tip, atol=5e-3)
         assert it.position[2] > still_cell.belt.top_z + 0.25
         _move(sim, LEFT, tip + [0.3, 0.0, 0.0])  # it moves with the tool
-        it = sim.items()[0]
+        it = sim.conveyor.items()[0]
         npt.assert_allclose(it.position[:2], tip[:2] + [0.3, 0.0], atol=5e-3)
         ok, _ = sim.grippers.release(LEFT)
         assert ok and sim.grippers.held_item(LEFT) is None
         sim.step(600)  # it falls back onto the belt
-        it = sim.items()[0]
+        it = sim.conveyor.items()[0]
         assert it.state == 'belt'
         assert it.position[2] == pytest.approx(still_cell.belt.top_z
                                                + still_cell.item_size / 2, abs=2e-3)
-        kinds = [e.kind for e in sim.pop_events()]
+        kinds = [e.kind for e in sim.conveyor.pop_events()]
         assert kinds == ['spawned', 'grasped', 'released']
         assert item == it.id
 
@@ -431,16 +431,16 @@ def test_dropping_an_item_gives_the_right_event(still_cell, where, kind):
             target = [*still_cell.bins[(LEFT, cls)][:2], 0.5]
         _move(sim, LEFT, target, kind='joint')
         sim.grippers.release(LEFT)
-        sim.pop_events()
+        sim.conveyor.pop_events()
         events = []
         for _ in range(200):
             sim.step(10)
-            events += sim.pop_events()
+            events += sim.conveyor.pop_events()
             if events:
                 break
         assert [(e.kind, e.item, e.cls) for e in events] == [(kind, item, 'red')]
         assert events[0].robot == LEFT
-        assert sim.items() == []
+        assert sim.conveyor.items() == []
 
 
 def test_payload_is_felt_by_the_arm(cell):
@@ -455,7 +455,7 @@ def test_payload_is_felt_by_the_arm(cell):
         after = sim.joint_state().effort[2]
         assert after - before == pytest.approx(-2.5 * g, rel=0.01)
         npt.assert_allclose(sim.arm_state(LEFT)[0], q0, atol=1e-4)
-        assert math.isclose(sim.items()[0].position[2], 0.35, abs_tol=2e-3)
+        assert math.isclose(sim.conveyor.items()[0].position[2], 0.35, abs_tol=2e-3)
 
 
 def test_when_a_trajectory_arrives_before_its_start_does_not_change_the_run(cell):

@@ -156,7 +156,7 @@ def test_gripper_refuses_with_nothing_to_grasp_and_items_are_published(graph):
     res = graph.call(SetBool, '/scara_left/gripper', SetBool.Request(data=False))
     assert res.success and 'holds nothing' in res.message  # idempotent: release while empty
     items = graph.collect(MarkerArray, '/conveyor/items')
-    graph.bridge.sim.spawn_item()
+    graph.bridge.sim.conveyor.spawn_item()
     classes = set(graph.bridge.cell.item_classes)
     assert graph.spin_until(lambda: any(m.ns in classes for a in items for m in a.markers))
 

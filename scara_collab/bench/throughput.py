@@ -69,7 +69,7 @@ def sim_speed(mode: str, n_items: int, seconds: float) -> float:
         for arm in cell.arms:
             sim.reset_arm(arm.name, ends[arm.name][0])
         for k in range(n_items):
-            sim.spawn_item(x=cell.belt.x_start + 0.1 + 0.4 * k)
+            sim.conveyor.spawn_item(x=cell.belt.x_start + 0.1 + 0.4 * k)
         steps, leg = int(round(seconds / sim.dt)), {name: 1 for name in ends}
         start = time.perf_counter()
         for _ in range(0, steps, 10):

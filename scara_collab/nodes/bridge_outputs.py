@@ -62,7 +62,8 @@ class BridgeOutputs:
             self.state()
             self.next['state'] += self.periods['state']
         if t >= self.next['markers']:
-            self.items_pub.publish(conv.item_markers(self.sim.items(), self.cell.item_classes,
+            items = self.sim.conveyor.items()
+            self.items_pub.publish(conv.item_markers(items, self.cell.item_classes,
                                                      self.cell.item_size, self.sim.time))
             self.next['markers'] += self.periods['markers']
         if t >= self.next['diagnostics']:

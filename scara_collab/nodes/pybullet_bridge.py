@@ -348,13 +348,13 @@ class PyBulletBridge(Node):
         """Return the simulator's state now (:class:`~scara_collab.nodes.protocol.SimStatus`)."""
         return proto.SimStatus(
             round(self.sim.time, 6), self.control.paused, self.sim.estop,
-            sum(self.sim.active(r) for r in self.sim.robots), len(self.sim.items()),
+            sum(self.sim.active(r) for r in self.sim.robots), len(self.sim.conveyor.items()),
             ', '.join(self.gate.absent))
 
     def _publish_due(self, every: bool = False) -> None:
         """Publish what is due (``every``: everything, now), the item events; poll the moves."""
         (self.outputs.publish_all if every else self.outputs.publish_due)()
-        for ev in self.sim.pop_events():
+        for ev in self.sim.conveyor.pop_events():
             self.line.on_event(ev.kind, ev.item, ev.time)
             self.events_pub.publish(proto.ItemEvent(ev.kind, ev.item, ev.cls, ev.time, ev.robot,
                                                     ev.cause).to_msg())

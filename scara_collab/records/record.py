@@ -70,6 +70,31 @@ MODES = LAUNCH_MODES
 ONE_PER_RUN = tuple(BY_NAME) + ('run_recorder', 'launch_cell_watch')
 
 
+def mirror_fields(mirror, log: Optional[RunLog]) -> Dict[str, object]:
+    """Return the summary's mirror error fields (all None outside a mirrored run).
+
+    :param mirror: the replication manager's newest ``MirrorStatus``, or None;
+    :param log: the run log (its whole-run mirror error), or None.
+    """
+    m = mirror
+    return {
+        'mirror_error_max_m': None if m is None else m.error_max,
+        'mirror_error_source': None if m is None else 'replication_manager, in-step moves',
+        'mirror_in_step_moves': None if m is None else m.in_step_moves,
+        'mirror_not_in_step': None if m is None else m.not_in_step,
+        'mirror_not_in_step_reason': None if m is None else m.last_reason,
+        'mirror_error_whole_run_max_m': None if log is None else log.max_mirror_error,
+        'mirror_error_whole_run_time': None if log is None else log.max_mirror_error_time}
+
+
+def state_fields(log: RunLog, refused: int) -> Dict[str, object]:
+    """Return the summary's fields about the joint states kept (``refused``: at the door)."""
+    return {'joint_state_rows': log.rows, 'joint_states_missing': log.missing,
+            'joint_states_refused': refused, 'largest_gap_s': log.largest_gap,
+            'joint_speed_max_ratio': round(log.max_speed_ratio, 3),
+            'overspeed_count': log.overspeed_count, 'overspeed': list(log.overspeed)}
+
+
 class RunRecord:
     """Record one run into ``directory``.
 
@@ -233,7 +258,6 @@ class RunRecord:
         log = self.log
         mirrored = self.mode == 'mirrored' and log.rows > 0
         sep, sep_time, sep_source = self.separation()
-        mirror = self.mirror if mirrored else None
         summary: Dict[str, object] = {
             'mode': self.mode,
             'profile': self.profile or self.cell.profile,
@@ -250,14 +274,7 @@ class RunRecord:
             'min_separation_source': sep_source,
             'safety_margin_m': self.cell.safety_margin,
             'margin_ok': None if sep is None else bool(sep >= self.cell.safety_margin),
-            'mirror_error_max_m': None if mirror is None else mirror.error_max,
-            'mirror_error_source': None if mirror is None else
-            'replication_manager, in-step moves',
-            'mirror_in_step_moves': None if mirror is None else mirror.in_step_moves,
-            'mirror_not_in_step': None if mirror is None else mirror.not_in_step,
-            'mirror_not_in_step_reason': None if mirror is None else mirror.last_reason,
-            'mirror_error_whole_run_max_m': log.max_mirror_error if mirrored else None,
-            'mirror_error_whole_run_time': log.max_mirror_error_time if mirrored else None,
+            **mirror_fields(self.mirror if mirrored else None, log if mirrored else None),
             **self.stop_log.summary(t_end),
             'emergency_stop_reason': None if self.monitor is None or not self.monitor.stopped
             else self.monitor.reason,
@@ -268,13 +285,7 @@ class RunRecord:
             'exit_reason': exit_reason,
             'job_start_sim_time': self.job_start,
             'sim_time_end': t_end,
-            'joint_state_rows': log.rows,
-            'joint_states_missing': log.missing,
-            'joint_states_refused': self.refused,
-            'largest_gap_s': log.largest_gap,
-            'joint_speed_max_ratio': round(log.max_speed_ratio, 3),
-            'overspeed_count': log.overspeed_count,
-            'overspeed': list(log.overspeed),
+            **state_fields(log, self.refused),
             'events': counts,
             'job': dict(self.stats),
             'job_time': self.stats_time,

@@ -132,6 +132,23 @@ class GraphClient:
                 continue
             return answer[0]
 
+    def start(self, name: str, timeout: float, what: str) -> None:
+        """Call the start service ``name`` (Trigger) until it succeeds, 0.5 s apart.
+
+        A server may refuse while its own endpoints are not matched yet (DDS discovery).
+
+        :raises RunEnd: it still refused after ``timeout``, with its last word.
+        """
+        deadline = time.monotonic() + timeout
+        while True:
+            res = self.call(Trigger, name, Trigger.Request(), timeout, what)
+            if res.success:
+                return
+            if time.monotonic() > deadline:
+                raise RunEnd(f'{what} refused to start for {timeout:g} s: {res.message}')
+            self.console.say(f'[launch] {what}: {res.message}; asking again')
+            self.pause(0.5)
+
     def set_bridge(self, timeout: Optional[float] = None, supervise: bool = True,
                    **values: float) -> None:
         """Set the bridge's dynamic parameters (``real_time_factor``, ``feed_interval``)."""

@@ -279,6 +279,16 @@ def default_output(mode: str) -> Path:
     return path
 
 
+def record_mcap(recorder: RunRecorder, output: Path, console: Console) -> None:
+    """Record the run's topics to MCAP too (on ``recorder``, whose finish closes the file)."""
+    from scara_collab.nodes.mcap_recorder import McapRecorder
+    from scara_collab.records.mcap_log import MCAP_FILE
+    mcap = McapRecorder(recorder, output / MCAP_FILE, robots=[a.name for a in recorder.cell.arms],
+                        urdf=recorder.cell.urdf)  # + /robot_description, /tf
+    recorder.sinks.append(mcap)
+    console.say(f'[launch] recording {len(mcap.topics)} topics to {mcap.path}')
+
+
 class Launcher:
     """Run the job: start the graph, start the job, supervise, stop; see the module docstring.
 
@@ -315,14 +325,8 @@ class Launcher:
             self.recorder = RunRecorder(output, args.mode, profile=args.profile,
                                         context=self.context, namespace=self.namespace)
         self.recorder.extra['lockstep'] = getattr(args, 'lockstep', 'on')
-        if getattr(args, 'record', False):  # raw subscriptions on the recorder; finish() closes
-            from scara_collab.nodes.mcap_recorder import McapRecorder
-            from scara_collab.records.mcap_log import MCAP_FILE
-            mcap = McapRecorder(self.recorder, output / MCAP_FILE,
-                                robots=[a.name for a in self.recorder.cell.arms],
-                                urdf=self.recorder.cell.urdf)  # + /robot_description, /tf
-            self.recorder.sinks.append(mcap)
-            console.say(f'[launch] recording {len(mcap.topics)} topics to {mcap.path}')
+        if getattr(args, 'record', False):
+            record_mcap(self.recorder, output, console)
         self.executor = make_executor(context=self.context)
         self.executor.add_node(self.recorder)
         self.ros = GraphClient(self.recorder, self.executor, console,
@@ -428,19 +432,8 @@ class Launcher:
     def start_job(self) -> None:
         """Call ``/automation_manager/start`` (not in idle mode) and release the clock."""
         if self.args.mode != 'idle':
-            # refused while its endpoints are not matched yet (DDS discovery): ask again
-            deadline = time.monotonic() + self.args.ready_timeout
-            while True:
-                res = self.ros.call(Trigger, self.name('automation_manager/start'),
-                                    Trigger.Request(), self.args.ready_timeout,
-                                    'automation_manager')
-                if res.success:
-                    break
-                if time.monotonic() > deadline:
-                    raise RunEnd(f'automation_manager refused to start for '
-                                 f'{self.args.ready_timeout:g} s: {res.message}')
-                self.console.say(f'[launch] automation_manager: {res.message}; asking again')
-                self.ros.pause(0.5)
+            self.ros.start(self.name('automation_manager/start'), self.args.ready_timeout,
+                           'automation_manager')
             self.job_started = True
         t0 = self.recorder.start_job()
         release = {}

@@ -30,10 +30,10 @@ grippers, which hold an item by a fixed constraint.
 Example::
 
     >>> with CellSim() as sim:                 # defaults from config/ and the model
-    ...     item = sim.spawn_item('red', y=0.1)
+    ...     item = sim.conveyor.spawn_item('red', y=0.1)
     ...     sim.step(1000)                     # 1 s of sim time
     ...     names, q, qd, effort = sim.joint_state()
-    ...     round(sim.time, 6), names[0], sim.items()[0].state
+    ...     round(sim.time, 6), names[0], sim.conveyor.items()[0].state
     (1.0, 'scara_left_joint_1', 'belt')
 """
 from contextlib import contextmanager
@@ -52,7 +52,7 @@ from scara_collab.core.config import ConfigError, load_config
 from scara_collab.core.frames import quaternion, Tree
 from scara_collab.core.model import CellModel, load_cell, parse_urdf
 from scara_collab.sim.controllers import applied_efforts
-from scara_collab.sim.conveyor import BeltBox, Conveyor, Item, SimEvent
+from scara_collab.sim.conveyor import BeltBox, Conveyor
 from scara_collab.sim.gripper import Grippers
 from scara_collab.sim.reference import robot_index, TrajectoryError, validate_trajectory
 from scara_collab.sim.servo import CONTROL_MODES, Servo
@@ -410,20 +410,6 @@ class CellSim:
         q_all[a] = np.asarray(q, dtype=float)
         m = np.array(self._pb.calculateMassMatrix(self._body, q_all.ravel().tolist()))
         return m[3 * a:3 * a + 3, 3 * a:3 * a + 3]
-
-    # --- the conveyor (items, feed, bins, events: :class:`~scara_collab.sim.conveyor.Conveyor`)
-    def spawn_item(self, cls: Optional[str] = None, y: Optional[float] = None,
-                   x: Optional[float] = None) -> int:
-        """Put an item on the belt (:meth:`Conveyor.spawn_item`); return its id."""
-        return self.conveyor.spawn_item(cls, y, x)
-
-    def items(self) -> List[Item]:
-        """Every item in the cell now (:meth:`Conveyor.items`)."""
-        return self.conveyor.items()
-
-    def pop_events(self) -> List[SimEvent]:
-        """Events since the last call, oldest first (:meth:`Conveyor.pop_events`)."""
-        return self.conveyor.pop_events()
 
     # --- lifetime -------------------------------------------------------------------------
     def close(self) -> None:
