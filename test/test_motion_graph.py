@@ -42,7 +42,7 @@ def motion_graph(**bridge):
     g.distance = g.collect(Float64, '/collision_monitor/min_distance')
     g.estop = g.collect(Bool, '/emergency_stop', LATCHED)
     assert g.spin_until(lambda: g.left.q is not None and g.right.q is not None
-                        and g.left._now() > 0.1 and g.right._now() > 0.1)
+                        and conv.now(g.left) > 0.1 and conv.now(g.right) > 0.1)
     return g
 
 
@@ -341,7 +341,7 @@ def test_an_offered_plan_is_scheduled_as_it_is_not_planned_again(cell):
     left = cell.bridge.cell.leader
     target = np.array([3.3, -0.6, 0.45])
     traj = plan_path(left, cell.left.q, target, mode='line_or_joint')
-    request = cell.left._now() + 0.3
+    request = conv.now(cell.left) + 0.3
     pub, msg = offer(cell, 'scara_left', traj, request)
     assert cell.spin_until(lambda: cell.trajs['scara_left'])
     sent = cell.trajs['scara_left'][-1]
@@ -368,7 +368,7 @@ def test_an_offer_from_elsewhere_is_planned_again_to_its_end(cell):
     target = np.array([3.3, -0.6, 0.45])
     elsewhere = cell.left.q + [0.05, -0.05, 0.0]
     traj = plan_path(left, elsewhere, target, mode='line_or_joint')
-    offer(cell, 'scara_left', traj, cell.left._now() + 0.3)
+    offer(cell, 'scara_left', traj, conv.now(cell.left) + 0.3)
     assert cell.spin_until(lambda: cell.trajs['scara_left'])
     _, _, q, _, _ = conv.trajectory_arrays(cell.trajs['scara_left'][-1], left.joint_names)
     np.testing.assert_allclose(q[0], cell.left.q, atol=2e-3)  # from the arm, not the offer
@@ -406,7 +406,7 @@ def test_a_malformed_offer_is_refused_and_nothing_moves(cell, spoil, reason):
     q0 = cell.left.q.copy()
     traj = plan_path(left, q0, [3.3, -0.6, 0.45], mode='line_or_joint')
     msg = conv.trajectory_msg(left.joint_names, traj.t, traj.q, traj.qd, traj.qdd)
-    msg.header.stamp = conv.time_from_ns(int(round((cell.left._now() + 0.3) * 1e9)))
+    msg.header.stamp = conv.time_from_ns(int(round((conv.now(cell.left) + 0.3) * 1e9)))
     spoil(msg)
     pub = cell.probe.create_publisher(JointTrajectory, '/scara_left/target_trajectory', 10)
     assert cell.spin_until(lambda: pub.get_subscription_count() > 0)
@@ -433,7 +433,7 @@ def test_a_mirrored_offer_reaches_both_planners_mirrored_joint_by_joint(cell):
     pub = cell.probe.create_publisher(JointTrajectory, '/collab/target_trajectory', 10)
     assert cell.spin_until(lambda: pub.get_subscription_count() > 0)
     msg = conv.trajectory_msg(left.joint_names, traj.t, traj.q, traj.qd, traj.qdd)
-    msg.header.stamp = conv.time_from_ns(int(round((cell.left._now() + 0.3) * 1e9)))
+    msg.header.stamp = conv.time_from_ns(int(round((conv.now(cell.left) + 0.3) * 1e9)))
     pub.publish(msg)
     assert cell.spin_until(lambda: all(cell.trajs[n] for n in cell.trajs))
     ql = conv.trajectory_arrays(cell.trajs['scara_left'][-1], left.joint_names)[2]

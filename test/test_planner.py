@@ -50,7 +50,7 @@ def test_the_defaults_and_valid_overrides_are_taken(context):
     """The defaults hold unless overridden; a whole number is a valid time."""
     node = _planner(context, mode='joint', max_wait='5')
     settings = node.planner.settings
-    assert node.arm.name == 'scara_left' and node.leader and settings.mode == 'joint'
+    assert node.arm.name == 'scara_left' and node.planner.leader and settings.mode == 'joint'
     assert (settings.planning_lead, settings.send_margin, settings.max_delay,
             settings.max_wait) == (0.05, 0.05, 30.0, 5.0)  # a lockstep's send margin
     assert settings.margin == pytest.approx(node.cell.safety_margin + 0.03)

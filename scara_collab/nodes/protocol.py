@@ -103,6 +103,21 @@ def parse_move_id(move: str) -> Tuple[str, int]:
         raise ProtocolError(f'move id {move!r} is not <robot>/<request ns>') from None
 
 
+def request_of(robot: str, move: str) -> Optional[int]:
+    """Return the request of ``robot``'s planned move ``move``, or None for any other move.
+
+    >>> request_of('scara_left', 'scara_left/15'), request_of('scara_left', 'scara_left/hold')
+    (15, None)
+    >>> request_of('scara_left', 'scara_right/15') is None
+    True
+    """
+    try:
+        _, request = parse_move_id(move)
+    except ProtocolError:
+        return None  # a planner's hold, a raw command
+    return request if move_id(robot, request) == move else None
+
+
 def _encode(value) -> str:
     if value is None:
         return ''
@@ -248,6 +263,16 @@ class PlannerStatus(_MoveStatus):
 
     KIND: ClassVar[str] = 'planner'
     CHOICES: ClassVar[Tuple[str, tuple]] = ('state', PLANNER_STATES)
+
+    @classmethod
+    def of(cls, robot: str, status) -> 'PlannerStatus':
+        """Return what ``robot``'s planner reports for its core's ``status``.
+
+        :param status: a :class:`scara_collab.core.arm_planner.Status`.
+        """
+        return cls(robot, status.state, move_id(robot, status.request), status.request,
+                   reason=status.reason, start=status.start, end=status.end,
+                   delay=status.delay, kind=status.kind)
 
     def name(self) -> str:
         """Return ``'<robot>/planner'``."""
