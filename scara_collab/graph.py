@@ -409,7 +409,9 @@ def job_params(mode: str, lockstep: bool = True) -> Dict[str, Dict[str, str]]:
     ``/joint_states`` only where mirrored moves are asked for (mirrored mode, and the idle
     graph a user drives by hand); the automation manager runs the mode's job. Without
     ``lockstep`` the clock waits for nobody (the bridge's ``lockstep_window`` 0), as on
-    hardware, and the planners send their moves :data:`REALTIME_SEND_MARGIN` ahead.
+    hardware, the planners send their moves :data:`REALTIME_SEND_MARGIN` ahead, and the
+    automation manager decides on the newest joint state instead of waiting for the state of
+    its tick's instant (``state_sync``).
 
     >>> job_params('collaborative', lockstep=False)['left_planner']
     {'send_margin': '0.05'}
@@ -428,6 +430,7 @@ def job_params(mode: str, lockstep: bool = True) -> Dict[str, Dict[str, str]]:
         out['pybullet_bridge']['lockstep_window'] = '0.0'
         for planner in (n.name for n in NODES if n.component == _n('planner:Planner')):
             out[planner]['send_margin'] = repr(REALTIME_SEND_MARGIN)
+        out['automation_manager']['state_sync'] = 'false'
     return out
 
 

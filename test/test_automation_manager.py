@@ -43,6 +43,27 @@ def test_the_same_seed_gives_the_same_run():
     assert {k: first[k] for k in keys} == {k: second[k] for k in keys}
 
 
+def test_each_tick_decides_on_the_joint_state_of_its_own_instant(monkeypatch):
+    """In lockstep the job decides at sim time T on the state stamped T, never the one before.
+
+    The bridge sends the state of T after the clock of T (and the one of T - 10 ms just
+    before it), on another topic: taken as they come, a tick saw one or the other, and two
+    saturated runs parted a tick apart.
+    """
+    from scara_collab.nodes.automation_manager import AutomationManager
+    seen = []
+    decide = AutomationManager._decide
+
+    def recorded(self):
+        seen.append((self._now(), self.state_time))
+        decide(self)
+    monkeypatch.setattr(AutomationManager, '_decide', recorded)
+    s = run_job('collaborative', 8.0, 0.8)
+    assert s['sorted'] >= 1 and len(seen) >= 300  # a tick every 20 ms
+    late = [(t, st) for t, st in seen[1:] if abs(t - st) > 1e-9]  # the first: no state yet
+    assert not late, f'{len(late)} of {len(seen)} ticks decided on an older state: {late[:3]}'
+
+
 def test_a_saturated_feed_keeps_the_margin():
     """An item every 0.8 s, twice what the pair can take: busy arms, the margin still holds."""
     s = run_job('collaborative', 60.0, 0.8)

@@ -118,8 +118,9 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
         down.conveyor.join_line(False, 1_000_001)
         section = Section(CELL)
         out, box = Outbox(), Inbox(section)
-        ids = [up.spawn_item('red', 0.3, 4.2), up.spawn_item('blue', -0.25, 4.35)]
-        ev_up, ev_down = up.pop_events(), down.pop_events()
+        ids = [up.conveyor.spawn_item('red', 0.3, 4.2),
+               up.conveyor.spawn_item('blue', -0.25, 4.35)]
+        ev_up, ev_down = up.conveyor.pop_events(), down.conveyor.pop_events()
         crossing = {}
         while up.time < 4.0:
             up.step(10)
@@ -130,8 +131,8 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
                 down.conveyor.receive(h, at)
             while down.time + 0.01 <= box.limit() + 1e-9:
                 down.step(10)
-            ev_up += up.pop_events()
-            ev_down += down.pop_events()
+            ev_up += up.conveyor.pop_events()
+            ev_down += down.conveyor.pop_events()
         handed = {e.item: e for e in ev_up if e.kind == 'handed_on'}
         got = {e.item: e for e in ev_down if e.kind == 'received'}
         assert sorted(handed) == sorted(got) == sorted(ids)
@@ -139,10 +140,11 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
         assert crossing[ids[0]] == pytest.approx((4.5 - 4.2) / CELL.belt.speed, abs=0.011)
         for i in ids:
             assert got[i].time == pytest.approx(crossing[i] + section.transit, abs=0.011)
-        items = {it.id: it for it in down.items()}
+        items = {it.id: it for it in down.conveyor.items()}
         assert items[ids[0]].cls == 'red' and items[ids[0]].position[1] == pytest.approx(0.3)
         assert items[ids[1]].cls == 'blue'
-        assert down.spawn_item() == 1_000_001  # the cell's own items never meet handed ids
+        # the cell's own items never meet handed ids
+        assert down.conveyor.spawn_item() == 1_000_001
         with pytest.raises(ValueError, match='already on this belt'):
             down.conveyor.receive(Handoff(ids[0], 'red', 0.0, 1.0), down.time)
         with pytest.raises(ValueError, match='unknown class'):
@@ -153,7 +155,7 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
         # the belt while its centre is, so it is taken
         down.conveyor.receive(Handoff(79, 'red', -0.493, down.time), down.time)
         down.step(10)
-        assert {e.item for e in down.pop_events() if e.kind == 'received'} == {79}
+        assert {e.item for e in down.conveyor.pop_events() if e.kind == 'received'} == {79}
     finally:
         up.close()
         down.close()

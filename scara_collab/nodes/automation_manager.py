@@ -20,7 +20,10 @@ retries, :mod:`scara_collab.nodes.protocol` for the statuses):
   asked again). Its lockstep answer waits for the planners' status of each move it sent and
   for the bridge's answer to each gripper call (at most ``lockstep.REPLY_WAIT`` wall seconds
   each): the bridge cannot step before it has gripped, so the next ``/clock`` always finds the
-  reply taken (README, *Repeatable runs*).
+  reply taken (README, *Repeatable runs*). With ``state_sync`` (the default; the launcher turns
+  it off in real time) a tick at sim time T decides on the joint state stamped T: the bridge
+  sends it right after the clock of T, on another topic, so the tick waits for it (and the
+  lockstep answer with it) when it comes second, unless the states have stopped coming.
 
 Services ``~/start`` and ``~/stop`` (std_srvs/Trigger, idempotent: starting a running job
 succeeds; a start before every endpoint the job uses is matched is refused, naming what is
@@ -30,7 +33,7 @@ starts once the graph is connected); ``~/stats`` (:class:`~scara_collab.nodes.pr
 preferring its half of the belt), ``mirrored`` (items arrive in mirror pairs; the leader's moves
 go through the replication manager so the follower replicates them).
 """
-from typing import List
+from typing import List, Optional
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
@@ -42,7 +45,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from scara_collab.core import sorting
-from scara_collab.core.config import Rule
+from scara_collab.core.config import load_config, Rule
 from scara_collab.core.job import GripCommand, JobSettings, MoveCommand, SortingJob
 from scara_collab.core.kinematics import IKError
 from scara_collab.core.model import load_cell
@@ -70,9 +73,10 @@ class AutomationManager(Node):
         super().__init__('automation_manager', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         cfg = declare_config(self, ('automation', 'controllers'))
-        params = declare_checked(self, {'profile': '', 'auto_start': False, 'tick': 0.02},
-                                 (Rule('profile', 'text'), Rule('auto_start', 'bool'),
-                                  Rule('tick', 'positive')))
+        params = declare_checked(
+            self, {'profile': '', 'auto_start': False, 'tick': 0.02, 'state_sync': True},
+            (Rule('profile', 'text'), Rule('auto_start', 'bool'), Rule('tick', 'positive'),
+             Rule('state_sync', 'bool')))
         self.cell = load_cell(params['profile'] or None)
         self.settings = JobSettings.from_config(self.cell, cfg['automation'],
                                                 controllers=cfg['controllers'])
@@ -131,6 +135,10 @@ class AutomationManager(Node):
         every(self, 1.0, self._publish_stats)
         # auto_start: the job starts on the first tick that finds the graph connected
         self.start_pending = params['auto_start']
+        self.state_sync = params['state_sync']
+        self.state_period = 1.0 / float(load_config('simulation')['state_rate'])
+        self.state_time = float('-inf')  # sim s of the newest joint state
+        self._due: Optional[float] = None  # a tick waiting for the state of its instant
         self.lockstep = lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'sorting job ready: mode {self.mode}, lanes '
                                f'{[lane.robot for lane in self.job.lanes]}')
@@ -162,6 +170,9 @@ class AutomationManager(Node):
         for a in self.cell.arms:
             q, _ = conv.joint_state_arrays(msg, a.joint_names)  # refuses non-finite states
             self.job.on_arm_state(a.name, q)
+        self.state_time = conv.to_sec(msg.header.stamp)
+        if self._due is not None and self.state_time >= self._due - 1e-9:
+            self._decide_due()  # the state the tick waited for
 
     def _on_planner(self, msg: DiagnosticStatus) -> None:
         st = proto.PlannerStatus.from_msg(msg)
@@ -251,6 +262,23 @@ class AutomationManager(Node):
 
     # --- the job ----------------------------------------------------------------------------
     def _tick(self) -> None:
+        now = self._now()
+        if self._due is not None:  # the state a tick waited for never came: decide on the last
+            self._decide_due()
+        if (self.lockstep is not None and self.state_sync
+                and now - 2 * self.state_period - 1e-6 <= self.state_time < now - 1e-9):
+            self._due = now  # the state of this instant is on its way: decide on it
+            self.lockstep.await_reply(('state', self._due))
+            return
+        self._decide()
+
+    def _decide_due(self) -> None:
+        key, self._due = ('state', self._due), None
+        self._decide()
+        self.lockstep.reply(key)
+
+    def _decide(self) -> None:
+        """Run the job's tick and send what it decided."""
         if self.start_pending:
             missing = self.missing_links()
             if missing:
