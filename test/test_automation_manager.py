@@ -55,7 +55,7 @@ def test_each_tick_decides_on_the_joint_state_of_its_own_instant(monkeypatch):
     decide = AutomationManager._decide
 
     def recorded(self):
-        seen.append((self._now(), self.state_time))
+        seen.append((self._now(), self.sync.state_time))
         decide(self)
     monkeypatch.setattr(AutomationManager, '_decide', recorded)
     s = run_job('collaborative', 8.0, 0.8)
@@ -123,7 +123,7 @@ def test_the_node_logs_the_jobs_decisions_at_both_levels():
         assert g.spin_until(lambda: sub.get_publisher_count() >= 2)  # the node's and the probe's
         levels = ('info', 'warn', 'info', 'warn')
         for k, level in enumerate(levels):
-            node._log(level, f'decision {k}: {level}')
+            node.job.log(level, f'decision {k}: {level}')  # as the job logs
 
         def decisions():
             return [m for m in logs if m.name == 'automation_manager'
@@ -163,7 +163,7 @@ def test_the_job_starts_only_once_every_endpoint_it_uses_is_matched():
         assert '/scara_left/target (' not in missing
         assert '/scara_left/target_trajectory (no subscriber)' in missing
         node.destroy_subscription(sub)
-        node._tick()  # no auto_start: nothing happens, nothing raised
+        node._decide()  # no auto_start: nothing happens, nothing raised
         assert not node.job.running
         node.destroy_node()
     finally:

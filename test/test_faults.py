@@ -190,11 +190,11 @@ def test_the_bridge_publishes_joint_states_directly_or_late_in_order(g):
                 'real_time_factor': 1.0, 'feed_interval': 0.0, 'faults': faults}))
     plain = bridge([''])
     try:
-        assert plain.state_pub.publish == plain.state_pub.publisher.publish
+        assert plain.outputs.state_pub.publish == plain.outputs.state_pub.publisher.publish
     finally:
         plain.destroy_node()
     late = g.add(bridge(['latency:/joint_states:0.02:0.01']))
-    spy = late.state_pub.publisher = Spy(late, '/joint_states')  # what leaves, and when
+    spy = late.outputs.state_pub.publisher = Spy(late, '/joint_states')  # what leaves, and when
     line, dues = late.faults.latency['/joint_states'], []
     before = line.sent  # the state the bridge sent as it started (due unknown here)
     push = line.push

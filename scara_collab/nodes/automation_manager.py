@@ -33,7 +33,7 @@ starts once the graph is connected); ``~/stats`` (:class:`~scara_collab.nodes.pr
 preferring its half of the belt), ``mirrored`` (items arrive in mirror pairs; the leader's moves
 go through the replication manager so the follower replicates them).
 """
-from typing import List, Optional
+from typing import Callable, List
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
@@ -59,6 +59,18 @@ from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import DEFAULT, LATCHED
 from scara_collab.nodes.runner import run_node
 from scara_collab.nodes.sim_timer import every
+from scara_collab.nodes.state_sync import StateSync
+
+
+def log_to(logger) -> Callable[[str, str], None]:
+    """Return ``log(level, text)`` for the job: ``'warn'`` a warning, else info."""
+    def log(level: str, text: str) -> None:
+        # one call site per severity: rclpy refuses a call site whose severity changes
+        if level == 'warn':
+            logger.warning(text)
+        else:
+            logger.info(text)
+    return log
 
 
 class AutomationManager(Node):
@@ -90,7 +102,7 @@ class AutomationManager(Node):
             except IKError as exc:
                 raise ValueError(str(exc)) from None
 
-        self.job = SortingJob(self.cell, self.settings, plan, self._log)
+        self.job = SortingJob(self.cell, self.settings, plan, log_to(self.get_logger()))
         self.faults = declare_faults(self)
         self.target_pub = {a.name: self.create_publisher(PointStamped, f'{a.name}/target', 10)
                            for a in self.cell.arms}
@@ -131,28 +143,20 @@ class AutomationManager(Node):
         self.create_service(Trigger, '~/start', guarded(self, self._on_start, service=True))
         self.create_service(Trigger, '~/stop', guarded(self, self._on_stop, service=True))
         # on the sim clock, before joining the lockstep: each answer follows the tick's work
-        every(self, float(params['tick']), self._tick)
+        self.sync = StateSync(self._decide, 1.0 / float(load_config('simulation')['state_rate']),
+                              params['state_sync'])  # each tick on the state of its instant
+        every(self, float(params['tick']), lambda: self.sync.on_tick(self._now()))
         every(self, 1.0, self._publish_stats)
         # auto_start: the job starts on the first tick that finds the graph connected
         self.start_pending = params['auto_start']
-        self.state_sync = params['state_sync']
-        self.state_period = 1.0 / float(load_config('simulation')['state_rate'])
-        self.state_time = float('-inf')  # sim s of the newest joint state
-        self._due: Optional[float] = None  # a tick waiting for the state of its instant
         self.lockstep = lockstep.join(self)  # sim time waits while this node computes
+        self.sync.lockstep = self.lockstep
         self.get_logger().info(f'sorting job ready: mode {self.mode}, lanes '
                                f'{[lane.robot for lane in self.job.lanes]}')
 
     # --- plumbing ---------------------------------------------------------------------------
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
-
-    def _log(self, level: str, text: str) -> None:
-        # one call site per severity: rclpy refuses a call site whose severity changes
-        if level == 'warn':
-            self.get_logger().warning(text)
-        else:
-            self.get_logger().info(text)
 
     # --- inputs -----------------------------------------------------------------------------
     def _on_items(self, msg: MarkerArray) -> None:
@@ -170,9 +174,7 @@ class AutomationManager(Node):
         for a in self.cell.arms:
             q, _ = conv.joint_state_arrays(msg, a.joint_names)  # refuses non-finite states
             self.job.on_arm_state(a.name, q)
-        self.state_time = conv.to_sec(msg.header.stamp)
-        if self._due is not None and self.state_time >= self._due - 1e-9:
-            self._decide_due()  # the state the tick waited for
+        self.sync.on_state(conv.to_sec(msg.header.stamp))
 
     def _on_planner(self, msg: DiagnosticStatus) -> None:
         st = proto.PlannerStatus.from_msg(msg)
@@ -261,22 +263,6 @@ class AutomationManager(Node):
         return res
 
     # --- the job ----------------------------------------------------------------------------
-    def _tick(self) -> None:
-        now = self._now()
-        if self._due is not None:  # the state a tick waited for never came: decide on the last
-            self._decide_due()
-        if (self.lockstep is not None and self.state_sync
-                and now - 2 * self.state_period - 1e-6 <= self.state_time < now - 1e-9):
-            self._due = now  # the state of this instant is on its way: decide on it
-            self.lockstep.await_reply(('state', self._due))
-            return
-        self._decide()
-
-    def _decide_due(self) -> None:
-        key, self._due = ('state', self._due), None
-        self._decide()
-        self.lockstep.reply(key)
-
     def _decide(self) -> None:
         """Run the job's tick and send what it decided."""
         if self.start_pending:
