@@ -1,78 +1,80 @@
-"""The collision monitor's decisions alone (core/stops.py): the forecast, the standing stop."""
-import numpy as np
+"""The run's stops (records.stops): stop events, the monitor's status, /emergency_stop holds."""
 import pytest
 
-from scara_collab.core.mirror import mirror_joints
-from scara_collab.core.stops import BreachForecast, StopLatch
+from scara_collab.records.stops import StopLog
 
 
-def test_a_stop_of_the_kind_that_stands_changes_nothing_and_counts_once():
-    """A second protective stop while one stands is no news; the count stays 1."""
-    latch = StopLatch(resume_after=0.3)
-    (begin,) = latch.stop('protective', 'predicted breach', 2.0)
-    assert (begin.kind, begin.state, begin.time) == ('protective', 'begin', 2.0)
-    assert begin.since is None
-    assert latch.stop('protective', 'again', 2.1) == []
-    assert latch.stopped and latch.reason == 'predicted breach' and latch.since == 2.0
-    assert latch.counts == {'protective': 1, 'emergency': 0}
+def kinds(log, t_end):
+    """Return ``(protective, emergency)`` lists of ``(time, lost, standing, cause)``."""
+    out = log.summary(t_end)
+    return tuple([(s['time'], s['lost'], s['standing'], s['cause']) for s in out[k]]
+                 for k in ('protective_stops', 'emergency_stops'))
 
 
-def test_an_emergency_overrides_a_protective_stop_and_nothing_overrides_it():
-    """Protective then emergency: the protective one ends first; an emergency stays."""
-    latch = StopLatch(resume_after=0.3)
-    latch.stop('protective', 'p', 1.0)
-    end, begin = latch.stop('emergency', 'margin broken', 1.5)
-    assert (end.kind, end.state, end.since, end.text) == ('protective', 'end', 1.0,
-                                                          'overridden by an emergency stop')
-    assert (begin.kind, begin.state) == ('emergency', 'begin')
-    assert latch.stop('protective', 'p', 1.6) == [] and latch.kind == 'emergency'
-    assert latch.calm(5.0, True, True, 0.5) == []  # an emergency never resumes by itself
-    (cleared,) = latch.end('cleared', 6.0)
-    assert (cleared.kind, cleared.since) == ('emergency', 1.5) and not latch.stopped
-    assert latch.end('again', 6.1) == []
+def test_begins_and_ends_give_each_stop_its_cost():
+    """Each begin and end pair is one stop; a begin without its end stands to the run's end."""
+    log = StopLog()
+    log.event('protective', 'begin', 10.0, 'predicted breach')
+    log.event('protective', 'begin', 10.0, 'predicted breach')  # delivered twice
+    log.event('protective', 'end', 10.5, 'arms at rest', since=10.0)
+    log.event('protective', 'end', 10.5, 'arms at rest', since=10.0)
+    log.event('protective', 'begin', 20.0, 'no valid joint state for 0.200 s')
+    log.event('protective', 'end', 20.25, 'overridden by an emergency stop', since=20.0)
+    log.event('emergency', 'begin', 20.25, 'margin broken')
+    protective, emergency = kinds(log, 60.0)
+    assert protective == [(10.0, 0.5, False, 'predicted breach'),
+                          (20.0, 0.25, False, 'no valid joint state for 0.200 s')]
+    assert emergency == [(20.25, pytest.approx(39.75), True, 'margin broken')]
+    log.event('emergency', 'end', 61.0, 'cleared', since=20.25)  # during the shutdown
+    assert kinds(log, 60.0)[1] == [(20.25, pytest.approx(40.75), False, 'margin broken')]
 
 
-def test_a_protective_stop_resumes_after_resume_after_of_calm_and_restarts_when_unsettled():
-    """Calm (apart and at rest) must last ``resume_after``; any break starts it over."""
-    latch = StopLatch(resume_after=0.3)
-    latch.stop('protective', 'p', 0.0)
-    assert latch.calm(1.0, True, True, 0.4) == []        # calm from 1.0
-    assert latch.calm(1.2, True, False, 0.4) == []       # moving: over
-    assert latch.calm(1.3, True, True, 0.4) == []        # calm from 1.3
-    latch.unsettled()                                     # an unusable state
-    assert latch.calm(1.5, True, True, 0.4) == []        # calm from 1.5
-    assert latch.calm(1.79, True, True, 0.4) == []
-    (end,) = latch.calm(1.8, True, True, 0.4)
-    assert end.state == 'end' and end.text.startswith('valid states, arms at rest 0.400 m apart')
-    assert not latch.stopped
+def test_lost_messages_and_late_stops():
+    """An end without its begin is still a stop; one that begins after the run is not its."""
+    log = StopLog()
+    log.event('protective', 'end', 5.0, 'arms at rest', since=4.2)
+    log.event('emergency', 'begin', 80.0, 'margin broken')  # after the run's end (60)
+    protective, emergency = kinds(log, 60.0)
+    assert protective == [(4.2, pytest.approx(0.8), False,
+                           '(begin not heard; released: arms at rest)')]
+    assert emergency == []
+    with pytest.raises(ValueError):
+        log.event('protective', 'paused', 1.0, '')
+    with pytest.raises(ValueError):
+        log.event('safety', 'begin', 1.0, '')
 
 
-def test_an_unknown_kind_is_refused():
-    """Only protective and emergency stops exist."""
-    with pytest.raises(ValueError, match='unknown stop kind'):
-        StopLatch(0.3).stop('soft', 'x', 0.0)
+def test_the_monitors_newest_status_has_the_last_word():
+    """A stop the monitor still reports stands; a newer status without it ends a lost end."""
+    log = StopLog()
+    log.monitor(30.0, True, 'emergency', 'margin broken')  # its begin event was lost
+    log.monitor(31.0, True, 'emergency', 'margin broken')
+    assert kinds(log, 40.0)[1] == [(30.0, 10.0, True, 'margin broken')]
+    log = StopLog()
+    log.event('protective', 'begin', 12.0, 'predicted breach')
+    log.monitor(11.0, False, '', '')  # older than the begin: says nothing about it
+    assert kinds(log, 40.0)[0][0][2] is True
+    log.monitor(13.0, False, '', '')  # newer: the end event was lost
+    assert kinds(log, 40.0)[0] == [(12.0, 1.0, False, 'predicted breach')]
+    log = StopLog()  # a status older than the end heard: not a new stop
+    log.event('protective', 'begin', 12.0, 'predicted breach')
+    log.monitor(12.0, True, 'protective', 'predicted breach')
+    log.event('protective', 'end', 12.4, 'arms at rest', since=12.0)
+    assert kinds(log, 40.0)[0] == [(12.0, pytest.approx(0.4), False, 'predicted breach')]
+    old = StopLog()  # a monitor that says no kind: an emergency stop
+    old.monitor(7.0, True, '', 'unusable joint state')
+    assert kinds(old, 9.0)[1] == [(7.0, 2.0, True, 'unusable joint state')]
 
 
-def test_the_forecast_stops_a_committed_move_into_the_other_arm_before_the_breach(cell):
-    """A move heard to run into the other arm gives a reason to stop before the breach."""
-    lead = cell.leader
-    home, into = np.array([0.0, 1.5708, 0.0]), np.array([1.0, 0.0, 0.0])
-    q_foll = mirror_joints(into)  # the follower waits over the belt's middle, where ``into`` is
-    forecast = BreachForecast(cell.arms, cell.safety_margin, dt=0.001)
-    rest = np.zeros(3)
-    assert forecast.reason_to_stop(0.0, (home, q_foll), (rest, rest), 0.05) is None
-    t = np.linspace(0.0, 2.0, 21)
-    path = home + np.outer(t / 2.0, into - home)
-    forecast.on_trajectory(lead.name, 'scara_left/1', 0.0, t, path, 0.0, home)
-    velocity = (into - home) / 2.0
-    why, when = None, None
-    for stamp in np.arange(0.0, 2.0, 0.01):
-        q = home + (stamp / 2.0) * (into - home)
-        why = forecast.reason_to_stop(stamp, (q, q_foll), (velocity, rest), 0.05)
-        if why is not None:
-            when = stamp
-            break
-    assert why is not None and why.startswith('predicted: the commanded moves (scara_left')
-    assert forecast.breach is not None and when < forecast.breach
-    # an arm that does not follow the heard move is no ground for a prediction
-    assert forecast.reason_to_stop(when + 0.01, (home, q_foll), (rest, rest), 0.05) is None
+def test_emergency_stop_holds_without_an_event_are_listed_once():
+    """A hold on /emergency_stop no stop event covers is an emergency stop; one covered is not."""
+    log = StopLog()
+    log.request(False, 0.0)  # the latched initial false
+    log.request(True, 15.0)
+    log.request(True, 15.5)  # still held
+    log.request(False, 18.0)
+    log.request(True, 40.2)  # the monitor's own stop, its event stamped a little earlier
+    log.event('emergency', 'begin', 40.0, 'margin broken')
+    _, emergency = kinds(log, 50.0)
+    assert emergency == [(15.0, 3.0, False, 'held on /emergency_stop (no stop event heard)'),
+                         (40.0, 10.0, True, 'margin broken')]
