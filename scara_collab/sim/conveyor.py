@@ -199,6 +199,8 @@ class SectionEnds:
 
     def arrivals(self, now: float) -> List[Tuple[float, Handoff]]:
         """Return the items due by ``now`` (arrival time, item), in order; forget them."""
+        if not self._arriving:  # the usual case, at every belt update
+            return []
         due = sorted((a for a in self._arriving if a[0] <= now + 1e-9),
                      key=lambda a: (a[0], a[1].item))
         if due:
@@ -307,9 +309,12 @@ class Conveyor:
         return self.ends.pop_handoffs()
 
     def _arrive(self, now: float) -> None:
+        due = self.ends.arrivals(now)
+        if not due:
+            return
         belt = self.cell.belt
         z = belt.top_z + self.cell.item_size / 2.0
-        for at, h in self.ends.arrivals(now):
+        for at, h in due:
             x = min(belt.x_start + (now - at) * belt.speed, belt.x_end)
             rec = self.create_item(h.cls, (x, h.y, z), self.cell.item_mass, 'belt',
                                    item_id=h.item)
