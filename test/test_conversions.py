@@ -83,6 +83,50 @@ def test_target_frames_are_world_or_the_arms_base():
             conv.target_frame(frame, 'scara_left')
 
 
+def test_a_target_in_an_unknown_frame_reads_back_with_the_reason(cell):
+    """``target_of`` gives the frame to plan in, or '' and why: the planner refuses it so."""
+    xyz = np.array([1.0, 2.0, 0.5])
+    xyz_back, stamp, frame, error = conv.target_of(
+        conv.make_point_stamped(xyz, 'scara_left_base'), 'scara_left')
+    np.testing.assert_array_equal(xyz_back, xyz)
+    assert (frame, error) == ('base', '')
+    assert conv.target_of(conv.make_point_stamped(xyz, 'map'), 'scara_left')[2:] == (
+        '', "unknown frame 'map'; use world or scara_left_base")
+
+
+def test_an_offer_reads_back_or_gives_its_stamp_and_the_reason(cell):
+    """A good offer reads back as its arrays; a malformed one as its stamp and the reason."""
+    arm = cell.leader
+    t, q = np.array([0.0, 0.5]), np.array([[0.0, 1.0, 0.0], [0.1, 1.1, 0.0]])
+    (stamp, t_back, q_back, _, _), error = conv.offer_of(
+        conv.trajectory_msg(arm.joint_names, t, q, start=2.5), arm.joint_names)
+    assert (stamp, error) == (2.5, '')
+    np.testing.assert_array_equal(q_back, q)
+    bad = conv.trajectory_msg(arm.joint_names, t, q * np.nan, start=2.5)
+    arrays, error = conv.offer_of(bad, arm.joint_names)
+    assert arrays == (2.5,) and 'non-finite' in error
+
+
+def test_a_planners_move_and_hold_become_the_trajectories_it_sends(cell):
+    """A move is named by its request and starts at its plan's start; a hold is one point now."""
+    from scara_collab.core.arm_planner import HoldArm, SendMove
+    from scara_collab.core.planning import Plan
+    from scara_collab.core.trajectory import Trajectory
+    arm = cell.leader
+    t, q = np.array([0.0, 0.5]), np.array([[0.0, 1.0, 0.0], [0.1, 1.1, 0.0]])
+    traj = Trajectory(t, q, np.zeros_like(q), np.zeros_like(q), np.zeros_like(q))
+    msg = conv.move_msg(arm.name, arm.joint_names, SendMove(1500000000, Plan(traj, 3.0, 0.0)))
+    assert msg.header.frame_id == 'scara_left/1500000000'
+    stamp, t_back, q_back, _, _ = conv.trajectory_arrays(msg, arm.joint_names)
+    assert stamp == 3.0
+    np.testing.assert_array_equal(q_back, q)
+    np.testing.assert_array_equal(t_back, t)
+    hold = conv.move_msg(arm.name, arm.joint_names, HoldArm(q[1]))
+    assert hold.header.frame_id == 'scara_left/hold'
+    assert conv.trajectory_arrays(hold, arm.joint_names)[0] == 0.0
+    np.testing.assert_array_equal(conv.trajectory_arrays(hold, arm.joint_names)[2], [q[1]])
+
+
 def _reference_joint_state_arrays(msg, names):
     """Return what ``joint_state_arrays`` returned with numpy (before its plain-float path)."""
     index = {n: i for i, n in enumerate(msg.name)}

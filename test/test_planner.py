@@ -134,7 +134,7 @@ def test_a_target_goes_out_as_a_trajectory_its_path_and_a_status(shell, cell):
     names = [n for a in cell.arms for n in a.joint_names]
     state = conv.joint_state(conv.now(g.node), names, q, np.zeros(6), np.zeros(6))
     _publish(g, type(state), 'joint_states', state)
-    assert g.spin_until(lambda: g.node.q is not None)
+    assert g.spin_until(lambda: g.node.planner.joints is not None)
     target.header.stamp = conv.to_time(stamp + 0.5)  # a new request
     _publish(g, PointStamped, 'scara_left/target', target)
     assert g.spin_until(lambda: len(g.status) == 2 and g.trajs and g.paths)

@@ -44,11 +44,12 @@ All times are absolute sim seconds from the ``clock`` given to :class:`ArmPlanne
 """
 from collections import OrderedDict
 from dataclasses import dataclass, replace
-from typing import Callable, List, NamedTuple, Optional, Union
+from typing import Callable, Dict, List, Mapping, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.model import ArmModel
 from scara_collab.core.motion import Heard, Lateness
@@ -58,6 +59,33 @@ from scara_collab.core.trajectory import path_metrics, Trajectory
 
 #: the states of a request a planner reports
 STATES = ('planned', 'queued', 'waiting', 'refused', 'superseded')
+
+#: the planner's times, s, parameters of its node that may change while it runs: a move starts
+#: at least ``send_margin`` after it is sent (plus the worst start lateness measured;
+#: ``--lockstep off`` sets ``graph.REALTIME_SEND_MARGIN``), waits at most ``max_delay`` for the
+#: other arm, and is refused after ``max_wait`` blocked
+TIMES = {'send_margin': 0.05, 'max_delay': 30.0, 'max_wait': 60.0}
+
+
+def planner_parameters(robot: str, robots: Sequence[str]) -> Tuple[Dict[str, object],
+                                                                   Tuple[Rule, ...]]:
+    """Return a planner node's parameters (defaults) and the rules they must meet.
+
+    ``robot`` (the default arm) must be one of ``robots``, ``mode`` one of :data:`MODES`,
+    every time of :data:`TIMES` > 0; ``profile`` names the arm profile ('' the cell's).
+
+    >>> defaults, rules = planner_parameters('scara_left', ['scara_left', 'scara_right'])
+    >>> sorted(defaults), [r.key for r in rules if r.kind == 'positive']
+    (['max_delay', 'max_wait', 'mode', 'profile', 'robot', 'send_margin'], \
+['send_margin', 'max_delay', 'max_wait'])
+    """
+    return ({'robot': robot, 'profile': '', 'mode': 'line_or_joint', **TIMES},
+            (Rule('robot', 'str', lambda v: v in robots, f'must be one of {list(robots)}'),
+             Rule('profile', 'text'),
+             Rule('mode', 'str', lambda v: v in MODES, f'must be one of {MODES}'),
+             *(Rule(key, 'positive') for key in TIMES)))
+
+
 #: requests whose last status is kept, to answer a re-sent one
 HISTORY = 64
 #: m: a planned move whose tool leaves the straight line by less than this is a ``line``
@@ -91,6 +119,20 @@ class PlannerSettings:
     margin: float
     trajectory: dict
     send_margin: float
+
+    @classmethod
+    def of(cls, params: Mapping[str, object], safety_margin: float,
+           controllers: Mapping[str, object]) -> 'PlannerSettings':
+        """Return the settings of a planner node's parameters (``mode``, :data:`TIMES`).
+
+        :param safety_margin: the cell's, m (``planning_buffer`` is added to it).
+        :param controllers: ``controllers.yaml`` (``planning_lead``, ``planning_buffer``,
+            ``trajectory``).
+        """
+        return cls(str(params['mode']), float(controllers['planning_lead']),
+                   margin=safety_margin + float(controllers['planning_buffer']),
+                   trajectory=controllers['trajectory'],
+                   **{k: float(params[k]) for k in TIMES})
 
     def __post_init__(self):
         """Refuse a mode not in :data:`~scara_collab.core.planning.MODES` or a time <= 0."""

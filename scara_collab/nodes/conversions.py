@@ -17,6 +17,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from scara_collab.core.frames import quaternion
 from scara_collab.core.palette import class_colour
+from scara_collab.nodes import protocol
 
 
 class MessageError(ValueError):
@@ -176,6 +177,22 @@ def trajectory_msg(names: Sequence[str], t: np.ndarray, q: np.ndarray,
     return msg
 
 
+def move_msg(robot: str, joint_names: Sequence[str], cmd) -> JointTrajectory:
+    """Return the ``JointTrajectory`` ``robot``'s planner sends for a ``SendMove`` or ``HoldArm``.
+
+    A move (:func:`~scara_collab.nodes.protocol.move_id`) from its start, or the hold
+    (:func:`~scara_collab.nodes.protocol.hold_id`) as one point at once (stamp 0); the
+    commands are :mod:`scara_collab.core.arm_planner`'s.
+    """
+    plan = getattr(cmd, 'plan', None)
+    if plan is None:  # a hold
+        return trajectory_msg(joint_names, np.array([0.0]), cmd.q.reshape(1, 3),
+                              frame_id=protocol.hold_id(robot))
+    t = plan.traj
+    return trajectory_msg(joint_names, t.t, t.q, t.qd, t.qdd, start=plan.start,
+                          frame_id=protocol.move_id(robot, cmd.request))
+
+
 #: the most points a trajectory may have: 100 s at the planners' 100 Hz
 MAX_TRAJECTORY_POINTS = 10_000
 
@@ -242,6 +259,31 @@ def point_stamped(msg: PointStamped) -> Tuple[str, np.ndarray, float]:
     """``PointStamped`` -> ``(frame_id, xyz (3,), stamp s)`` (the point may be non-finite)."""
     p = msg.point
     return msg.header.frame_id, np.array([p.x, p.y, p.z], dtype=float), to_sec(msg.header.stamp)
+
+
+def target_of(msg: PointStamped, robot: str) -> Tuple[np.ndarray, float, str, str]:
+    """Return a target for ``robot`` as ``(xyz (3,), stamp s, frame, error)``.
+
+    ``frame`` from :func:`target_frame`, or ``''`` and the reason in ``error`` (the planner
+    refuses it so).
+
+    >>> msg = make_point_stamped(np.array([1.0, 2.0, 0.5]), 'elsewhere')
+    >>> target_of(msg, 'scara_left')[2:]
+    ('', "unknown frame 'elsewhere'; use world or scara_left_base")
+    """
+    frame_id, xyz, stamp = point_stamped(msg)
+    try:
+        return xyz, stamp, target_frame(frame_id, robot), ''
+    except MessageError as exc:
+        return xyz, stamp, '', str(exc)
+
+
+def offer_of(msg: JointTrajectory, names: Sequence[str]) -> Tuple[tuple, str]:
+    """Return an offered plan as ``(trajectory_arrays, '')``, or ``((stamp s,), reason)``."""
+    try:
+        return trajectory_arrays(msg, names), ''
+    except MessageError as exc:
+        return (to_sec(msg.header.stamp),), str(exc)
 
 
 def transform_stamped(parent: str, child: str, pose: np.ndarray,

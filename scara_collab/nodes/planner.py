@@ -9,27 +9,20 @@ from typing import List, Optional
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
 from nav_msgs.msg import Path
-import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from scara_collab.core.arm_planner import (ArmPlanner, Command, HoldArm, PlannerSettings,
-                                           SendMove, Status)
-from scara_collab.core.config import load_config, Rule
+from scara_collab.core.arm_planner import (ArmPlanner, Command, planner_parameters,
+                                           PlannerSettings, SendMove, Status, TIMES)
+from scara_collab.core.config import load_config
 from scara_collab.core.model import load_cell
-from scara_collab.core.planning import MODES
 from scara_collab.nodes import conversions as conv, lockstep, protocol as proto
 from scara_collab.nodes.faults import declare_faults, FaultyPublisher
 from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import DEFAULT, EVENTS
 from scara_collab.nodes.runner import run_node
-
-#: the planner's times, s: a move starts at least ``send_margin`` after it is sent (plus the
-#: worst start lateness measured; ``--lockstep off`` sets graph.REALTIME_SEND_MARGIN), waits
-#: at most ``max_delay`` for the other arm, and is refused after ``max_wait`` blocked
-TIMES = {'send_margin': 0.05, 'max_delay': 30.0, 'max_wait': 60.0}
 
 
 class Planner(Node):
@@ -43,29 +36,21 @@ class Planner(Node):
         super().__init__(node_name or f'{robot.split("_")[-1]}_planner', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         cfg = declare_config(self, ('controllers',))['controllers']
-        robots = load_config('cell')['robots']['names']
         params = declare_checked(
-            self, {'robot': robot, 'profile': '', 'mode': 'line_or_joint', **TIMES},
-            (Rule('robot', 'str', lambda v: v in robots, f'must be one of {list(robots)}'),
-             Rule('profile', 'text'), Rule('mode', 'str', lambda v: v in MODES,
-                                           f'must be one of {MODES}'),
-             *(Rule(key, 'positive') for key in TIMES)),
-            dynamic=('mode', *TIMES),
-            on_change=lambda p: setattr(self.planner, 'settings', self._settings(p)))
+            self, *planner_parameters(robot, load_config('cell')['robots']['names']),
+            dynamic=('mode', *TIMES), on_change=lambda p: setattr(
+                self.planner, 'settings', PlannerSettings.of(p, self.cell.safety_margin, cfg)))
         self.cell = load_cell(params['profile'] or None)
         self.arm = self.cell.arm(params['robot'])
         self.other = next(a for a in self.cell.arms if a is not self.arm)
-        self._fixed = {'planning_lead': float(cfg['planning_lead']), 'trajectory':
-                       cfg['trajectory'], 'margin': self.cell.safety_margin
-                       + float(cfg['planning_buffer'])}
         self.planner = ArmPlanner(
-            self.arm, self.other, self.arm is self.cell.leader, self._settings(params),
-            lambda: conv.now(self), dt=1.0 / float(load_config('simulation')['physics_rate']))
+            self.arm, self.other, self.arm is self.cell.leader,
+            PlannerSettings.of(params, self.cell.safety_margin, cfg), lambda: conv.now(self),
+            dt=1.0 / float(load_config('simulation')['physics_rate']))
         r, o = self.arm.name, self.other.name
-        faults = declare_faults(self)
         self.traj_pub = self.create_publisher(JointTrajectory, f'{r}/joint_trajectory', 10)
         self.path_pub = self.create_publisher(Path, f'{r}/planned_path', 10)
-        self.status_pub = FaultyPublisher(self, faults, self.create_publisher(
+        self.status_pub = FaultyPublisher(self, declare_faults(self), self.create_publisher(
             DiagnosticStatus, f'{r}/planner_status', EVENTS))
         # every state, each in turn (a depth of 1 would take the newest, and a queued move
         # would start at one state or the next by timing)
@@ -81,66 +66,36 @@ class Planner(Node):
         self.get_logger().info(f'{r} planner ready ({params["mode"]} moves, ' + (
             'leader)' if self.arm is self.cell.leader else f'follower, yields to {o})'))
 
-    @property
-    def q(self) -> Optional[np.ndarray]:
-        """This arm's last measured joints, ``(3,)``; None before the first joint state."""
-        return self.planner.joints
-
-    def _settings(self, params: dict) -> PlannerSettings:
-        return PlannerSettings(params['mode'], **self._fixed,
-                               **{k: float(params[k]) for k in TIMES})
-
     def _send(self, commands: List[Command]) -> None:
         """Publish what the planner decided, in its order."""
         for cmd in commands:
-            if isinstance(cmd, SendMove):
-                t, start = cmd.plan.traj, cmd.plan.start
-                self.traj_pub.publish(conv.trajectory_msg(
-                    self.arm.joint_names, t.t, t.q, t.qd, t.qdd, start=start,
-                    frame_id=proto.move_id(self.arm.name, cmd.request)))
-                self.path_pub.publish(conv.path_msg(t.p, start))
-            elif isinstance(cmd, HoldArm):
-                self.traj_pub.publish(conv.trajectory_msg(
-                    self.arm.joint_names, np.array([0.0]), cmd.q.reshape(1, 3),
-                    frame_id=proto.hold_id(self.arm.name)))
-            elif isinstance(cmd, Status):
+            if isinstance(cmd, Status):
                 st = proto.PlannerStatus.of(self.arm.name, cmd)
                 if cmd.state == 'refused' and not cmd.repeated:
                     self.get_logger().warning(st.text())
                 self.status_pub.publish(st.to_msg())
+                continue
+            self.traj_pub.publish(conv.move_msg(self.arm.name, self.arm.joint_names, cmd))
+            if isinstance(cmd, SendMove):
+                self.path_pub.publish(conv.path_msg(cmd.plan.traj.p, cmd.plan.start))
 
     def _on_state(self, msg: JointState) -> None:
-        if not conv.admit_state(self, self.stamps, msg):
-            return
-        try:
+        if conv.admit_state(self, self.stamps, msg):
             q = [conv.joint_state_arrays(msg, a.joint_names)[0] for a in (self.arm, self.other)]
-        except conv.MessageError as exc:
-            self.get_logger().warning(f'ignoring joint_states: {exc}', throttle_duration_sec=5.0)
-            return
-        self._send(self.planner.on_joint_state(*q, conv.to_sec(msg.header.stamp)))
+            self._send(self.planner.on_joint_state(*q, conv.to_sec(msg.header.stamp)))
 
     def _on_target(self, msg: PointStamped) -> None:
-        frame_id, xyz, stamp = conv.point_stamped(msg)
-        try:
-            frame, frame_error = conv.target_frame(frame_id, self.arm.name), ''
-        except conv.MessageError as exc:
-            frame, frame_error = '', str(exc)
+        xyz, stamp, frame, error = conv.target_of(msg, self.arm.name)  # refused with a reason
         self._send(self.planner.on_target(proto.stamp_ns(msg.header.stamp), stamp, xyz, frame,
-                                          frame_error))
+                                          error))
 
     def _on_offer(self, msg: JointTrajectory) -> None:
-        try:
-            arrays, error = conv.trajectory_arrays(msg, self.arm.joint_names), ''
-        except conv.MessageError as exc:  # refused with the reason
-            arrays, error = (conv.to_sec(msg.header.stamp),), str(exc)
+        arrays, error = conv.offer_of(msg, self.arm.joint_names)  # refused with the reason
         self._send(self.planner.on_offer(proto.stamp_ns(msg.header.stamp), *arrays,
                                          error=error))
 
     def _on_other(self, msg: JointTrajectory) -> None:
-        try:
-            stamp, t, q, _, _ = conv.trajectory_arrays(msg, self.other.joint_names)
-        except conv.MessageError:
-            return  # the bridge refuses it and reports it; nothing committed
+        stamp, t, q, _, _ = conv.trajectory_arrays(msg, self.other.joint_names)
         self._send(self.planner.on_other_trajectory(msg.header.frame_id, stamp, t, q))
 
     def _on_other_execution(self, msg: DiagnosticStatus) -> None:
@@ -149,8 +104,7 @@ class Planner(Node):
 
     def _on_own_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
-        request = proto.request_of(self.arm.name, st.move)  # None: a hold, a raw command
-        if request is not None:
+        if (request := proto.request_of(self.arm.name, st.move)) is not None:  # not a hold
             self._send(self.planner.on_own_execution(st.state, request, st.start,
                                                      bool(st.stamp), st.late))
 
