@@ -170,6 +170,37 @@ def test_a_follower_move_starting_first_binds_the_leader(cell, poses):
         cm.take(LEFT, _move('L', 0.5, poses['left_out'], poses['left_in'], 2.0), 0.0, _q(cm))
 
 
+def test_a_follower_move_starting_with_the_leaders_leaves_the_follower_on_its_running_move(
+        cell, poses):
+    """The leader is judged against what the follower runs, not against a follower frozen.
+
+    Both moves are sent for the same instant (two planners answering the same tick, neither
+    having heard the other's). The follower's waiting move yields, so the leader is judged
+    against the follower's running move carried on, as its planner sees it without the
+    waiting move; at its start the waiting move is judged again against the leader's, and the
+    arms keep the margin along what they then run.
+    """
+    start = 0.3
+    cm = CellMotion(cell.arms, [poses['left_out'], poses['right_in']], cell.safety_margin, DT)
+    q = {LEFT: poses['left_out'], RIGHT: poses['right_in']}
+    away = _move('R1', 0.0, poses['right_in'], poses['right_out'], 1.0)  # leaving the belt
+    cm.take(RIGHT, away, 0.0, q)
+    frozen = away.timeline.at(start)  # where the follower is when both moves start
+    assert collision.arm_distance(cell.leader, poses['left_in'], cell.follower,
+                                  frozen) < cell.safety_margin
+    cm.take(RIGHT, _move('R2', start, frozen, poses['right_out'] + [0.3, 0.0, 0.0]), 0.0, q)
+    leader = _move('L', start, poses['left_out'], poses['left_in'], 1.5)
+    cm.take(LEFT, leader, 0.0, q)  # admitted: the follower held at ``frozen`` would refuse it
+    closest = float('inf')
+    for k in range(0, 2500):
+        now = round(k * DT, 9)
+        pose = {r: a.current(now).at(now) for r, a in cm.arms.items()}
+        cm.advance(now, pose)
+        closest = min(closest, float(collision.arm_distance(cell.leader, pose[LEFT],
+                                                            cell.follower, pose[RIGHT])))
+    assert closest >= cell.safety_margin
+
+
 def test_arms_stopped_too_close_may_only_be_parted(cell, poses):
     """Arms already within the margin: only a move parting them from a still arm is run."""
     near = _pose(cell, LEFT, [2.0, 0.25, 0.4])

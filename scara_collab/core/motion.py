@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike
 
 from scara_collab.core import collision, safety
 from scara_collab.core.model import ArmModel
-from scara_collab.core.planning import other_view, Timeline
+from scara_collab.core.planning import binds_leader, Timeline
 
 
 class Refused(ValueError):
@@ -204,16 +204,16 @@ class ArmMotion:
         """Return everything the arm is committed to from ``now``: the running, then the waiting.
 
         :param before: the start of a leader's move that this arm (a follower) must make way
-            for: a waiting move starting at or after it is left out, the arm holding where it
-            would start it (the priority rule, :func:`scara_collab.core.planning.other_view`);
-            None: everything counts.
+            for: a waiting move starting at or after it is left out (the priority rule,
+            :func:`scara_collab.core.planning.binds_leader`), and the arm runs what it runs:
+            that move is judged again against the leader's when it would take over and, if
+            dropped then, the arm goes on with its running move. None: everything counts.
         """
         now_on = self.current(now, q)
         w = self.waiting
-        if w is None:
+        if w is None or (before is not None and not binds_leader(w.start, before)):
             return now_on
-        waiting = w.timeline if before is None else other_view(w.timeline, before, leader=True)
-        return splice(now_on, waiting.since(now))
+        return splice(now_on, w.timeline.since(now))
 
 
 @dataclass(frozen=True)

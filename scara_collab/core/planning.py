@@ -178,14 +178,27 @@ def starts_at(traj: Trajectory, q_now, tolerance: float) -> bool:
     return bool(np.all(np.abs(traj.q[0] - np.asarray(q_now, dtype=float)) <= tolerance))
 
 
+def binds_leader(follower_start: float, leader_start: float) -> bool:
+    """Return True if a follower motion starting at ``follower_start`` binds a leader move.
+
+    The priority rule, written once: the leader respects follower motion that starts before
+    its own start; one starting at or after it yields (it is judged again when it would take
+    over, :meth:`scara_collab.core.motion.CellMotion.advance`).
+
+    >>> binds_leader(1.0, 1.5), binds_leader(1.5, 1.5), binds_leader(2.0, 1.5)
+    (True, False, False)
+    """
+    return follower_start < leader_start
+
+
 def other_view(other: Timeline, my_start: float, leader: bool) -> Timeline:
     """Return what of the other arm's commitment an arm must respect (the priority rule).
 
     The follower respects all of the leader's motion. The leader ignores follower motion that
-    starts at or after its own start (the follower will yield): it sees the follower held at
-    its pose at ``my_start``, or its full motion if that started earlier.
+    starts at or after its own start (:func:`binds_leader`: the follower will yield): it sees
+    the follower held at its pose at ``my_start``, or its full motion if that started earlier.
     """
-    if not leader or other.start < my_start:
+    if not leader or binds_leader(other.start, my_start):
         return other
     return Timeline.hold(other.start, other.q[0])
 
