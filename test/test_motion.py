@@ -13,8 +13,8 @@ from scara_collab.core import collision, motion
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik
 from scara_collab.core.motion import ArmMotion, CellMotion, Heard, Move, Refused
-from scara_collab.core.planning import Timeline
-from scara_collab.core.trajectory import joint_move
+from scara_collab.core.planning import schedule, Timeline
+from scara_collab.core.trajectory import joint_move, Trajectory
 from scara_collab.sim import CellSim
 
 LEFT, RIGHT = 'scara_left', 'scara_right'
@@ -199,6 +199,47 @@ def test_a_follower_move_starting_with_the_leaders_leaves_the_follower_on_its_ru
         closest = min(closest, float(collision.arm_distance(cell.leader, pose[LEFT],
                                                             cell.follower, pose[RIGHT])))
     assert closest >= cell.safety_margin
+
+
+def test_a_leader_planned_against_a_follower_moving_away_starts_after_it_and_is_admitted(
+        cell, poses):
+    """The planner applies the priority rule at the start it finds, as the door does.
+
+    The follower stands in the leader's way and has a move out of it waiting to start at the
+    leader's wanted start. At that start the move yields (the door sees the follower stand),
+    so the leader starts after it (a step on at the least), against the follower moving away;
+    the door admits that plan. Planned by the rule at the wanted start only, the leader
+    relied on a follower move that does not bind it there, and the door refused it.
+    """
+    start, now = motion.stamp_time(0.3), 0.0  # as both stamps say it
+    in_way = poses['right_in'] + 0.3 * (poses['right_out'] - poses['right_in'])
+    assert collision.arm_distance(cell.leader, poses['left_in'], cell.follower,
+                                  in_way) < cell.safety_margin
+    q = {LEFT: poses['left_out'], RIGHT: in_way}
+
+    def follower_moving_away():
+        cm = CellMotion(cell.arms, [poses['left_out'], in_way], cell.safety_margin, DT)
+        cm.take(RIGHT, _move('R', start, in_way, poses['right_out'], 1.0), now, q)
+        return cm
+    cm = follower_moving_away()
+    step = _move('L', 0.0, poses['left_out'], poses['left_in'], 1.5).timeline
+    traj = Trajectory(step.t, step.q, np.zeros_like(step.q), np.zeros_like(step.q),
+                      np.zeros_like(step.q))
+
+    def view(before):
+        return cm[RIGHT].motion(now, in_way, before=before)
+    plan = motion.schedule_for_door(cell.leader, traj, start, cell.follower, view,
+                                    cm[RIGHT].waiting.start, cell.safety_margin, True, 30.0, DT)
+    assert plan.start >= start + DT - 1e-12 and plan.start == motion.stamp_time(plan.start)
+    assert plan.delay == pytest.approx(plan.start - start)
+    cm.take(LEFT, Move('L', Timeline(plan.start + traj.t, traj.q)), now, q)  # admitted
+    # the rule applied at the wanted start only: the follower counted as moving away at once
+    naive = schedule(cell.leader, traj, start, cell.follower, view(None), cell.safety_margin,
+                     True, 30.0)
+    assert naive.start < plan.start
+    with pytest.raises(Refused, match='where it stands and its next move'):
+        follower_moving_away().take(LEFT, Move('L', Timeline(naive.start + traj.t, traj.q)),
+                                    now, q)
 
 
 def test_arms_stopped_too_close_may_only_be_parted(cell, poses):

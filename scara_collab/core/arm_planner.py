@@ -52,7 +52,7 @@ from numpy.typing import ArrayLike
 from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.model import ArmModel
-from scara_collab.core.motion import Heard, Lateness
+from scara_collab.core.motion import Heard, Lateness, schedule_for_door
 from scara_collab.core.planning import (MODES, offered_move, path_options, Plan, plan_path,
                                         schedule, starts_at)
 from scara_collab.core.trajectory import path_metrics, Trajectory
@@ -482,12 +482,14 @@ class ArmPlanner:
                 return
         now = self.clock()
         start = max(start, now + s.send_margin + late)  # planning took (sim) time too
-        # from now on (the past is past); the leader leaves out a follower move that waits to
-        # start at or after its own start (the priority rule: that one yields)
-        other = self.other_motion.motion(now, self.other_joints,
-                                         before=start if self.leader else None)
-        plan = schedule(self.arm, traj, start, self.other_arm, other, s.margin, self.leader,
-                        s.max_delay)
+        # from now on (the past is past), by the priority rule at the start found, as the
+        # door applies it (a follower move waiting to start at or after it yields)
+        heard = self.other_motion
+        plan = schedule_for_door(
+            self.arm, traj, start, self.other_arm,
+            lambda before: heard.motion(now, self.other_joints, before=before),
+            None if heard.arm.waiting is None else heard.arm.waiting.start, s.margin,
+            self.leader, s.max_delay, heard.dt)
         asked = asked._replace(wanted=wanted)
         if plan is None:
             self._wait(asked)

@@ -33,14 +33,15 @@ predicts the arms with the same rules.
 All times are absolute sim seconds.
 """
 from dataclasses import dataclass, replace
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from scara_collab.core import collision, safety
 from scara_collab.core.model import ArmModel
-from scara_collab.core.planning import binds_leader, Timeline
+from scara_collab.core.planning import binds_leader, Plan, schedule, Timeline
+from scara_collab.core.trajectory import Trajectory
 
 
 class Refused(ValueError):
@@ -80,6 +81,55 @@ class Move:
     def shifted(self, start: float) -> 'Move':
         """Return the same move starting at ``start``."""
         return replace(self, timeline=self.timeline.shifted(start - self.start))
+
+
+def stamp_time(t: float) -> float:
+    """Return the time a message stamp says for ``t`` s: what the bridge reads back.
+
+    A stamp (``builtin_interfaces/Time``) holds whole nanoseconds; read back as
+    ``sec + nanosec * 1e-9`` (``nodes.conversions.to_time``, ``to_sec``). A planner that
+    decides by a start must decide by this one, the start the door will see: a sim clock at
+    190.70000000000002 s plus 0.05 s is 190.75000000000003, but the stamp says 190.75, and the
+    priority rule tells those apart.
+
+    >>> 190.70000000000002 + 0.05, stamp_time(190.70000000000002 + 0.05)
+    (190.75000000000003, 190.75)
+    """
+    ns = int(round(float(t) * 1e9))
+    return ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
+
+
+def schedule_for_door(me: ArmModel, traj: Trajectory, start: float, other_arm: ArmModel,
+                      view: Callable[[Optional[float]], Timeline],
+                      waiting: Optional[float], margin: float, leader: bool,
+                      max_delay: float, dt: float) -> Optional[Plan]:
+    """Schedule ``traj`` from ``start`` against the other arm as the door will judge it.
+
+    :func:`scara_collab.core.planning.schedule`, with the priority rule applied at the start
+    it finds (:meth:`CellMotion.judge` applies it at the move's start): a follower move
+    waiting to start at ``waiting`` counts for a leader move that starts after it and not for
+    one that starts at or before it. If the start found without it is later than it, the
+    move starts after it (one step ``dt`` on at the least), against the follower's motion with
+    it. Starts are on the stamp's grid (:func:`stamp_time`).
+
+    :param view: ``view(before)``: the other arm's committed motion for a move starting at
+        ``before`` (``None``: all of it), e.g. :meth:`Heard.motion`.
+    :param waiting: the start of the other arm's move waiting for its start, or None.
+    :return: the plan (its ``delay`` from ``start``), or None if no start within
+        ``max_delay`` keeps ``margin``.
+    """
+    start = stamp_time(start)
+    plan = schedule(me, traj, start, other_arm, view(start if leader else None), margin, leader,
+                    max_delay)
+    if (leader and waiting is not None and not binds_leader(waiting, start)
+            and (plan is None or binds_leader(waiting, stamp_time(plan.start)))):
+        after = stamp_time(max(waiting + dt, start))
+        plan = None if after - start > max_delay else schedule(
+            me, traj, after, other_arm, view(after), margin, leader, max_delay - (after - start))
+    if plan is None:
+        return None
+    at = stamp_time(plan.start)
+    return Plan(traj, at, at - start)
 
 
 def start_time(stamp: float, duration: float, now: float, dt: float) -> float:
