@@ -74,8 +74,11 @@ from scara_collab.nodes.guarded import guarded
 TOPIC = 'sim/lockstep'  # relative: in the cell's namespace
 QOS = QoSProfile(depth=50)
 END_OF_TIME = Time(sec=2**31 - 1, nanosec=0)
-#: wall s a participant holds its answer for an awaited reply (a lost one: then it answers)
-REPLY_WAIT = 0.5
+#: wall s a participant holds its answer for an awaited reply (a lost one: then it answers).
+#: A slow reply looks the same: a plan of 20-50 ms CPU took over 0.5 s wall with 30 processes
+#: on 2 cores, and the run parted there; 2 s covers that, within the bridge's 5 s
+#: ``lockstep_timeout`` for the waiting node
+REPLY_WAIT = 2.0
 
 
 def _sec(stamp) -> float:
