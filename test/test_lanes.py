@@ -91,6 +91,22 @@ def test_a_move_at_its_end_with_the_tool_there_has_arrived_without_the_bridges_w
     assert event.kind == 'failed' and 'did not arrive' in event.why
 
 
+def test_an_accepted_move_arrives_at_its_end_whenever_the_bridges_finished_comes(cell):
+    """The bridge's ``finished`` says no more than that the accepted end has passed.
+
+    So the lane arrives at the first tick at or after that end, with the tool still short of
+    the target, whether ``finished`` came before that tick or comes a tick later (messages on
+    two topics, delivered in either order): the run's next step does not depend on it.
+    """
+    proto, lane = protocol(cell)
+    cmd = proto.move(lane, 'to_park', target(cell), 0.1, 0.0)
+    proto.on_planner(lane.robot, cmd.request, 'planned', 0.1, 1.0)
+    assert proto.tick(lane, 1.0) == ([], None)  # planned only: the bridge may start it late
+    proto.on_execution(lane.robot, cmd.request, 'accepted', 0.12, 1.02)
+    assert proto.tick(lane, 1.0) == ([], None)  # before its end
+    assert proto.tick(lane, 1.02)[1].kind == 'arrived'  # its end: no finished, not there
+
+
 def test_a_lost_answer_is_asked_again_with_the_same_request_then_fails(cell):
     """No planner answer: the same request again after ``answer_timeout``, then failed."""
     proto, lane = protocol(cell)

@@ -32,6 +32,8 @@ PHASES = ('idle', 'to_item', 'grasping', 'lift', 'via', 'to_bin', 'releasing', '
 MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
 #: planner / bridge answers about a move, in the order a move goes through them
 MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
+#: s: an accepted move's end as a status carries it (rounded) may be this far off the bridge's
+END_SLACK = 1e-6
 FAILED_MOVE = ('refused', 'superseded', 'held')
 #: what ends a lane's wait (:class:`LaneEvent`)
 EVENTS = ('arrived', 'gripped', 'failed')
@@ -423,7 +425,11 @@ class LaneProtocol:
             if track.state in FAILED_MOVE:
                 return out, LaneEvent('failed', lane,
                                       f'{robot} move {track.state}: {track.reason}')
-            if track.state == 'finished':
+            if track.state == 'finished' or (track.state == 'accepted'
+                                             and now >= track.end - END_SLACK):
+                # the bridge says finished at the first instant at or after the end of a move
+                # it accepted: decided at that instant, not when its word comes in (a tick
+                # later or not, by how the messages were delivered)
                 track.arrived = True
                 continue
             if (track.state == 'asked'
