@@ -41,7 +41,8 @@ def motion_graph(**bridge):
                for n in ('scara_left', 'scara_right')}
     g.distance = g.collect(Float64, '/collision_monitor/min_distance')
     g.estop = g.collect(Bool, '/emergency_stop', LATCHED)
-    assert g.spin_until(lambda: g.left.q is not None and g.right.q is not None
+    assert g.spin_until(lambda: g.left.planner.joints is not None
+                        and g.right.planner.joints is not None
                         and conv.now(g.left) > 0.1 and conv.now(g.right) > 0.1)
     return g
 
@@ -93,7 +94,7 @@ def test_collab_target_moves_both_arms_mirrored_and_straight(cell):
     line deviation stay within 1 mm, and the margin holds.
     """
     left, right = cell.bridge.cell.arms
-    p0 = fk(left, cell.left.q)
+    p0 = fk(left, cell.left.planner.joints)
     target = np.array([2.7, -0.7, 0.4])
     publish(cell, '/collab/target', target)
     assert cell.spin_until(lambda: all(cell.status[n] for n in cell.status))
@@ -136,7 +137,7 @@ def test_meeting_on_the_belt_centre_line_makes_the_right_arm_wait(cell):
                                        s.message for s in cell.status['scara_right']))
     run_until(cell, last_end(cell, 'scara_right') + 0.3)
     right = cell.bridge.cell.follower
-    np.testing.assert_allclose(fk(right, cell.right.q), [2.6, 0.03, 0.4], atol=1e-3)
+    np.testing.assert_allclose(fk(right, cell.right.planner.joints), [2.6, 0.03, 0.4], atol=1e-3)
     low = min(m.data for m in cell.distance)
     print(f'\ncentre-line meeting: right arm waited, then '
           f'{cell.status["scara_right"][-1].message}; min separation {low:.3f} m')
@@ -154,13 +155,13 @@ def test_meeting_on_the_belt_centre_line_makes_the_right_arm_wait(cell):
 ])
 def test_bad_targets_are_refused_and_nothing_moves(cell, xyz, frame, reason):
     """Each bad target is refused with its reason, and the arm does not move."""
-    q0 = cell.left.q.copy()
+    q0 = cell.left.planner.joints.copy()
     publish(cell, '/scara_left/target', xyz, frame)
     assert cell.spin_until(lambda: cell.status['scara_left'])
     last = cell.status['scara_left'][-1]
     assert last.level == DiagnosticStatus.ERROR and reason in last.message, last.message
     run_until(cell, cell.bridge.sim.time + 1.0)
-    np.testing.assert_allclose(cell.left.q, q0, atol=1e-4)
+    np.testing.assert_allclose(cell.left.planner.joints, q0, atol=1e-4)
     assert not cell.trajs['scara_left']
 
 
@@ -181,13 +182,14 @@ def test_base_frame_targets_and_mirroring_off(cell):
     assert res.success
     # off, it has nothing to measure: it does not take /joint_states (the cost of a message)
     assert not listens_to_states(cell.replicator) and cell.replicator.error is None
-    q_right = cell.right.q.copy()
+    q_right = cell.right.planner.joints.copy()
     publish(cell, '/collab/target', [0.8, 1.3, 0.2], frame='scara_left_base')
     assert cell.spin_until(lambda: cell.status['scara_left'])
     run_until(cell, last_end(cell, 'scara_left') + 0.3)
-    np.testing.assert_allclose(fk(left, cell.left.q), left.base_position + [0.8, 1.3, 0.2],
+    np.testing.assert_allclose(fk(left, cell.left.planner.joints),
+                               left.base_position + [0.8, 1.3, 0.2],
                                atol=1e-3)
-    np.testing.assert_allclose(cell.right.q, q_right, atol=1e-4)
+    np.testing.assert_allclose(cell.right.planner.joints, q_right, atol=1e-4)
     assert not cell.status['scara_right']
     assert cell.replicator.error is None  # no mirror error measured while off
     assert cell.call(SetBool, '/replication_manager/enable', SetBool.Request(data=True)).success
@@ -204,7 +206,7 @@ def _raw_crossing(g):
     publish(g, '/scara_left/target', [1.8, -0.2, 0.4])  # the left arm waits on the belt
     assert g.spin_until(lambda: g.status['scara_left'])
     run_until(g, last_end(g, 'scara_left') + 0.2)
-    q0 = g.right.q.copy()
+    q0 = g.right.planner.joints.copy()
     return q0, joint_move(right, q0, ik(right, [1.8, -0.2, 0.4], q_current=q0).unwrap())
 
 
@@ -275,7 +277,7 @@ def test_the_monitor_stops_a_crossing_the_door_let_through_and_resumes(open_door
     estop = g.probe.create_publisher(Bool, '/emergency_stop', LATCHED)
     estop.publish(Bool(data=True))
     assert g.spin_until(lambda: g.bridge.sim.estop and g.monitor.stops.kind == 'emergency')
-    q = g.right.q.copy()
+    q = g.right.planner.joints.copy()
     from scara_collab.core.trajectory import joint_move
     closer = joint_move(right, q, q + 0.3 * (through.q[-1] - q))  # towards the left arm
     raw.publish(conv.trajectory_msg(right.joint_names, closer.t, closer.q, frame_id='raw/2'))
@@ -300,19 +302,19 @@ def test_a_nan_state_then_a_target_leaves_the_planner_planning(cell):
     left = cell.bridge.cell.leader
     pub = cell.probe.create_publisher(JointState, '/joint_states', 10)
     names = [n for arm in cell.bridge.cell.arms for n in arm.joint_names]
-    q_before = cell.left.q.copy()
+    q_before = cell.left.planner.joints.copy()
     stamp = cell.bridge.sim.time + 0.005  # in order and on the clock: only the values are bad
     pub.publish(conv.joint_state(stamp, names, [float('nan')] * 6, [0.0] * 6, [0.0] * 6))
     assert cell.spin_until(lambda: cell.monitor.stopped)
     assert 'unusable joint state' in cell.monitor.stops.reason
-    assert np.all(np.isfinite(cell.left.q))
-    np.testing.assert_allclose(cell.left.q, q_before, atol=1e-3)
+    assert np.all(np.isfinite(cell.left.planner.joints))
+    np.testing.assert_allclose(cell.left.planner.joints, q_before, atol=1e-3)
     publish(cell, '/scara_left/target', [2.4, -0.6, 0.5])
     assert cell.spin_until(lambda: cell.status['scara_left'])
     st = proto.PlannerStatus.from_msg(cell.status['scara_left'][-1])
     assert st.state in ('planned', 'refused'), st
     assert 'nan' not in st.reason.lower()
-    assert np.all(np.isfinite(fk(left, cell.left.q)))
+    assert np.all(np.isfinite(fk(left, cell.left.planner.joints)))
 
 
 def offer(g, robot, traj, request_s):
@@ -340,7 +342,7 @@ def test_an_offered_plan_is_scheduled_as_it_is_not_planned_again(cell):
     from scara_collab.core.planning import plan_path
     left = cell.bridge.cell.leader
     target = np.array([3.3, -0.6, 0.45])
-    traj = plan_path(left, cell.left.q, target, mode='line_or_joint')
+    traj = plan_path(left, cell.left.planner.joints, target, mode='line_or_joint')
     request = conv.now(cell.left) + 0.3
     pub, msg = offer(cell, 'scara_left', traj, request)
     assert cell.spin_until(lambda: cell.trajs['scara_left'])
@@ -352,7 +354,7 @@ def test_an_offered_plan_is_scheduled_as_it_is_not_planned_again(cell):
     assert st.state == 'planned' and st.request == proto.stamp_ns(msg.header.stamp)
     assert sent.header.frame_id == st.move and abs(st.start - request) < 1e-6
     run_until(cell, st.end + 0.3)
-    np.testing.assert_allclose(fk(left, cell.left.q), target, atol=1e-3)
+    np.testing.assert_allclose(fk(left, cell.left.planner.joints), target, atol=1e-3)
     n_trajs, n_status = len(cell.trajs['scara_left']), len(cell.status['scara_left'])
     pub.publish(msg)  # re-sent (a lost answer): the same answer, nothing planned or moved
     assert cell.spin_until(lambda: len(cell.status['scara_left']) > n_status)
@@ -366,12 +368,13 @@ def test_an_offer_from_elsewhere_is_planned_again_to_its_end(cell):
     from scara_collab.core.planning import plan_path
     left = cell.bridge.cell.leader
     target = np.array([3.3, -0.6, 0.45])
-    elsewhere = cell.left.q + [0.05, -0.05, 0.0]
+    elsewhere = cell.left.planner.joints + [0.05, -0.05, 0.0]
     traj = plan_path(left, elsewhere, target, mode='line_or_joint')
     offer(cell, 'scara_left', traj, conv.now(cell.left) + 0.3)
     assert cell.spin_until(lambda: cell.trajs['scara_left'])
     _, _, q, _, _ = conv.trajectory_arrays(cell.trajs['scara_left'][-1], left.joint_names)
-    np.testing.assert_allclose(q[0], cell.left.q, atol=2e-3)  # from the arm, not the offer
+    # from the arm, not the offer
+    np.testing.assert_allclose(q[0], cell.left.planner.joints, atol=2e-3)
     np.testing.assert_allclose(fk(left, q[-1]), target, atol=1e-9)
     assert statuses(cell, 'scara_left')[-1].state == 'planned'
 
@@ -403,7 +406,7 @@ def test_a_malformed_offer_is_refused_and_nothing_moves(cell, spoil, reason):
     """An offered plan that is not one is refused with the reason; the arm stays."""
     from scara_collab.core.planning import plan_path
     left = cell.bridge.cell.leader
-    q0 = cell.left.q.copy()
+    q0 = cell.left.planner.joints.copy()
     traj = plan_path(left, q0, [3.3, -0.6, 0.45], mode='line_or_joint')
     msg = conv.trajectory_msg(left.joint_names, traj.t, traj.q, traj.qd, traj.qdd)
     msg.header.stamp = conv.time_from_ns(int(round((conv.now(cell.left) + 0.3) * 1e9)))
@@ -415,7 +418,7 @@ def test_a_malformed_offer_is_refused_and_nothing_moves(cell, spoil, reason):
     st = statuses(cell, 'scara_left')[-1]
     assert st.state == 'refused' and 'offered trajectory' in st.reason and reason in st.reason
     run_until(cell, cell.bridge.sim.time + 0.5)
-    np.testing.assert_allclose(cell.left.q, q0, atol=1e-4)
+    np.testing.assert_allclose(cell.left.planner.joints, q0, atol=1e-4)
     assert not cell.trajs['scara_left']
 
 
@@ -429,7 +432,7 @@ def test_a_mirrored_offer_reaches_both_planners_mirrored_joint_by_joint(cell):
     from scara_collab.core.planning import plan_path
     left, right = cell.bridge.cell.arms
     target = np.array([2.7, -0.7, 0.4])
-    traj = plan_path(left, cell.left.q, target, mode='line_or_joint')
+    traj = plan_path(left, cell.left.planner.joints, target, mode='line_or_joint')
     pub = cell.probe.create_publisher(JointTrajectory, '/collab/target_trajectory', 10)
     assert cell.spin_until(lambda: pub.get_subscription_count() > 0)
     msg = conv.trajectory_msg(left.joint_names, traj.t, traj.q, traj.qd, traj.qdd)
@@ -443,5 +446,6 @@ def test_a_mirrored_offer_reaches_both_planners_mirrored_joint_by_joint(cell):
     stamps = {proto.stamp_ns(cell.trajs[n][-1].header.stamp) for n in cell.trajs}
     assert stamps == {proto.stamp_ns(msg.header.stamp)}
     run_until(cell, max(last_end(cell, n) for n in cell.status) + 0.3)
-    np.testing.assert_allclose(fk(right, cell.right.q), mirror_point(left, right, target),
+    np.testing.assert_allclose(fk(right, cell.right.planner.joints),
+                               mirror_point(left, right, target),
                                atol=1e-3)

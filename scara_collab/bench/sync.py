@@ -92,7 +92,8 @@ def measure(smoke: bool, scratch: Path) -> dict:
             raise RuntimeError(f'mirrored moves: timed out waiting for {what}')
 
     try:
-        spin_until(lambda: left_pl.q is not None and right_pl.q is not None
+        spin_until(lambda: left_pl.planner.joints is not None
+                   and right_pl.planner.joints is not None
                    and conv.now(left_pl) > 0.1, 'the planners to see the arms')
         pub = probe.create_publisher(PointStamped, 'collab/target', 10)
         spin_until(lambda: pub.get_subscription_count() > 0, 'the replication manager')
