@@ -179,6 +179,27 @@ def test_summary_plots_and_counts(make_recorder, cell):
     assert 'sorted 1' in text and 'min arm sep.' in text and str(rec.directory) in text
 
 
+def test_events_of_the_window_heard_after_it_closed_still_count(make_recorder, cell):
+    """Events stamped within the window count after it is frozen; later ones do not.
+
+    The state of the end can come before the window's last events (two topics, a starved
+    launcher).
+    """
+    rec = make_recorder('collaborative')
+    q = np.array([0.0, 1.5708, 0.0])
+    rec.start_job(0.0)
+    for k in range(201):
+        feed(rec, state_msg(cell, 0.01 * k, q, mirror_joints(q)))
+    rec.on_event(event_msg('spawned', 0.5, 1))
+    rec.freeze(2.0)
+    rec.on_event(event_msg('sorted', 1.98, 1, robot='scara_left'))  # in flight at the end
+    rec.on_event(event_msg('spawned', 2.1, 2))  # after the window
+    summary = rec.finish('duration reached', False)
+    assert (summary['spawned'], summary['sorted']) == (1, 1)
+    _, events = read_csv(rec.directory / 'events.csv')
+    assert [e[1] for e in events] == ['spawned', 'sorted']
+
+
 def test_each_figure_comes_from_its_one_source(make_recorder, cell):
     """Counts come from the events, give-ups from the job, the separation from the monitor."""
     rec = make_recorder('single')

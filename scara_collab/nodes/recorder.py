@@ -138,10 +138,17 @@ class RunRecorder(Node, RunRecord):
             return None
 
     def on_event(self, msg: DiagnosticStatus) -> None:
-        """Record a conveyor event (:class:`~scara_collab.nodes.protocol.ItemEvent`)."""
-        ev = self._read(proto.ItemEvent, msg, 'an item event') if self.recording else None
-        if ev is not None:
-            t = ev.time if math.isfinite(ev.time) else self.sim_time
+        """Record a conveyor event (:class:`~scara_collab.nodes.protocol.ItemEvent`).
+
+        Once the window is closed (:meth:`freeze`), an event stamped within it still counts:
+        on a starved machine the state of the end comes in before the last events, on
+        another topic, and the run would undercount what it did.
+        """
+        ev = self._read(proto.ItemEvent, msg, 'an item event') if not self.log.closed else None
+        if ev is None:
+            return
+        t = ev.time if math.isfinite(ev.time) else self.sim_time
+        if self.recording or (self.end is not None and t <= self.end + 1e-9):
             self.log.add_event(t, ev.kind, ev.item, ev.cls, ev.robot, ev.cause)
 
     def on_stats(self, msg: DiagnosticStatus) -> None:

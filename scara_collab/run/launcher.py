@@ -473,6 +473,7 @@ class Launcher:
             sim = self.recorder.sim_time
             if (self.recorder.log.t_last or 0.0) >= end:  # recorded up to the end
                 self.recorder.freeze(end)
+                self.ros.pause(0.3)  # the events of the window still in flight
                 return
             if sim > last_sim:
                 last_sim, last_change = sim, now
