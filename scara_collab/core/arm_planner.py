@@ -488,7 +488,7 @@ class ArmPlanner:
         plan = schedule_for_door(
             self.arm, traj, start, self.other_arm,
             lambda before: heard.motion(now, self.other_joints, before=before),
-            None if heard.arm.waiting is None else heard.arm.waiting.start, s.margin,
+            heard.waiting_start, s.margin,
             self.leader, s.max_delay, heard.dt)
         asked = asked._replace(wanted=wanted)
         if plan is None:

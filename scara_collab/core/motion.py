@@ -512,6 +512,11 @@ class Heard:
             return True
         return False
 
+    @property
+    def waiting_start(self) -> Optional[float]:
+        """Return the start of the arm's move waiting for its start, as heard; None: none."""
+        return None if self.arm.waiting is None else self.arm.waiting.start
+
     def motion(self, now: float, q: Optional[ArrayLike] = None,
                before: Optional[float] = None) -> Timeline:
         """Return the arm's commitments from ``now`` (:meth:`ArmMotion.motion`)."""

@@ -4,7 +4,7 @@ Also the node clock in seconds (:func:`now`). The statuses the nodes exchange
 (DiagnosticStatus key-values) are :mod:`scara_collab.nodes.protocol`'s, not this module's.
 """
 import math
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, PointStamped, Pose, PoseStamped, TransformStamped
@@ -15,6 +15,7 @@ from std_msgs.msg import ColorRGBA, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
 
+from scara_collab.core.arm_planner import HoldArm, SendMove
 from scara_collab.core.frames import quaternion
 from scara_collab.core.palette import class_colour
 from scara_collab.nodes import protocol
@@ -177,19 +178,19 @@ def trajectory_msg(names: Sequence[str], t: np.ndarray, q: np.ndarray,
     return msg
 
 
-def move_msg(robot: str, joint_names: Sequence[str], cmd) -> JointTrajectory:
+def move_msg(robot: str, joint_names: Sequence[str],
+             cmd: Union[SendMove, HoldArm]) -> JointTrajectory:
     """Return the ``JointTrajectory`` ``robot``'s planner sends for a ``SendMove`` or ``HoldArm``.
 
     A move (:func:`~scara_collab.nodes.protocol.move_id`) from its start, or the hold
     (:func:`~scara_collab.nodes.protocol.hold_id`) as one point at once (stamp 0); the
     commands are :mod:`scara_collab.core.arm_planner`'s.
     """
-    plan = getattr(cmd, 'plan', None)
-    if plan is None:  # a hold
+    if isinstance(cmd, HoldArm):
         return trajectory_msg(joint_names, np.array([0.0]), cmd.q.reshape(1, 3),
                               frame_id=protocol.hold_id(robot))
-    t = plan.traj
-    return trajectory_msg(joint_names, t.t, t.q, t.qd, t.qdd, start=plan.start,
+    t = cmd.plan.traj
+    return trajectory_msg(joint_names, t.t, t.q, t.qd, t.qdd, start=cmd.plan.start,
                           frame_id=protocol.move_id(robot, cmd.request))
 
 
