@@ -246,6 +246,13 @@ def test_a_grasped_item_is_lifted_only_when_it_would_sweep_the_belt(cell):
         assert nxt.purpose == expected, (neighbours, nxt.purpose)
         if expected == 'lift':
             assert nxt.target[2] == pytest.approx(job.settings.carry_z)
+            # lifted, it is carried at that height all the way to the bin: a line down to the
+            # drop point would bring it back to the tops of the items it was lifted over
+            arrive(cell, job, nxt, t + 0.5)
+            carry = moves(job.tick(t + 0.52))[0]
+            assert carry.purpose == 'to_bin' and carry.target[2] >= job.settings.carry_z
+            assert np.min(carry.plan.p[:, 2]) >= job.settings.carry_z - 1e-6
+            assert np.allclose(carry.target[:2], drop[:2])
 
 
 def test_the_sweep_check_covers_a_start_as_late_as_measured(cell):

@@ -75,9 +75,16 @@ class JobMoves:
         return True
 
     def to_bin(self, lane: Lane, now: float) -> None:
-        """Carry the item ``lane`` holds to the bin of its class."""
+        """Carry the item ``lane`` holds to the bin of its class.
+
+        Lifted clear of the items on the belt, it stays at least that high all the way: a line
+        from the lift down to the drop point would bring the held item back down to the tops
+        of the items it was lifted over, wherever it crosses the belt on its way.
+        """
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls,
                                   self.settings.drop_clearance)
+        if lane.phase == 'lift':
+            drop[2] = max(drop[2], self.settings.carry_z)
         self.move_safely(lane, 'to_bin', drop, self.asap_start(lane, now), now)
 
     def park(self, lane: Lane, now: float) -> None:
