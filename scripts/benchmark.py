@@ -1,18 +1,9 @@
 #!/usr/bin/env python3
 """Measure every result the design documents claim, on this machine; write docs/RESULTS.md.
 
-Sections (``--only KEY``, repeatable or a comma list; default: the seven numbered ones):
-
-- the numbered sections of ``RESULTS.md``: paths, solvers, payload, sync, singularity,
-  foresight, throughput (about 20 minutes on 2 cores; ``--smoke``: seconds, tiny sizes);
-- through the launcher, each run in its own ROS domain: ``protocol`` (20-25 min; ``--seeds
-  --runs --hogs``), ``faults`` (``--cases``), ``soak`` (``--duration --warm``), blocks of
-  ``RESULTS.md``; ``realtime`` (``--duration --seeds --conditions --capacity-duration
-  --one-process``) writes ``REALTIME.md``; ``line`` (``--cells --duration --scenarios``)
-  writes ``LINE.md``.
-
-``--out``: the folder (default ``docs/``, a temporary one with ``--smoke``); a ``.md`` path
-names the real-time page. Exit status 1 if a section failed or missed its targets.
+Default: the seven numbered sections of ``RESULTS.md``; ``--only`` also runs those through the
+launcher (``REALTIME.md``, ``LINE.md``, blocks of ``RESULTS.md``): docs/benchmarks.md. Exit
+status 1 if a section failed or missed its targets.
 """
 import argparse
 import os

@@ -10,7 +10,7 @@ import pytest
 from scara_collab.bench import report
 from scara_collab.bench.claims import CLAIMS
 from scara_collab.bench.report import SECTIONS, SUMMARY_ORDER
-from scara_collab.bench.util import fmt_seconds, spread, table
+from scara_collab.bench.util import fmt_seconds, spread, table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = ROOT.parent / 'shared' / 'seeds'
@@ -120,8 +120,8 @@ def test_a_run_replaces_only_its_blocks_of_the_page(tmp_path, smoke):
     assert again.count('<!-- benchmark:paths:begin -->') == 1
     assert '| IK latency |' in sections['Summary'] and 'hand-written' in sections['Notes']
     written = tmp_path / 'RESULTS.md'
-    report.write_block(written, 'soak', 'Soak', 'first')
-    report.write_block(written, 'soak', 'Soak', 'second')
+    write_block(written, 'soak', 'Soak', 'first')
+    write_block(written, 'soak', 'Soak', 'second')
     assert written.read_text() == ('# Results, measured\n\n## Soak\n\n<!-- soak:begin -->\n'
                                    'second\n<!-- soak:end -->\n')
 

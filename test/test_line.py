@@ -303,7 +303,7 @@ def test_the_line_benchmark_writes_each_scenario_into_its_own_block(tmp_path):
     1's log, the first sort after the takeover in cell 2's.
     """
     from scara_collab.bench import line as bench
-    from scara_collab.bench.report import write_block
+    from scara_collab.bench.util import write_block
     page = tmp_path / 'LINE.md'
     page.write_text('# A line of cells\n\nkept by hand\n')
     rated = {'cells': 2, 'duration': 600.0, 'feed_interval': 0.9, 'missed': 0, 'dropped': 1,

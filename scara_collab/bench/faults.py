@@ -1,8 +1,7 @@
 """The fault matrix: bad input, lost answers, hung and killed nodes against the launcher.
 
-Each case starts the launcher (one process per node, its own ROS domain), waits for the job,
-injects one fault from a probe node in this process (or a launcher flag, or a signal), waits
-for the run to end and judges it from the run's own files (``summary.json``, the node logs).
+Each case starts the launcher in its own ROS domain, waits for the job, injects one fault (a
+probe node in this process, a launcher flag or a signal) and judges the run from its files.
 """
 from contextlib import suppress
 from dataclasses import dataclass
@@ -19,9 +18,8 @@ import numpy as np
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from scara_collab.bench.launched import Launch, stamp, stops, Summary, use_domain
+from scara_collab.bench.launched import Launch, publish, stamp, stops, Summary, use_domain
 from scara_collab.bench.probe import Probe
-from scara_collab.bench.report import write_block
 from scara_collab.bench.util import Log, table
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import load_cell
@@ -33,19 +31,15 @@ from scara_collab.nodes import conversions as conv
 STATE_READERS = 5
 
 
-# --- injections -------------------------------------------------------------------------------
-def _names() -> List[str]:
-    return [n for arm in load_cell().arms for n in arm.joint_names]
-
-
 def nan_state_then_target(run: Launch) -> None:
     """Publish a NaN joint state (on sim time) five times, then a target for the left arm."""
+    names = [n for arm in load_cell().arms for n in arm.joint_names]
     with Probe() as probe:
         pub = probe.publisher(JointState, 'joint_states', STATE_READERS)
         probe.wait_state()
         for _ in range(5):
             probe.spin(0.1)  # take the newest state, stamp a little ahead of it: only not finite
-            pub.publish(conv.joint_state(conv.to_sec(probe.state.header.stamp) + 0.1, _names(),
+            pub.publish(conv.joint_state(conv.to_sec(probe.state.header.stamp) + 0.1, names,
                                          [float('nan')] * 6, [0.0] * 6, [0.0] * 6))
             probe.spin(0.05)
         target = probe.publisher(PointStamped, 'scara_left/target')
@@ -55,10 +49,11 @@ def nan_state_then_target(run: Launch) -> None:
 
 def wall_clock_states(run: Launch) -> None:
     """Publish states stamped with wall time (1.79e9 s) for 3 s."""
+    names = [n for arm in load_cell().arms for n in arm.joint_names]
     with Probe() as probe:
         pub = probe.publisher(JointState, 'joint_states', STATE_READERS)
         for _ in range(60):
-            pub.publish(conv.joint_state(1.79e9, _names(), [0.0] * 6, [0.0] * 6, [0.0] * 6))
+            pub.publish(conv.joint_state(1.79e9, names, [0.0] * 6, [0.0] * 6, [0.0] * 6))
             probe.spin(0.05)
 
 
@@ -121,13 +116,13 @@ def sigkill_planner(run: Launch) -> None:
     os.kill(run.pid('left_planner'), signal.SIGKILL)
 
 
-# --- judges: (passed, what was observed) from the summary and the run folder ------------------
 def _died(s: Summary) -> List[str]:
     """Return the nodes that did not end with the run (died)."""
     return [n for n, v in (s.get('nodes') or {}).items() if v.get('exit_code') not in (0, None)]
 
 
 def _sep(s: Summary) -> float:
+    """Return the run's minimum separation (NaN if none)."""
     return float('nan') if s.get('min_separation_m') is None else float(s['min_separation_m'])
 
 
@@ -237,7 +232,7 @@ CASES = (
 def run_case(case: Case, out: Path, domain: int, log: Log) -> Dict:
     """Run one case in ROS domain ``domain``; return its row: case, expected, observed, pass.
 
-    An injection returns None, or the pid of a process it stopped: SIGCONT after the run.
+    An injection returns None or the pid of a process it stopped (SIGCONT after the run).
     """
     use_domain(domain)
     run, frozen = Launch(case.mode, case.duration, out, 1.0, case.flags, quiet=False), None
@@ -263,11 +258,9 @@ def run_case(case: Case, out: Path, domain: int, log: Log) -> Dict:
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the fault cases, print the table and write it as the ``faults`` block of ``page``.
+    """Run the fault cases into the ``faults`` block of ``page``; True if every case passed.
 
-    ``args.cases``: 1-based case numbers (default all; the block is written for all only).
-
-    :return: True if every case passed.
+    ``--cases``: 1-based case numbers (default all; the block is written for all only).
     """
     out = Path(tempfile.mkdtemp(prefix='scara_faults_'))
     start = time.monotonic()
@@ -278,8 +271,5 @@ def section(args, page: Path, command: str, log: Log) -> bool:
                  'collaborative job unless the case says no job), the fault injected once the '
                  "job runs, judged from the run's `summary.json` and node logs. "
                  f'{passed} of {len(rows)} cases pass.') + '\n\n' + table(rows)
-    print(text)
-    if not args.cases:
-        write_block(page, 'faults', 'Faults against the launcher', text)
-    log(f'run folders in {out}')
+    publish(text, None if args.cases else page, 'faults', 'Faults against the launcher', log, out)
     return passed == len(rows)

@@ -80,11 +80,8 @@ def _execute(sim: CellSim, cell: CellModel, moves) -> float:
 def measure(smoke: bool, scratch: Path) -> dict:
     """Draw, schedule and (the first conflicts) execute 200 crossing pairs (seed 1; smoke: 6).
 
-    :return: ``{'pairs': [...], 'margin', 'lead', 'n_pairs'}``; per pair: ``conflict``,
-        ``foresight_s`` and ``impact_s`` (when the margin would break and the capsules touch
-        if both started together), ``unresolved_min_m``, ``outcome`` (``'clear'``,
-        ``'delayed'``, ``'waits'``: no delay keeps the margin), ``delay_s``, ``decision_s``
-        (wall), ``planned_min_m``, ``executed_min_m`` (or None).
+    Per pair: when the margin would break and the capsules touch if both started together,
+    the outcome (``'waits'``: no delay keeps the margin), the delay and the separations.
     """
     cell = load_cell()
     left, right = cell.leader, cell.follower

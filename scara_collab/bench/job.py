@@ -1,16 +1,13 @@
-"""The sorting job, measured in one process (:func:`run_job`).
+"""The sorting job measured in one process (:func:`run_job`), free of separate processes' latency.
 
-:func:`run_job` builds the whole graph in ONE process on one executor, unthrottled: sim time
-cannot run ahead of the nodes while they compute, so the figures are the job's own, free of
-the latency separate processes add. The bridge's lockstep gate stays on: even in one process
-messages travel through DDS asynchronously, and without the gate a loaded machine lets the
-bridge step on before they arrive. Through the launcher: :mod:`scara_collab.bench.launched`.
+The whole graph runs on one executor, unthrottled, so sim time cannot run ahead of the nodes.
+The bridge's lockstep gate stays on: even in one process messages travel through DDS
+asynchronously, and a loaded machine would let the bridge step on before they arrive.
 """
 import time
 from typing import Callable, Dict, Optional, Sequence
 
 from scara_collab import graph
-from scara_collab.bench.util import Log
 from scara_collab.core.config import load_config
 from scara_collab.nodes.runner import InProcess
 
@@ -21,22 +18,13 @@ def default_feed() -> float:
 
 
 def run_job(mode: str, duration: float, feed: Optional[float] = None,
-            seed: Optional[int] = None, log: Optional[Log] = None,
-            report_every: float = 10.0, faults: Sequence[str] = (),
+            seed: Optional[int] = None, faults: Sequence[str] = (),
             during: Optional[Callable[[InProcess, Dict[str, object], float], None]] = None
             ) -> Dict[str, object]:
-    """Run one mode for ``duration`` sim seconds in one process; return the job's figures.
+    """Run ``mode`` for ``duration`` sim s in one process; return the job's figures.
 
-    :param mode: ``'single'``, ``'collaborative'`` or ``'mirrored'``.
-    :param feed: sim seconds between items (default: ``simulation.yaml``).
-    :param seed: item feed seed (default ``simulation.yaml``).
-    :param report_every: sim seconds between progress lines.
-    :param faults: fault injection entries for every node (:mod:`scara_collab.nodes.faults`).
-    :param during: called as ``during(g, nodes, sim_time)`` after every turn of the executor
-        (``g`` the :class:`~scara_collab.nodes.runner.InProcess` graph, ``nodes`` by name).
-    :return: counts, ``items_per_minute``, ``give_ups``, ``retries``, ``min_separation_m``,
-        stops, the mirror error (mirrored mode), ``wall_seconds``, ``sim_seconds``,
-        ``real_time_factor``, ``feed_interval``, ``seed``.
+    ``feed``, ``seed``: default ``simulation.yaml``'s; ``faults``: fault entries for every
+    node; ``during(g, nodes, sim_time)`` is called after every turn of the executor.
     """
     feed = default_feed() if feed is None else float(feed)
     seed = int(load_config('simulation')['item_seed'] if seed is None else seed)
@@ -52,18 +40,11 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
                                             cli_args=graph.ros_args(spec.configs, own)))
     bridge, job = nodes['pybullet_bridge'], nodes['automation_manager']
     wall = time.monotonic()
-    next_report = report_every
     try:
         while bridge.sim.time < duration:
             g.spin_once(timeout_sec=0.01)
             if during is not None:
                 during(g, nodes, bridge.sim.time)
-            if log and bridge.sim.time >= next_report:
-                c = job.job.counts
-                log(f'{mode} (seed {seed}): {bridge.sim.time:.0f}/{duration:.0f} sim s, sorted '
-                    f'{c.get("sorted", 0)}, missed {c.get("missed", 0)}, '
-                    f'{time.monotonic() - wall:.0f} s wall')
-                next_report += report_every
         stats, took = job.stats(), time.monotonic() - wall
         mirror = nodes['replication_manager'].status()
         guard = nodes['collision_monitor'].status()

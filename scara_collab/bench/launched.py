@@ -1,9 +1,8 @@
-"""The sections run through the launcher: the launcher as a subprocess, and a run's row.
+"""The launcher as a subprocess, for every section that runs it, and a run's row and blocks.
 
-:class:`Launch` starts ``scara_collab.run.launcher`` (one process per node) and keeps its
-output lines; :func:`launch` runs it to the end in a ROS domain of its own, beside CPU hogs if
-asked, and returns its :func:`row`: the figures of its ``summary.json``. :func:`cells` and
-:func:`stamp` present rows as the launcher sections' blocks.
+:class:`Launch` starts ``scara_collab.run.launcher`` and keeps its output lines; :func:`launch`
+runs it to the end in a ROS domain of its own, beside CPU hogs if asked, and returns its
+:func:`row`; :func:`cells`, :func:`stamp` and :func:`publish` make the sections' blocks.
 """
 from contextlib import contextmanager
 import json
@@ -18,7 +17,7 @@ import threading
 import time
 from typing import Dict, Iterator, List, Optional, Sequence
 
-from scara_collab.bench.util import Log, num, table
+from scara_collab.bench.util import Log, num, table, write_block
 
 Summary = Dict[str, object]
 HOG = 'import time\nend = time.monotonic() + {limit}\nwhile time.monotonic() < end: pass\n'
@@ -41,24 +40,17 @@ def use_domain(k: int) -> None:
     os.environ.update(ROS_DOMAIN_ID=str(140 + k % 90), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
 
 
-def launcher_cmd(mode: str, duration: float, output: Path, rtf: float,
-                 extra: Sequence[str] = (), quiet: bool = True) -> List[str]:
-    """Return the command line of the launcher (no plots; ``--quiet`` if ``quiet``)."""
-    return [sys.executable, '-c', 'import sys; from scara_collab.run.launcher import main; '
-            'sys.exit(main(sys.argv[1:]))', '--mode', mode, '--duration', f'{duration:g}',
-            '--rtf', f'{rtf:g}', '--output', str(output), '--no-plots', *extra,
-            *(['--quiet'] if quiet else [])]
-
-
 class Launch:
-    """The launcher as a subprocess, its output lines collected in a thread."""
+    """The launcher as a subprocess (no plots), its output lines collected in a thread."""
 
     def __init__(self, mode: str, duration: float, out: Path, rtf: float = 0.0,
-                 flags: Sequence[str] = (), quiet: bool = True):
+                 flags: Sequence[str] = (), quiet: bool = True, env: Dict[str, str] = None):
         """Start the launcher for ``duration`` sim s into the run folder ``out``."""
         self.out, self.start = Path(out), time.monotonic()
-        self.proc = subprocess.Popen(launcher_cmd(mode, duration, out, rtf, flags, quiet),
-                                     env=dict(os.environ, PYTHONUNBUFFERED='1'),
+        cmd = [sys.executable, '-m', 'scara_collab.run.launcher', '--mode', mode, '--duration',
+               f'{duration:g}', '--rtf', f'{rtf:g}', '--output', str(out), '--no-plots',
+               *flags, *(['--quiet'] if quiet else [])]
+        self.proc = subprocess.Popen(cmd, env=dict(env or os.environ, PYTHONUNBUFFERED='1'),
                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.lines: List[str] = []
         self._queue: 'queue.Queue[str]' = queue.Queue()
@@ -90,11 +82,10 @@ class Launch:
         path = self.out / 'logs' / f'{node}.log'
         return path.read_text(errors='replace') if path.is_file() else ''
 
-    def finish(self, timeout: float) -> Summary:
+    def finish(self, timeout: Optional[float]) -> Summary:
         """Wait for the end (SIGINT, then SIGKILL, after ``timeout`` wall s); return the summary.
 
-        :return: ``summary.json`` plus ``exit_code`` and ``launcher_wall_seconds``, and an
-            ``error`` if the run overran or wrote no summary.
+        ``summary.json`` plus ``exit_code``, ``launcher_wall_seconds`` and maybe an ``error``.
         """
         error = None
         for stop in (None, signal.SIGINT, signal.SIGKILL):
@@ -119,11 +110,7 @@ class Launch:
 def run_launcher(mode: str, duration: float, output: Path, rtf: float = 0.0,
                  seed: Optional[int] = None, timeout: float = 600.0,
                  extra: Sequence[str] = ()) -> Summary:
-    """Run the launcher to the end; return :meth:`Launch.finish`'s summary.
-
-    :param rtf: the bridge's real-time factor (0 = as fast as the machine allows).
-    :param extra: more launcher flags (e.g. ``--feed-interval 1.0``, ``--fault ...``).
-    """
+    """Run the launcher to the end (``rtf`` 0: unthrottled); return its summary."""
     flags = list(extra) + (['--seed', str(seed)] if seed is not None else [])
     return Launch(mode, duration, output, rtf, flags).finish(timeout)
 
@@ -142,10 +129,8 @@ KEYS = ('exit_code', 'exit_reason', 'error', 'sorted', 'missed', 'dropped', 'wro
 def row(summary: Summary) -> Dict[str, object]:
     """Return one run's figures: :data:`KEYS`, the job's give-ups, and its stops.
 
-    ``own_moves``: stops caused by the job's own moves (``predicted`` in the cause);
-    ``lost_s``: sim s the stops cost; ``causes``: their causes, each cut to 60 characters;
-    ``cpu_s``: the graph's CPU s per sim s (every process); ``overspeed``: episodes of a joint
-    faster than its limit allows (the arm left its trajectory).
+    ``own_moves``: stops the job's own moves caused (``predicted``); ``lost_s``: sim s the
+    stops cost; ``cpu_s``: CPU s per sim s (every process); ``overspeed``: a joint too fast.
     """
     job = summary.get('job') or {}
     cpu = summary.get('cpu_per_sim_s') or {}
@@ -164,9 +149,9 @@ def row(summary: Summary) -> Dict[str, object]:
 
 def launch(what: str, domain: int, mode: str, duration: float, out: Path, log: Log,
            hogs: int = 0, **kwargs) -> Dict[str, object]:
-    """Run the launcher in ``domain`` (beside ``hogs`` CPU hogs); log and return its :func:`row`.
+    """Run the launcher in ``domain`` beside ``hogs`` CPU hogs; log and return its :func:`row`.
 
-    :param kwargs: :func:`run_launcher`'s; ``timeout`` defaults to 3 × duration + 300 s.
+    ``kwargs``: :func:`run_launcher`'s; ``timeout`` defaults to 3 × duration + 300 s.
     """
     use_domain(domain)
     kwargs.setdefault('timeout', duration * 3 + 300)
@@ -193,3 +178,12 @@ def stamp(command: str, start: float, what: str) -> str:
     """Return a block's first line: the command, the date, the wall minutes since ``start``."""
     return (f'*Generated by `{command}` on {time.strftime("%Y-%m-%d %H:%M %Z")} '
             f'({(time.monotonic() - start) / 60:.1f} min wall): {what}*')
+
+
+def publish(text: str, page: Optional[Path], name: str, heading: str, log: Log,
+            folder: Path) -> None:
+    """Print a block, write it as block ``name`` of ``page`` (None: not), name the run folder."""
+    print(text)
+    if page is not None:
+        write_block(page, name, heading, text)
+    log(f'run folders in {folder}')

@@ -1,42 +1,29 @@
-"""A line of cells: capacity against one cell's, handoffs, CPU per cell (``--only line``).
+"""A line of cells through the launcher (``--only line``): one block of ``LINE.md`` a scenario.
 
-For each line length N (``--cells``, default 2 and 3) the feed is N times one cell's saturating
-feed, an item every 0.9 / N s. At 0.2 m/s that is denser than the belt can carry (items are
-0.1 m), so the line runs at N times the belt speed, and one cell's capacity is measured at that
-speed and feed too (a share folder of its own with the faster belt: ``SCARA_COLLAB_SHARE``).
-Every run goes through the launcher, each cell in one process (``--one-process``), unthrottled
-in lockstep, so the figures do not depend on how busy the machine is. Items per minute are
-counted at steady state, after the first :data:`WARM` sim seconds (the last cell of a line gets
-its first item only after the belt has carried it through the ones before). A run's row: items
-sorted per minute (line and per cell), handoffs checked, the minimum separation per cell, CPU
-s per sim s per cell, the exit code. Targets (SPEC section 5, "a line of cells"): line
-capacity >= 0.9 x N x one cell's, no cell below 0.85 x one cell's, the margin kept in every
-cell, every handoff received once.
+Every run: each cell in one process, unthrottled, in lockstep (docs/benchmarks.md says more).
 
-Two more scenarios (``--scenarios``; default ``capacity`` alone):
-
-- ``rated``: N cells at N times the rated feed (an item every 1.8 / N s) at the belt's own
-  speed, with a third of the handoff messages lost and a third repeated; target 0 missed at
-  the end of the line, every handoff received once, the items balanced;
-- ``kill``: three cells at three times the rated feed, twice: undisturbed, and with cell 1's
-  bridge killed (``crash:``) at 300 sim s; targets: cell 0's event log identical in both,
-  cell 2 sorting again within the lookahead plus 10 s wall of the kill (from the logs' wall
-  stamps), the report naming cell 1, a non-zero exit.
+- ``capacity``: N cells (``--cells``, 2 and 3) fed N times one cell's saturating feed (an item
+  every 0.9 / N s) at N times the belt speed, beside one cell at that speed and feed (a share
+  folder with the faster belt: ``SCARA_COLLAB_SHARE``); items/min after :data:`WARM` sim s.
+  Targets: line >= 0.9 x N x one cell's, every cell >= 0.85 x, the margin kept, every handoff
+  received once;
+- ``rated``: N cells at N times the rated feed, a third of the handoffs lost and a third
+  repeated; target 0 missed, every handoff received once, the items balanced;
+- ``kill``: three cells at three times the rated feed, undisturbed and with cell 1's bridge
+  killed at 300 sim s; targets: cell 0's events identical, cell 2 sorting again within the
+  lookahead + 10 s wall of the kill, the report naming cell 1, a non-zero exit.
 """
-import json
 import os
 from pathlib import Path
 import re
 import shutil
-import subprocess
-import sys
 import tempfile
 from typing import Dict, List, Sequence
 
 import yaml
 
-from scara_collab.bench.report import write_block
-from scara_collab.bench.util import Log, table
+from scara_collab.bench.launched import Launch
+from scara_collab.bench.util import Log, table, write_block
 from scara_collab.core.config import load_config
 from scara_collab.core.line import Section
 from scara_collab.core.model import load_cell
@@ -56,8 +43,7 @@ def belt_share(speed: float, into: Path) -> Path:
     shutil.copytree(src / 'config', into / 'config', dirs_exist_ok=True)
     path = into / 'config' / 'cell.yaml'
     text = path.read_text(encoding='utf-8')
-    tree = yaml.safe_load(text)
-    old = tree['/**']['ros__parameters']['belt']['speed']
+    old = yaml.safe_load(text)['/**']['ros__parameters']['belt']['speed']
     path.write_text(text.replace(f'speed: {old}', f'speed: {speed:g}', 1), encoding='utf-8')
     return into
 
@@ -68,39 +54,41 @@ def run(cells: int, speed: float, feed: float, duration: float, out: Path, log: 
     env = dict(os.environ)
     if speed != load_cell().belt.speed:
         env['SCARA_COLLAB_SHARE'] = str(belt_share(speed, out.parent / f'share_{speed:g}'))
-    cmd = [sys.executable, '-m', 'scara_collab.run.launcher', '--cells', str(cells),
-           '--one-process', '--rtf', '0', '--duration', f'{duration:g}', '--feed-interval',
-           f'{feed:g}', '--seed', str(seed), '--output', str(out), '--no-plots', '--quiet',
-           *flags]
-    proc = subprocess.run(cmd, env=env, capture_output=True, text=True)
-    row = row_of(out, cells, speed, feed, duration, proc.returncode)
-    log(f'{cells} cell(s) at {speed:g} m/s, an item every {feed:g} s: exit '
-        f'{proc.returncode}, {row["items_per_minute"]:.1f} items/min '
-        f'({", ".join(f"{p:.1f}" for p in row["per_cell"])}), {row["handoffs"]} handoffs')
-    return row
-
-
-def row_of(out: Path, cells: int, speed: float, feed: float, duration: float,
-           code: int) -> Dict[str, object]:
-    """Return a run's row from its folder (items/min at steady state, after :data:`WARM`)."""
-    try:
-        s = json.loads((out / 'summary.json').read_text(encoding='utf-8'))
-    except (OSError, ValueError):  # a run that never got going: its exit code says why
-        s = {}
+    s = Launch('collaborative', duration, out, 0.0, env=env, flags=[
+        '--cells', str(cells), '--one-process', '--feed-interval', f'{feed:g}', '--seed',
+        str(seed), *flags]).finish(None)
     rows = s.get('cells') or [dict(s, cell=0)]
     folders = [out / f'cell_{k}' for k in range(cells)] if cells > 1 else [out]
     per = [sum(1 for t, kind, _, _ in read_events(f) if kind == 'sorted' and float(t) >= WARM)
            * 60.0 / (duration - WARM) if (f / 'events.csv').is_file() else 0.0
            for f in folders]
-    cpu = [r.get('cpu_s_per_sim_s') or (r.get('cpu_per_sim_s') or {}).get('total')
-           for r in rows]
-    seps = [r.get('min_separation_m') for r in rows]
-    return {'cells': cells, 'belt_speed': speed, 'feed_interval': feed, 'duration': duration,
-            'exit_code': code, 'items_per_minute': round(sum(per), 2),
-            'per_cell': per, 'cpu_per_cell': cpu, 'min_separation_m': seps,
-            'missed': s.get('missed'), 'dropped': s.get('dropped'),
-            'handoffs': s.get('handoffs', 0), 'balanced': s.get('balanced'),
-            'handoff_problems': len(s.get('handoff_problems') or []), 'died': s.get('died')}
+    row = {'cells': cells, 'belt_speed': speed, 'feed_interval': feed, 'duration': duration,
+           'exit_code': s['exit_code'], 'items_per_minute': round(sum(per), 2),
+           'per_cell': per, 'min_separation_m': [r.get('min_separation_m') for r in rows],
+           'cpu_per_cell': [r.get('cpu_s_per_sim_s')
+                            or (r.get('cpu_per_sim_s') or {}).get('total') for r in rows],
+           'missed': s.get('missed'), 'dropped': s.get('dropped'),
+           'handoffs': s.get('handoffs', 0), 'balanced': s.get('balanced'),
+           'handoff_problems': len(s.get('handoff_problems') or []), 'died': s.get('died')}
+    log(f'{cells} cell(s) at {speed:g} m/s, an item every {feed:g} s: exit '
+        f'{row["exit_code"]}, {row["items_per_minute"]:.1f} items/min '
+        f'({", ".join(f"{p:.1f}" for p in per)}), {row["handoffs"]} handoffs')
+    return row
+
+
+def capacity(lines: List[int], duration: float, folder: Path,
+             log: Log) -> List[Dict[str, object]]:
+    """Each line length beside one cell at the same belt speed and feed; the ratios."""
+    out = []
+    for n in lines:
+        speed, feed = 0.2 * n, SATURATING / n
+        base = run(1, speed, feed, duration, folder / f'one_{n}', log)['items_per_minute']
+        line = run(n, speed, feed, duration, folder / f'line_{n}', log)
+        line['one_cell'] = base = base or float('nan')
+        line['ratio'] = round(line['items_per_minute'] / (n * base), 3)
+        line['worst_cell_ratio'] = round(min(line['per_cell']) / base, 3)
+        out.append(line)
+    return out
 
 
 def rated(n: int, duration: float, folder: Path, log: Log) -> Dict[str, object]:
@@ -138,44 +126,29 @@ def kill(duration: float, at: float, folder: Path, log: Log) -> Dict[str, object
                 calm_exit=calm['exit_code'])
 
 
-def measure(lines: List[int], duration: float, folder: Path,
-            log: Log) -> List[Dict[str, object]]:
-    """Each line length beside one cell at the same belt speed and feed; the ratios."""
-    out = []
-    for n in lines:
-        speed, feed = 0.2 * n, SATURATING / n
-        one = run(1, speed, feed, duration, folder / f'one_{n}', log)
-        line = run(n, speed, feed, duration, folder / f'line_{n}', log)
-        base = one['items_per_minute'] or float('nan')
-        line['one_cell'] = base
-        line['ratio'] = round(line['items_per_minute'] / (n * base), 3)
-        line['worst_cell_ratio'] = round(min(line['per_cell']) / base, 3)
-        out.append(line)
-    return out
+def _f(v, d=2) -> str:
+    """Format a number with ``d`` decimals ('-' for none)."""
+    return '-' if v is None else f'{v:.{d}f}'
 
 
-def markdown(rows: List[Dict[str, object]], command: str) -> str:
+def capacity_text(rows: List[Dict[str, object]], command: str) -> str:
     """Return the capacity runs as a Markdown block."""
-    def f(v, d=2):
-        return '-' if v is None else f'{v:.{d}f}'
-    lines = [f'Measured with `{command}` (`scara_collab/bench/line.py`): '
-             "each line fed N times one cell's saturating feed, at N times the belt speed, "
-             'beside one cell at the same speed and feed; each cell in one process, '
-             f'unthrottled, in lockstep; items per minute counted after the first {WARM:g} '
-             'sim s.', '',
-             '| cells | belt m/s | item every s | one cell items/min | line items/min | '
-             'ratio (>= 0.9) | worst cell / one (>= 0.85) | per cell | min separation m | '
-             'CPU s per sim s per cell | handoffs (problems) | exit |',
-             '|' + '---|' * 12]
-    for r in rows:
-        lines.append(
-            f'| {r["cells"]} | {r["belt_speed"]:g} | {r["feed_interval"]:.3g} | '
-            f'{f(r["one_cell"], 1)} | {f(r["items_per_minute"], 1)} | {f(r["ratio"], 3)} | '
-            f'{f(r["worst_cell_ratio"], 3)} | {", ".join(f(p, 1) for p in r["per_cell"])} | '
-            f'{", ".join(f(s, 3) for s in r["min_separation_m"])} | '
-            f'{", ".join(f(c) for c in r["cpu_per_cell"])} | {r["handoffs"]} '
-            f'({r["handoff_problems"]}) | {r["exit_code"]} |')
-    return '\n'.join(lines) + '\n'
+    return (f'Measured with `{command}` (`scara_collab/bench/line.py`): '
+            "each line fed N times one cell's saturating feed, at N times the belt speed, "
+            'beside one cell at the same speed and feed; each cell in one process, '
+            f'unthrottled, in lockstep; items per minute counted after the first {WARM:g} '
+            'sim s.\n\n' + table([{
+                'cells': r['cells'], 'belt m/s': f'{r["belt_speed"]:g}',
+                'item every s': f'{r["feed_interval"]:.3g}',
+                'one cell items/min': _f(r['one_cell'], 1),
+                'line items/min': _f(r['items_per_minute'], 1),
+                'ratio (>= 0.9)': _f(r['ratio'], 3),
+                'worst cell / one (>= 0.85)': _f(r['worst_cell_ratio'], 3),
+                'per cell': ', '.join(_f(p, 1) for p in r['per_cell']),
+                'min separation m': ', '.join(_f(s, 3) for s in r['min_separation_m']),
+                'CPU s per sim s per cell': ', '.join(_f(c) for c in r['cpu_per_cell']),
+                'handoffs (problems)': f'{r["handoffs"]} ({r["handoff_problems"]})',
+                'exit': r['exit_code']} for r in rows]) + '\n')
 
 
 def rated_text(rows: List[Dict[str, object]], command: str) -> str:
@@ -185,41 +158,37 @@ def rated_text(rows: List[Dict[str, object]], command: str) -> str:
     return (f'Measured with `{command}`: N cells at N times the rated feed, the belt at its '
             'own speed, a third of the handoff messages lost and a third repeated '
             '(`loss:`, `repeat:`); `missed`: at the end of the line.\n\n'
-            + table([{k: ', '.join('-' if x is None else f'{x:.3f}' for x in r[k])
-                      if isinstance(r[k], list) else r[k] for k in head} for r in rows]) + '\n')
+            + table([{k: ', '.join(_f(x, 3) for x in r[k]) if isinstance(r[k], list) else r[k]
+                      for k in head} for r in rows]) + '\n')
 
 
 def kill_text(r: Dict[str, object], command: str) -> str:
     """Return the killed-cell run as a Markdown block."""
-    again = r['sorting_again_wall_s']
     return (f'Measured with `{command}`: three cells at three times the rated feed, '
             f'{r["duration"]:g} sim s, undisturbed and with cell 1 killed at '
             f'{r["at"]:g} sim s.\n\n' + table([{
                 "cell 0's events identical": r['cell0_identical'],
                 'cell 2 sorting again after the kill (wall s)':
-                    '-' if again is None else f'{again:.1f}',
+                    _f(r['sorting_again_wall_s'], 1),
                 'target (lookahead + 10 s)': f'{r["lookahead_s"] + 10.0:.1f}',
                 'report names cell 1': r['named'], 'died': r['died'],
                 'exit (undisturbed, killed)': f'{r["calm_exit"]}, {r["exit_code"]}'}]) + '\n')
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the scenarios (``--scenarios``, default capacity) into blocks of ``LINE.md``.
+    """Run the ``--scenarios`` (default capacity) into blocks of ``LINE.md``; False if one missed.
 
-    ``--cells``: the line lengths (default 2 3); ``--duration``: sim s per run (default 240;
-    rated: 600; kill: 330, the kill at 300 or 30 s before the end). :return: False if a target
-    is missed.
+    ``--cells``: line lengths (2 3); ``--duration``: sim s per run (capacity 240, rated 600,
+    kill 330 with the kill at 300 or 30 s before the end).
     """
     target = page.parent / 'LINE.md'
-    if not target.is_file():
-        target.write_text('# A line of cells\n', encoding='utf-8')
     folder = Path(tempfile.mkdtemp(prefix='scara_line_'))
     log(f'run folders in {folder}')
     lines, bad = args.cells or [2, 3], []
-    for name in getattr(args, 'scenarios', None) or ['capacity']:
+    for name in args.scenarios or ['capacity']:
         if name == 'capacity':
-            rows = measure(lines, args.duration or 240.0, folder, log)
-            text, heading = markdown(rows, command), 'Capacity'
+            rows = capacity(lines, args.duration or 240.0, folder, log)
+            text, heading = capacity_text(rows, command), 'Capacity'
             bad += [f'capacity {r["cells"]}' for r in rows if r['exit_code']
                     or r['handoff_problems'] or r['ratio'] < 0.9 or r['worst_cell_ratio'] < 0.85
                     or any(s is None or s < 0.10 for s in r['min_separation_m'])]
@@ -237,6 +206,6 @@ def section(args, page: Path, command: str, log: Log) -> bool:
                     and again <= r['lookahead_s'] + 10.0):
                 bad.append('kill')
         print(text)
-        write_block(target, f'line:{name}', heading, text)
+        write_block(target, f'line:{name}', heading, text, title='# A line of cells')
     log(f'written {target}' + (f'; not met: {", ".join(bad)}' if bad else '; all met'))
     return not bad

@@ -21,13 +21,9 @@ METHODS = {'joint': 'joint interp.', 'line': 'straight line'}
 
 
 def execute(cell: CellModel, arm: ArmModel, traj: Trajectory, settle: float = 0.3) -> dict:
-    """Execute ``traj`` in a fresh simulator, sampled every ``traj`` step; return its metrics.
+    """Execute ``traj`` in a fresh simulator (``settle`` s more); return its path metrics.
 
-    :param settle: sim seconds observed after the trajectory ends.
-    :return: :func:`~scara_collab.core.trajectory.path_metrics` of the measured tool path,
-        with ``end_error``, ``tracking_error`` (largest tool distance from the plan, m),
-        ``duration`` (until the tool stays within :data:`ARRIVED` of the goal; None if never)
-        and the series ``t``, ``p``, ``deviation``.
+    ``duration``: until the tool stays within :data:`ARRIVED` of the goal (None: never).
     """
     with CellSim(cell, dict(load_config('simulation'), feed_interval=0.0)) as sim:
         sim.reset_arm(arm.name, traj.q[0])

@@ -20,14 +20,9 @@ CONTROLLERS = {'pid': "PID (seeds' gains)", 'computed_torque': 'computed torque'
 
 
 def tracking(cell: CellModel, mode: str, payload: float, settle: float) -> dict:
-    """Run the left arm's line with ``payload`` kg on the tool; return the metrics.
+    """Run the left arm's line with ``payload`` kg by ``mode``, ``settle`` s more; the metrics.
 
-    :param mode: ``'pid'`` (the seeds' gains) or ``'computed_torque'``.
-    :param settle: sim seconds observed after the trajectory ends.
-    :return: ``duration`` (planned, s), ``quill_err`` and ``tool_err`` (largest errors against
-        the plan, m), ``settling`` (s after the move; None if not within the window),
-        ``final`` (m), ``peak`` (3,) efforts, ``overshoot`` (% of the line past the goal),
-        the series ``t``, ``to_goal`` every 10 ms.
+    ``settling``: s after the move until within :data:`SETTLED` (None: not in the window).
     """
     arm = cell.leader
     start, goal = (np.array(p) for p in LINES[arm.name])

@@ -1,26 +1,17 @@
-"""The job protocol under load, through the launcher (separate processes).
-
-A long collaborative run, mirrored runs over several seeds (the replication manager's in-step
-mirror error), and the demo repeated while CPU hogs compete; each run in its own ROS domain,
-its figures from its ``summary.json``.
-"""
+"""The job protocol through the launcher: a long run, mirrored seeds, the demo beside CPU hogs."""
 from pathlib import Path
 import tempfile
 import time
 
-from scara_collab.bench.launched import cells, launch, stamp
-from scara_collab.bench.report import write_block
+from scara_collab.bench.launched import cells, launch, publish, stamp
 from scara_collab.bench.util import Log
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the three measurements; print the tables, write them as the ``job-protocol`` block.
+    """Run the three measurements into the ``job-protocol`` block; True if every demo completed.
 
-    Sizes: 600 sim s collaborative, mirrored seeds 11 12 13 (``args.seeds``) 90 sim s each,
-    ``args.runs`` (5) demo runs of 60 sim s beside ``args.hogs`` (2) CPU hogs; with
-    ``args.smoke`` 60 s, one seed of 30 s, 2 runs of 30 s (printed, not written).
-
-    :return: True if every demo run beside the hogs completed.
+    600 sim s collaborative, mirrored ``--seeds`` (11 12 13) 90 sim s each, ``--runs`` (5) demo
+    runs of 60 sim s beside ``--hogs`` (2); ``--smoke``: 60, one seed of 30, 2 runs of 30.
     """
     smoke = args.smoke
     long_s, mirrored_s, hog_s = (60.0, 30.0, 30.0) if smoke else (600.0, 90.0, 60.0)
@@ -52,8 +43,6 @@ def section(args, page: Path, command: str, log: Log) -> bool:
         'completed** (exit 0, items sorted, none missed)',
         cells(demo, ('run', 'exit_code', 'sorted', 'missed', 'dropped', 'give_ups', 'retries',
                      'min_separation_m', 'real_time_factor'))])
-    print(text)
-    if not smoke:
-        write_block(page, 'job-protocol', 'The job protocol through the launcher', text)
-    log(f'run folders in {out}')
+    publish(text, None if smoke else page, 'job-protocol',
+            'The job protocol through the launcher', log, out)
     return all(done)

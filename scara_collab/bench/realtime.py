@@ -1,21 +1,9 @@
 """The cell in real time, without lockstep, as against hardware: figures beside lockstep's.
 
-Every run goes through the launcher at ``--rtf 1`` (one process per node, or every node in one
-process with ``one_process``), where the nodes run against a clock that does not wait for them
-(``--lockstep off``), on the same seeds as a lockstep reference run:
-
-- ``lockstep``: the reference, ``--lockstep on`` (at ``--rtf 1`` too);
-- ``quiet``: ``--lockstep off`` on a quiet machine;
-- ``hog``: the same beside one CPU hog (a busy-looping process);
-- ``latency``: the same with 20 +- 10 ms on ``/joint_states`` and on the planners' and the
-  bridge's statuses (``--fault latency:...``);
-- ``two_hogs``: beside two CPU hogs (the machine loaded beyond its cores): any stop must be
-  protective and the job sorts to the end.
-
-A run's row says what its ``summary.json`` says: sorted, missed, dropped, the minimum
-separation, the stops (protective ones caused by the job's own moves are the predicted ones:
-``predicted`` in their cause), the exit code. :func:`capacity` measures items per minute at
-an item every 0.9 s (the feed faster than the arms) with and without lockstep.
+Every run goes through the launcher at ``--rtf 1`` against a clock that does not wait for the
+nodes (``--lockstep off``), on the same seeds as a lockstep reference, in the
+:data:`CONDITIONS`; :func:`capacity` measures items per minute at an item every 0.9 s (faster
+than the arms) with and without lockstep.
 """
 import os
 from pathlib import Path
@@ -24,13 +12,14 @@ from typing import Dict, Optional, Sequence
 
 from scara_collab import graph
 from scara_collab.bench.launched import launch
-from scara_collab.bench.util import Log
+from scara_collab.bench.util import Log, table
 
 #: 20 +- 10 ms on the joint states and on every status the job's timing hangs on
 LATENCY = (['latency:/joint_states:0.02:0.01']
            + [f'latency:/{r}/planner_status:0.02:0.01' for r in graph.ROBOTS]
            + [f'latency:/{r}/execution_status:0.02:0.01' for r in graph.ROBOTS])
-#: condition -> (lockstep on?, CPU hogs, faults)
+#: condition -> (lockstep on?, CPU hogs, faults); ``two_hogs`` loads the machine beyond its
+#: cores: any stop must be protective and the job sorts to the end
 CONDITIONS = {
     'lockstep': (True, 0, ()),
     'quiet': (False, 0, ()),
@@ -38,6 +27,9 @@ CONDITIONS = {
     'latency': (False, 0, tuple(LATENCY)),
     'two_hogs': (False, 2, ()),
 }
+COLUMNS = ('condition', 'seed', 'exit_code', 'sorted', 'missed', 'dropped', 'give_ups',
+           'min_separation_m', 'protective', 'emergency', 'own_moves', 'lost_s', 'overspeed',
+           'cpu_s')
 
 
 def run(condition: str, out: Path, duration: float, seed: int, log: Log,
@@ -45,10 +37,8 @@ def run(condition: str, out: Path, duration: float, seed: int, log: Log,
     """Run the collaborative job in one of :data:`CONDITIONS`; return its row."""
     lockstep, hogs, faults = CONDITIONS[condition]
     flags = ['--lockstep', 'on' if lockstep else 'off'] + ['--one-process'] * one_process
-    for f in faults:
-        flags += ['--fault', f]
-    if feed is not None:
-        flags += ['--feed-interval', f'{feed:g}']
+    flags += [a for f in faults for a in ('--fault', f)]
+    flags += ['--feed-interval', f'{feed:g}'] if feed is not None else []
     r = launch(f'{condition} seed {seed}', seed * 7 + len(condition), 'collaborative',
                duration, out / f'{condition}_{seed}', log, hogs=hogs, rtf=1.0, seed=seed,
                extra=flags)
@@ -69,11 +59,6 @@ def capacity(out: Path, seeds: Sequence[int], duration: float, log: Log,
             'rows': rows}
 
 
-COLUMNS = ('condition', 'seed', 'exit_code', 'sorted', 'missed', 'dropped', 'give_ups',
-           'min_separation_m', 'protective', 'emergency', 'own_moves', 'lost_s', 'overspeed',
-           'cpu_s')
-
-
 def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]],
              command: str, duration: float, one_process: bool = False) -> str:
     """Return the runs and the capacity as a Markdown page."""
@@ -88,8 +73,7 @@ def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]]
              'times a joint ran faster than its limit allows (the arm left its trajectory); '
              "`cpu_s`: the graph's CPU seconds per sim second, all its processes, on a machine "
              f'of {os.cpu_count()} cores (a hog takes one).', '',
-             '| ' + ' | '.join(COLUMNS) + ' |', '|' + '---|' * len(COLUMNS)]
-    lines += ['| ' + ' | '.join(cell(r.get(k)) for k in COLUMNS) + ' |' for r in rows]
+             table([{k: cell(r.get(k)) for k in COLUMNS} for r in rows])]
     causes = [f'- {r["condition"]} seed {r["seed"]}: {r["causes"]}' for r in rows
               if r.get('causes')]
     if causes:
@@ -102,30 +86,17 @@ def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]]
     return '\n'.join(lines) + '\n'
 
 
-def _bad(r) -> bool:
-    sep = r.get('min_separation_m')
-    broken = sep is None or sep < 0.10
-    if r['condition'] == 'two_hogs':
-        return broken or bool(r.get('emergency'))
-    return broken or bool(r.get('missed')) or bool(r.get('dropped')) or bool(r.get('own_moves'))
-
-
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the conditions and the capacity; print the page and write it to ``page``.
+    """Run the conditions and the capacity into ``page``; False if a target was missed.
 
-    Every run takes its duration in wall time (``--rtf 1``). ``args``: ``duration`` (sim s per
-    run, default 600), ``seeds`` (default 1 2 3), ``conditions`` (default all),
-    ``capacity_duration`` (sim s per capacity run, default 240; 0: none), ``one_process``
-    (every node of the cell in one process, in every run; default one process per node).
-
-    :return: False if a run broke the margin, missed or dropped an item, or stopped for the
-        job's own moves (``two_hogs`` may stop, protectively), or the capacity ratio < 0.95.
+    ``--duration`` sim s a run (600, in wall time), ``--seeds`` (1 2 3), ``--conditions``
+    (all), ``--capacity-duration`` (240; 0: none), ``--one-process``. Missed: a run broke the
+    margin, missed or dropped an item, or stopped for the job's own moves (``two_hogs`` may
+    stop, protectively), or the capacity ratio < 0.95.
     """
-    duration = args.duration or 600.0
-    seeds = args.seeds or [1, 2, 3]
+    duration, seeds, one = args.duration or 600.0, args.seeds or [1, 2, 3], args.one_process
     runs = Path(tempfile.mkdtemp(prefix='scara_realtime_'))
     log(f'run folders in {runs}')
-    one = bool(getattr(args, 'one_process', False))
     rows = [run(c, runs, duration, s, log, one_process=one) for s in seeds
             for c in args.conditions or list(CONDITIONS)]
     cap_s = 240.0 if args.capacity_duration is None else args.capacity_duration
@@ -133,7 +104,10 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     text = markdown(rows, cap, command, duration, one)
     print(text)
     page.write_text(text, encoding='utf-8')
-    bad = [f'{r["condition"]} seed {r["seed"]}' for r in rows if _bad(r)]
+    bad = [f'{r["condition"]} seed {r["seed"]}' for r in rows
+           if r.get('min_separation_m') is None or r['min_separation_m'] < 0.10
+           or (bool(r.get('emergency')) if r['condition'] == 'two_hogs' else
+               bool(r.get('missed') or r.get('dropped') or r.get('own_moves')))]
     if cap and cap['ratio'] is not None and cap['ratio'] < 0.95:
         bad.append(f'capacity ratio {cap["ratio"]} < 0.95')
     log(f'written {page}' + (f'; not met: {", ".join(bad)}' if bad else '; all met'))

@@ -1,10 +1,7 @@
-"""The benchmark's sections, their run, and ``RESULTS.md`` made of generated blocks.
+"""The numbered sections of ``RESULTS.md``: their run, and the page made of generated blocks.
 
-:data:`SECTIONS` are the numbered sections of ``RESULTS.md``, one module each
-(:class:`~scara_collab.bench.util.Section`). :func:`run` measures those asked for, draws their
-figures and writes their blocks into the page. Every generated part lies between
-``<!-- NAME:begin -->`` and ``<!-- NAME:end -->`` markers: a run replaces the blocks it
-measured and keeps everything else, hand-written text included.
+Every generated part lies between ``<!-- NAME:begin -->`` and ``<!-- NAME:end -->`` markers:
+a run replaces the blocks it measured and keeps everything else, hand-written text included.
 """
 from pathlib import Path
 import re
@@ -12,33 +9,22 @@ import resource
 import tempfile
 import time
 import traceback
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence
 
 from scara_collab.bench import foresight, paths, payload, singularity, solvers, sync, throughput
-from scara_collab.bench.util import machine, num, Progress, quote, Rows, table, usable, write_json
+from scara_collab.bench.util import (machine, num, Progress, put_block, quote, table, usable,
+                                     write_json)
 
 SECTIONS = (paths.SECTION, solvers.SECTION, payload.SECTION, sync.SECTION, singularity.SECTION,
             foresight.SECTION, throughput.SECTION)
 """Every numbered section, in the order they run and appear in ``RESULTS.md``."""
-
 SUMMARY_ORDER = ('solvers', 'paths', 'sync', 'payload', 'singularity', 'foresight', 'throughput')
 """The keys of the sections whose rows make the summary table, in its order (IK first)."""
-
-TITLE = '# Results, measured'
 
 
 def headings() -> List[str]:
     """Return the sections' headings in ``RESULTS.md``, numbered: ``'1. Path deviation: …'``."""
     return [f'{n}. {s.heading}' for n, s in enumerate(SECTIONS, 1)]
-
-
-def summary_table(results: dict) -> str:
-    """Return the summary table: what, seeds' claim, measured here, SPEC target, met."""
-    by_key = {s.key: s for s in SECTIONS}
-    rows: Rows = [row for key in SUMMARY_ORDER if usable(results.get(key))
-                  for row in by_key[key].summary(results[key])]
-    head = ('what', "seeds' claim", 'measured here', 'SPEC target', 'target')
-    return table([dict(zip(head, row)) for row in rows])
 
 
 def head(meta: dict) -> str:
@@ -57,39 +43,6 @@ def head(meta: dict) -> str:
         '(one section: `--only KEY`).')
 
 
-def block_markers(name: str) -> Tuple[str, str]:
-    """Return the ``<!-- name:begin -->`` / ``<!-- name:end -->`` markers of a block."""
-    return f'<!-- {name}:begin -->', f'<!-- {name}:end -->'
-
-
-def put_block(page: str, name: str, heading: str, body: str) -> str:
-    """Return ``page`` with ``body`` as its block ``name`` under the heading ``## heading``.
-
-    The block replaces the one between the page's markers; without markers, the text under
-    the heading (numbered or not) up to the next ``## `` heading; without either, it is
-    appended under a new heading.
-    """
-    begin, end = block_markers(name)
-    block = f'{begin}\n{body.strip()}\n{end}'
-    if begin in page and end in page:
-        before, rest = page.split(begin, 1)
-        return before + block + rest.split(end, 1)[1]
-    bare = re.sub(r'^\d+\. ', '', heading)
-    found = re.search(rf'^## (\d+\. )?{re.escape(bare)}\n', page, re.M)
-    if found:
-        after = re.search(r'^## ', page[found.end():], re.M)
-        stop = found.end() + after.start() if after else len(page)
-        return f'{page[:found.end()]}\n{block}\n\n{page[stop:]}'
-    return f'{page.rstrip()}\n\n## {heading}\n\n{block}\n'.lstrip()
-
-
-def write_block(path: Path, name: str, heading: str, body: str) -> None:
-    """Write ``body`` as the block ``name`` of the page at ``path`` (made if missing)."""
-    path = Path(path)
-    page = path.read_text() if path.is_file() else f'{TITLE}\n'
-    path.write_text(put_block(page, name, heading, body))
-
-
 def section_text(section, results: dict) -> str:
     """Return a section's block: the claims quoted, its paragraph, its tables, its figure."""
     data = results.get(section.key)
@@ -104,18 +57,22 @@ def section_text(section, results: dict) -> str:
 def render(results: dict, previous: str = '') -> str:
     """Return ``RESULTS.md``: ``previous`` with the blocks of this run's sections replaced.
 
-    The run's paragraph and every section that ran are replaced; the summary too when every
-    section of it has data (or the page has none yet); a section that failed says so.
+    The summary is replaced too when every section of it has data (or the page has none yet).
     """
-    page = previous or f'{TITLE}\n'
-    begin, end = block_markers('benchmark:run')
-    if begin not in page:  # the paragraph goes under the title
+    page = previous or '# Results, measured\n'
+    if '<!-- benchmark:run:begin -->' not in page:  # the paragraph goes under the title
         title, _, rest = page.partition('\n')
         after = re.search(r'^## ', rest, re.M)
-        page = f'{title}\n\n{begin}\n{end}\n\n' + (rest[after.start():] if after else '')
+        page = (f'{title}\n\n<!-- benchmark:run:begin -->\n<!-- benchmark:run:end -->\n\n'
+                + (rest[after.start():] if after else ''))
     page = put_block(page, 'benchmark:run', '', head(results['meta']))
     if all(usable(results.get(k)) for k in SUMMARY_ORDER) or 'benchmark:summary' not in page:
-        page = put_block(page, 'benchmark:summary', 'Summary', summary_table(results))
+        by_key = {s.key: s for s in SECTIONS}
+        rows = [row for key in SUMMARY_ORDER if usable(results.get(key))
+                for row in by_key[key].summary(results[key])]
+        cols = ('what', "seeds' claim", 'measured here', 'SPEC target', 'target')
+        page = put_block(page, 'benchmark:summary', 'Summary',
+                         table([dict(zip(cols, r)) for r in rows]))
     for heading, section in zip(headings(), SECTIONS):
         if not (results.get(section.key) or {}).get('skipped'):
             page = put_block(page, f'benchmark:{section.key}', heading,
@@ -135,10 +92,6 @@ def run(out: Path, smoke: bool, only: Sequence[str], progress: Progress,
     """Measure the sections ``only``, write their blocks into ``out/RESULTS.md``, figures beside.
 
     A section that fails is reported as failed (with the error) and the others still run.
-
-    :param smoke: the sections' smoke sizes (seconds, not minutes) instead of the full ones.
-    :param json_path: also write every measured value here (None: not).
-    :param command: the command line, quoted in the page.
     :return: ``{'meta': ..., <section key>: data or {'error': ...}, 'figures': ...}``.
     """
     (out / 'figures').mkdir(parents=True, exist_ok=True)

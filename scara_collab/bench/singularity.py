@@ -27,10 +27,7 @@ FAR_TARGET = (3.0, 0.0, 0.4)
 def study(arm: ArmModel, a, b, damping: float, threshold: float, dt: float) -> dict:
     """Run the seeds' loop along ``a`` -> ``b`` (base frame) at :data:`SPEED`.
 
-    :param damping: the DLS ``max_damping`` (0 = plain pseudo-inverse).
-    :return: ``peak_speed`` (rad/s, the faster revolute joint), ``max_tool_error`` (m),
-        ``min_manipulability`` (m^2), ``elbow_deg_at_min`` (|theta2| there), the series ``s``
-        (fraction of the path) and ``speed``.
+    ``damping``: the DLS ``max_damping`` (0: the plain pseudo-inverse).
     """
     a, b = np.asarray(a, float), np.asarray(b, float)
     duration = float(np.linalg.norm(b - a)) / SPEED

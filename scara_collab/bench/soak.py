@@ -1,9 +1,8 @@
-"""A long run through the launcher with the memory of every process sampled (the soak).
+"""The soak: a long run through the launcher, every process's resident memory sampled.
 
-The launcher runs the collaborative job (one process per node); each process's resident
-memory (``VmRSS`` from ``/proc/<pid>/status``) is sampled against the run's sim time, and the
-growth per sim hour after the warm-up is reported with the run's figures. Lockstep drops are
-counted from the bridge's log, missed items from the job's.
+Each process's ``VmRSS`` is sampled against the run's sim time; the growth per sim hour after
+the warm-up is reported with the run's figures, lockstep drops from the bridge's log and
+missed items from the job's.
 """
 import json
 import os
@@ -13,8 +12,7 @@ import tempfile
 import time
 from typing import Dict, List, Optional, Tuple
 
-from scara_collab.bench.launched import Launch, row, stamp
-from scara_collab.bench.report import write_block
+from scara_collab.bench.launched import Launch, publish, row, stamp
 from scara_collab.bench.util import Log, table
 
 #: the bridge's words when it stops waiting for a silent node (scara_collab.nodes.lockstep)
@@ -53,11 +51,7 @@ def last_sim_time(folder: Path) -> Optional[float]:
 
 
 def growth(samples: List[Tuple[float, int]], warm: float) -> Dict[str, Optional[float]]:
-    """Return the memory after the warm-up and at the end (MiB), and its growth per sim hour (%).
-
-    :param samples: ``(sim s, KiB)`` in time order.
-    :param warm: sim s of warm-up left out (imports, caches, the first items).
-    """
+    """Return RSS after the ``warm`` sim s and at the end (MiB), its growth per sim hour (%)."""
     after = [(t, k) for t, k in samples if t >= warm]
     if len(after) < 2 or after[-1][0] <= after[0][0]:
         return {'rss_warm_mib': None, 'rss_end_mib': None, 'growth_per_hour_pct': None}
@@ -67,11 +61,10 @@ def growth(samples: List[Tuple[float, int]], warm: float) -> Dict[str, Optional[
 
 
 def soak(out: Path, duration: float, warm: float, log: Log, every: float = 10.0) -> dict:
-    """Run the collaborative job ``duration`` sim s through the launcher, sampling RSS.
+    """Run the job ``duration`` sim s, sampling RSS every ``every`` wall s; return its row.
 
-    :param every: wall s between samples.
-    :return: :func:`scara_collab.bench.launched.row` of the summary plus ``processes`` (name
-        -> :func:`growth`), ``lockstep_drops``, ``missed_items`` and ``samples``.
+    :func:`~scara_collab.bench.launched.row` plus ``processes`` (name -> :func:`growth`),
+    ``lockstep_drops``, ``missed_items`` and ``samples``.
     """
     run = Launch('collaborative', duration, out)
     samples: Dict[str, List[Tuple[float, int]]] = {}
@@ -102,12 +95,10 @@ def soak(out: Path, duration: float, warm: float, log: Log, every: float = 10.0)
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the soak; print the table and write it as the ``soak`` block of ``page``.
+    """Run the soak into the ``soak`` block of ``page``; True if it met its targets.
 
-    ``args.duration``: sim s (default 3600); ``args.warm``: sim s left out (default 300).
-
-    :return: True if the run ended cleanly, missed nothing, had no lockstep drop and every
-        process grew < 5 % per sim hour.
+    ``--duration`` sim s (3600), ``--warm`` sim s left out (300). Targets: a clean end, 0
+    missed, 0 lockstep drops, every process growing < 5 % per sim hour.
     """
     out = Path(tempfile.mkdtemp(prefix='scara_soak_')) / 'soak'
     duration, warm = args.duration or 3600.0, 300.0 if args.warm is None else args.warm
@@ -131,10 +122,8 @@ def section(args, page: Path, command: str, log: Log) -> bool:
          'growth < 5 % per hour, 0 missed, 0 lockstep drops).']
         + (["Missed, with the job's last word on each: " + '; '.join(r['missed_items']) + '.']
            if r['missed_items'] else []))
-    print(text)
     (out / 'soak.json').write_text(json.dumps(r, indent=1))
-    write_block(page, 'soak', 'Soak: an hour of sim time through the launcher', text)
-    log(f'run folder {out}')
+    publish(text, page, 'soak', 'Soak: an hour of sim time through the launcher', log, out)
     grown = [g['growth_per_hour_pct'] for g in r['processes'].values()
              if g['growth_per_hour_pct'] is not None]
     return bool(r['exit_code'] == 0 and r['missed'] == 0 and r['lockstep_drops'] == 0

@@ -23,10 +23,7 @@ IK_TARGET = (3.5, -1.0, 0.3)
 
 
 def textbook_ik(l1: float, l2: float, xy: np.ndarray) -> np.ndarray:
-    """Solve the seeds' IK for ``(N, 2)`` base-frame targets, elbow up, no checks (the reference).
-
-    :return: ``(N, 2)`` ``(theta1, theta2)``, rad.
-    """
+    """Solve the seeds' IK for ``(N, 2)`` base-frame targets, elbow up, with no checks."""
     c2 = np.clip((np.sum(xy ** 2, axis=1) - l1 ** 2 - l2 ** 2) / (2 * l1 * l2), -1, 1)
     t2 = np.arccos(c2)
     t1 = np.arctan2(xy[:, 1], xy[:, 0]) - np.arctan2(l2 * np.sin(t2), l1 + l2 * np.cos(t2))
@@ -111,10 +108,7 @@ def coal_capsules(coal, start: np.ndarray, end: np.ndarray, radii) -> list:
 
 
 def coal_distance(coal, query, caps_a: list, caps_b: list) -> float:
-    """Smallest surface distance over every pair of coal capsules (coal queries only).
-
-    :param query: a coal ``(DistanceRequest, DistanceResult)``, made once.
-    """
+    """Smallest surface distance over every pair of coal capsules (``query``: made once)."""
     best = math.inf
     for ca, ta in caps_a:
         for cb, tb in caps_b:

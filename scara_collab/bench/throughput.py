@@ -1,25 +1,28 @@
 """Section 7, throughput and real-time factor: the sorting job's capacity, and what bounds it.
 
 The job in one process (:func:`scara_collab.bench.job.run_job`) over seeds and modes, and
-through the launcher (:mod:`scara_collab.bench.launched`); the cycle bound and the line timing
-against TOPP-RA (:mod:`scara_collab.bench.capacity`); the simulator's own speed.
+through the launcher; a single arm's cycle bound; line timing against TOPP-RA (``toppra``, an
+independent reference); the simulator's own speed.
 """
 from dataclasses import dataclass
+import logging
 from pathlib import Path
 import time
-from typing import List, Sequence, Tuple
+from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 
-from scara_collab.bench import capacity, job
+from scara_collab.bench import job
 from scara_collab.bench.claims import CLAIMS
 from scara_collab.bench.launched import run_launcher
 from scara_collab.bench.payload import LINES
-from scara_collab.bench.util import (axes, finish, met, num, Rows, Section, spread,
-                                     table)
+from scara_collab.bench.util import axes, finish, met, num, Rows, Section, spread, table
 from scara_collab.core.config import load_config
-from scara_collab.core.kinematics import ik
+from scara_collab.core.kinematics import ik, IKError
 from scara_collab.core.model import load_cell
+from scara_collab.core.planning import plan_path
+from scara_collab.core.sorting import drop_point, pick_height
+from scara_collab.core.trajectory import line_move, Trajectory
 from scara_collab.sim.cell_sim import CellSim
 
 CLAIMED = {'single': 12.0, 'collaborative': 22.0}
@@ -56,11 +59,78 @@ SMOKE = Sizes(job_seeds=(1,), job_modes=('collaborative',), job_duration=8.0, re
 """The seconds-long smoke run's sizes."""
 
 
-def sim_speed(mode: str, n_items: int, seconds: float) -> float:
-    """Return the simulator's real-time factor with both arms shuttling, ``n_items`` on the belt.
+def cycle_bound(step: float = 0.1) -> Dict[str, object]:
+    """Time the leader's bin -> pick -> bin motion (no grasp, no release) over pick points.
 
-    Each leg is a two-point cubic from the measured position to the other end of the arm's
-    line (:data:`~scara_collab.bench.payload.LINES`, 75 % of the velocity limit).
+    The belt in ``step`` m by its items' lateral spread in 5 cm, at the pick height, each with
+    both bins; the planners' own moves to and from the bin's drop point.
+    """
+    cell = load_cell()
+    arm = cell.leader
+    auto, sim = load_config('automation'), load_config('simulation')
+    z = pick_height(cell, float(auto['pick_clearance']))
+    belt = cell.belt
+    jitter = float(sim['lateral_jitter'])
+    ys = np.arange(belt.centre_y - jitter, belt.centre_y + jitter + 1e-9, 0.05)
+    xs = np.arange(belt.x_start, belt.x_end + 1e-9, step)
+    times: List[float] = []
+    best = (np.inf, None)
+    for cls in cell.item_classes:
+        drop = drop_point(cell, arm.name, cls, float(auto['drop_clearance']))
+        q_drop = ik(arm, drop).unwrap()
+        for x in xs:
+            for y in ys:
+                pick = np.array([x, y, z])
+                try:
+                    there = plan_path(arm, q_drop, pick, mode='line_or_joint')
+                    back = plan_path(arm, there.q[-1], drop, mode='line_or_joint')
+                except (IKError, ValueError):
+                    continue
+                t = there.duration + back.duration
+                times.append(t)
+                if t < best[0]:
+                    best = (t, pick)
+    med = float(np.median(times))
+    return {'best_s': float(best[0]), 'median_s': med, 'cases': len(times),
+            'items_per_min_best': 60.0 / best[0], 'items_per_min_median': 60.0 / med,
+            'best_pick': [float(v) for v in best[1]]}
+
+
+def toppra_duration(arm, traj: Trajectory) -> float:
+    """Return TOPP-RA's time along ``traj``'s own path (arc length), at the arm's limits."""
+    import toppra
+    from toppra import algorithm, constraint
+    logging.getLogger('toppra').setLevel(logging.ERROR)
+    d = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(traj.p, axis=0), axis=1))])
+    keep = np.concatenate([[True], np.diff(d) > 1e-9])
+    path = toppra.SplineInterpolator(d[keep] / d[keep][-1], traj.q[keep])
+    inst = algorithm.TOPPRA([constraint.JointVelocityConstraint(arm.max_velocity),
+                             constraint.JointAccelerationConstraint(arm.max_acceleration)],
+                            path, gridpoints=np.linspace(0.0, 1.0, 1001),
+                            parametrizer='ParametrizeConstAccel')
+    return inst.compute_trajectory().duration
+
+
+def topp_ratios(n: int = 100, seed: int = 1) -> np.ndarray:
+    """Line time / TOPP-RA time over ``n`` random lines (seeded) of at least 0.2 s."""
+    arm = load_cell().leader
+    rng = np.random.default_rng(seed)
+    ratios: List[float] = []
+    while len(ratios) < n:
+        a, b = rng.uniform([0.8, -2.4, 0.25], [3.6, 0.3, 0.6], size=(2, 3))
+        try:
+            traj = line_move(arm, ik(arm, a).unwrap(), b)
+        except (IKError, ValueError):
+            continue
+        if traj.duration >= 0.2:
+            ratios.append(traj.duration / toppra_duration(arm, traj))
+    return np.array(ratios)
+
+
+def sim_speed(mode: str, n_items: int, seconds: float) -> float:
+    """Return the simulator's real-time factor, both arms shuttling, ``n_items`` on the belt.
+
+    Each leg: a two-point cubic to the other end of the arm's ``payload.LINES`` line.
     """
     cell = load_cell()
     with CellSim(cell, dict(load_config('simulation'), feed_interval=0.0),
@@ -102,13 +172,13 @@ def measure(smoke: bool, scratch: Path) -> dict:
             launcher_runs.setdefault(name, []).append(run_launcher(
                 'collaborative', sizes.launcher_duration, scratch / f'launcher_{name}_{k + 1}',
                 seed=first, extra=flags))
-    ratios = capacity.topp_ratios(sizes.topp_lines)
+    ratios = topp_ratios(sizes.topp_lines)
     speed = [{'items': n, 'mode': mode, 'seconds': sizes.speed_seconds,
               'rtf': float(np.median([sim_speed(mode, n, sizes.speed_seconds)
                                       for _ in range(sizes.speed_repeat)]))}
              for n in sizes.speed_items for mode in sizes.speed_modes]
     return {'runs': runs, 'repeats': repeats, 'rated': rated, 'launcher_runs': launcher_runs,
-            'cycle': capacity.cycle_bound(step=sizes.cycle_step), 'topp': spread(ratios),
+            'cycle': cycle_bound(step=sizes.cycle_step), 'topp': spread(ratios),
             'speed': speed, 'duration': sizes.job_duration, 'modes': list(sizes.job_modes),
             'feed_interval': feed, 'rated_feed': job.default_feed()}
 

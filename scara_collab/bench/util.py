@@ -6,6 +6,7 @@ import math
 import os
 from pathlib import Path
 import platform
+import re
 import sys
 import time
 import timeit
@@ -154,19 +155,11 @@ def finish(ax, xlabel: str, ylabel: str, title: str, hlines: Dict[float, str] = 
 
 @dataclass(frozen=True)
 class Section:
-    """One numbered section of the benchmark and of ``RESULTS.md``, all of it in one module.
+    """One numbered section of ``RESULTS.md``, all of it in one module.
 
-    :ivar key: the results key, the ``--only`` name and the figure's name (``<key>.png``).
-    :ivar title: the name on the progress lines.
-    :ivar heading: the heading in ``RESULTS.md``, without its number.
-    :ivar claims: the keys of the seeds' claims quoted at the top.
-    :ivar text: the fixed paragraph: what is measured, how, the target.
-    :ivar measure: ``measure(smoke, scratch) -> data`` (plain data, arrays allowed); ``smoke``:
-        seconds-long sizes; ``scratch``: a folder for run files.
-    :ivar tables: ``tables(data) -> [Markdown]``: the tables, each maybe with a short label.
-    :ivar summary: ``summary(data) -> rows`` of the summary table.
-    :ivar figure: ``figure(data) -> matplotlib figure``.
-    :ivar figure_alt: the figure's alternative text.
+    ``key``: the ``--only`` name and the figure's (``<key>.png``); ``title``: on the progress
+    lines; ``text``: the fixed paragraph; ``measure(smoke, scratch) -> data``; ``tables(data)
+    -> [Markdown]``; ``summary(data) -> rows`` of the summary table; ``figure(data)``.
     """
 
     key: str
@@ -179,6 +172,35 @@ class Section:
     summary: Callable[[dict], Rows]
     figure: Callable[[dict], Any]
     figure_alt: str
+
+
+def put_block(page: str, name: str, heading: str, body: str) -> str:
+    """Return ``page`` with ``body`` as its block ``name`` under the heading ``## heading``.
+
+    The block replaces the one between the page's markers; without markers, the text under
+    the heading (numbered or not) up to the next ``## `` heading; without either, it is
+    appended under a new heading.
+    """
+    begin, end = f'<!-- {name}:begin -->', f'<!-- {name}:end -->'
+    block = f'{begin}\n{body.strip()}\n{end}'
+    if begin in page and end in page:
+        before, rest = page.split(begin, 1)
+        return before + block + rest.split(end, 1)[1]
+    bare = re.sub(r'^\d+\. ', '', heading)
+    found = re.search(rf'^## (\d+\. )?{re.escape(bare)}\n', page, re.M)
+    if found:
+        after = re.search(r'^## ', page[found.end():], re.M)
+        stop = found.end() + after.start() if after else len(page)
+        return f'{page[:found.end()]}\n{block}\n\n{page[stop:]}'
+    return f'{page.rstrip()}\n\n## {heading}\n\n{block}\n'.lstrip()
+
+
+def write_block(path: Path, name: str, heading: str, body: str,
+                title: str = '# Results, measured') -> None:
+    """Write ``body`` as the block ``name`` of the page at ``path`` (made with ``title``)."""
+    path = Path(path)
+    page = path.read_text() if path.is_file() else f'{title}\n'
+    path.write_text(put_block(page, name, heading, body))
 
 
 def usable(data) -> bool:
