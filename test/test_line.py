@@ -323,3 +323,16 @@ def test_the_line_benchmark_writes_each_scenario_into_its_own_block(tmp_path):
     logs.write_text('[INFO] [1796198515.138241243] [x]: other\n'
                     '[WARN] [1796198520.500000000] [pybullet_bridge]: line: sorting again: ...\n')
     assert bench.wall_of(logs, 'line: sorting again') == pytest.approx(1796198520.5)
+
+
+def test_the_line_capacity_block_sets_each_cells_cpu_beside_one_cells():
+    """The capacity block shows one cell's CPU beside the line's, and the worst ratio."""
+    from scara_collab.bench import line as bench
+    row = {'cells': 2, 'belt_speed': 0.4, 'feed_interval': 0.45, 'one_cell': 41.1,
+           'items_per_minute': 79.3, 'ratio': 0.964, 'worst_cell_ratio': 0.948,
+           'per_cell': [40.3, 39.0], 'min_separation_m': [0.142, 0.182],
+           'cpu_per_cell': [0.98, 0.88], 'one_cell_cpu': 0.8, 'cpu_ratio': 1.225,
+           'handoffs': 258, 'handoff_problems': 0, 'exit_code': 0}
+    text = bench.capacity_text([row], 'cmd')
+    assert '| CPU s per sim s per cell (one cell) | worst CPU / one (<= 1.1) |' in text
+    assert '| 0.98, 0.88 (0.80) | 1.225 |' in text

@@ -82,11 +82,14 @@ def capacity(lines: List[int], duration: float, folder: Path,
     out = []
     for n in lines:
         speed, feed = 0.2 * n, SATURATING / n
-        base = run(1, speed, feed, duration, folder / f'one_{n}', log)['items_per_minute']
+        one = run(1, speed, feed, duration, folder / f'one_{n}', log)
         line = run(n, speed, feed, duration, folder / f'line_{n}', log)
-        line['one_cell'] = base = base or float('nan')
+        line['one_cell'] = base = one['items_per_minute'] or float('nan')
         line['ratio'] = round(line['items_per_minute'] / (n * base), 3)
         line['worst_cell_ratio'] = round(min(line['per_cell']) / base, 3)
+        line['one_cell_cpu'] = cpu = one['cpu_per_cell'][0]
+        costs = [c for c in line['cpu_per_cell'] if c is not None]
+        line['cpu_ratio'] = round(max(costs) / cpu, 3) if cpu and costs else None
         out.append(line)
     return out
 
@@ -137,7 +140,8 @@ def capacity_text(rows: List[Dict[str, object]], command: str) -> str:
             "each line fed N times one cell's saturating feed, at N times the belt speed, "
             'beside one cell at the same speed and feed; each cell in one process, '
             f'unthrottled, in lockstep; items per minute counted after the first {WARM:g} '
-            'sim s.\n\n' + table([{
+            "sim s; CPU: each cell's process with its launcher, per sim s over the job "
+            "(SPEC: within 10 % of one cell's, at most 0.15).\n\n" + table([{
                 'cells': r['cells'], 'belt m/s': f'{r["belt_speed"]:g}',
                 'item every s': f'{r["feed_interval"]:.3g}',
                 'one cell items/min': _f(r['one_cell'], 1),
@@ -146,7 +150,9 @@ def capacity_text(rows: List[Dict[str, object]], command: str) -> str:
                 'worst cell / one (>= 0.85)': _f(r['worst_cell_ratio'], 3),
                 'per cell': ', '.join(_f(p, 1) for p in r['per_cell']),
                 'min separation m': ', '.join(_f(s, 3) for s in r['min_separation_m']),
-                'CPU s per sim s per cell': ', '.join(_f(c) for c in r['cpu_per_cell']),
+                'CPU s per sim s per cell (one cell)': ', '.join(_f(c) for c in r['cpu_per_cell'])
+                + f' ({_f(r["one_cell_cpu"])})',
+                'worst CPU / one (<= 1.1)': _f(r['cpu_ratio'], 3),
                 'handoffs (problems)': f'{r["handoffs"]} ({r["handoff_problems"]})',
                 'exit': r['exit_code']} for r in rows]) + '\n')
 
@@ -191,7 +197,9 @@ def section(args, page: Path, command: str, log: Log) -> bool:
             text, heading = capacity_text(rows, command), 'Capacity'
             bad += [f'capacity {r["cells"]}' for r in rows if r['exit_code']
                     or r['handoff_problems'] or r['ratio'] < 0.9 or r['worst_cell_ratio'] < 0.85
-                    or any(s is None or s < 0.10 for s in r['min_separation_m'])]
+                    or any(s is None or s < 0.10 for s in r['min_separation_m'])
+                    or r['cpu_ratio'] is None or r['cpu_ratio'] > 1.1
+                    or max(c or 0.0 for c in r['cpu_per_cell']) > 0.15]
         elif name == 'rated':
             rows = [rated(n, args.duration or 600.0, folder, log) for n in lines]
             text, heading = rated_text(rows, command), 'At N times the rated feed'
