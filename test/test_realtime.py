@@ -57,3 +57,22 @@ def test_the_page_has_a_row_per_run_and_the_capacity_ratio():
     assert text.count('| lockstep | 1 | 0 | 60 |') == 1 and '| quiet | 1 |' in text
     assert '| 1.100 | 2 | 1.279 |' in text  # lost_s, overspeed, cpu_s
     assert 'ratio 0.976' in text and 'Stop causes' in text
+
+
+def test_a_rerun_replaces_its_block_and_keeps_the_notes_written_by_hand(tmp_path, monkeypatch):
+    """``--only realtime`` writes its block; the page's other block and notes stay."""
+    from argparse import Namespace
+    page = tmp_path / 'REALTIME.md'
+    page.write_text('# Real time, without lockstep\n\n## One process, at 1×\n\n'
+                    '<!-- realtime:one_process:begin -->\nold\n'
+                    '<!-- realtime:one_process:end -->\n\nnotes by hand\n\n'
+                    '## One process per node, at 1×\n\n<!-- realtime:processes:begin -->\n'
+                    'kept\n<!-- realtime:processes:end -->\n')
+    monkeypatch.setattr(realtime, 'run', lambda c, runs, d, s, log, one_process: dict(
+        row(_summary(protective_stops=[])), condition=c, seed=s))
+    args = Namespace(duration=60.0, seeds=[1], conditions=['quiet'], capacity_duration=0,
+                     one_process=True)
+    assert realtime.section(args, page, 'cmd', lambda text: None) is True
+    text = page.read_text()
+    assert 'old' not in text and '| quiet | 1 | 0 | 60 |' in text
+    assert 'notes by hand' in text and 'kept' in text and text.count('realtime:') == 4

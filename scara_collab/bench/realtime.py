@@ -12,7 +12,7 @@ from typing import Dict, Optional, Sequence
 
 from scara_collab import graph
 from scara_collab.bench.launched import launch
-from scara_collab.bench.util import Log, table
+from scara_collab.bench.util import Log, table, write_block
 
 #: 20 +- 10 ms on the joint states and on every status the job's timing hangs on
 LATENCY = (['latency:/joint_states:0.02:0.01']
@@ -61,11 +61,10 @@ def capacity(out: Path, seeds: Sequence[int], duration: float, log: Log,
 
 def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]],
              command: str, duration: float, one_process: bool = False) -> str:
-    """Return the runs and the capacity as a Markdown page."""
+    """Return the runs and the capacity as a Markdown block."""
     def cell(v):
         return f'{v:.3f}' if isinstance(v, float) else ('' if v is None else str(v))
-    lines = ['# Real time, without lockstep', '',
-             f'Measured with `{command}`: the collaborative job through the launcher at '
+    lines = [f'Measured with `{command}`: the collaborative job through the launcher at '
              f'`--rtf 1`, {"one process" if one_process else "one process per node"}, '
              f'{duration:g} sim s a run, the rated feed (conditions: '
              "`scara_collab/bench/realtime.py`). `own_moves`: stops caused by the job's own "
@@ -103,7 +102,9 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     cap = capacity(runs, seeds, cap_s, log, one_process=one) if cap_s > 0 else None
     text = markdown(rows, cap, command, duration, one)
     print(text)
-    page.write_text(text, encoding='utf-8')
+    write_block(page, f'realtime:{"one_process" if one else "processes"}',
+                f'One process{"" if one else " per node"}, at 1×', text,
+                title='# Real time, without lockstep')
     bad = [f'{r["condition"]} seed {r["seed"]}' for r in rows
            if r.get('min_separation_m') is None or r['min_separation_m'] < 0.10
            or (bool(r.get('emergency')) if r['condition'] == 'two_hogs' else
