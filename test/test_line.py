@@ -336,3 +336,27 @@ def test_the_line_capacity_block_sets_each_cells_cpu_beside_one_cells():
     text = bench.capacity_text([row], 'cmd')
     assert '| CPU s per sim s per cell (one cell) | worst CPU / one (<= 1.1) |' in text
     assert '| 0.98, 0.88 (0.80) | 1.225 |' in text
+
+
+def test_an_item_handed_on_close_behind_another_comes_on_behind_it_not_into_it():
+    """Two items that cross closer than an item's size come on touching, none pushed off."""
+    from scara_collab.sim.cell_sim import CellSim
+    sim_cfg, ctl = load_config('simulation'), load_config('controllers')
+    down = CellSim(CELL, dict(sim_cfg, feed_interval=0.0), ctl)
+    try:
+        down.conveyor.join_line(False, 1_000_001)
+        size, speed = CELL.item_size, CELL.belt.speed
+        close = 0.6 * size / speed  # s apart at the boundary: their centres 0.6 sizes apart
+        down.conveyor.receive(Handoff(1, 'red', 0.05, 0.0), 0.0)
+        down.conveyor.receive(Handoff(2, 'red', 0.0, close), close)
+        down.step(int(round(3.0 / down.dt)))
+        events = down.conveyor.pop_events()
+        assert [(e.kind, e.item) for e in events] == [('received', 1), ('received', 2)]
+        assert events[1].time > close  # it waited until the first had moved on
+        items = {it.id: it for it in down.conveyor.items()}
+        assert items[1].state == items[2].state == 'belt'
+        gap = items[1].position[0] - items[2].position[0]
+        assert size <= gap < size + 0.01  # touching, as they came, not one into the other
+        assert abs(items[1].position[1] - 0.05) < 1e-3 and abs(items[2].position[1]) < 1e-3
+    finally:
+        down.close()

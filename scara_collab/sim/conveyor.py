@@ -33,6 +33,7 @@ PAYLOAD_CLASS = 'payload'
 """Class of the test bodies hung on a tool (``Grippers.attach_payload``), not sortable."""
 
 _LOST_Z = -1.0  # m, an item below this fell through something: dropped
+INLET_GAP = 0.002  # m between an item handed on and the one ahead of it, if they came close
 
 
 @dataclass(frozen=True)
@@ -315,11 +316,33 @@ class Conveyor:
         belt = self.cell.belt
         z = belt.top_z + self.cell.item_size / 2.0
         for at, h in due:
-            x = min(belt.x_start + (now - at) * belt.speed, belt.x_end)
+            x = self._room(min(belt.x_start + (now - at) * belt.speed, belt.x_end), h.y)
+            if x < belt.x_start:  # the item ahead still fills the inlet: on at a later update
+                self.ends.expect(h, at, lambda item: False)
+                continue
             rec = self.create_item(h.cls, (x, h.y, z), self.cell.item_mass, 'belt',
                                    item_id=h.item)
             self._set_vel(rec.body, [belt.speed, 0.0, 0.0], [0.0, 0.0, 0.0])
             self.event('received', rec)
+
+    def _room(self, x: float, y: float) -> float:
+        """Return ``x``, or less: where an item coming on at ``y`` overlaps none on the belt.
+
+        Items handed on arrive as far apart as their centres crossed the boundary; two that
+        touched upstream, one turned or nudged, can cross closer than an item's size. Put one
+        into the other and the simulator pushes them apart, one off the belt. It comes on
+        behind the item in its way (``INLET_GAP`` apart), as it would on a real belt.
+        """
+        half = self.cell.item_size / 2.0
+        boxes = [self._pb.getAABB(r.body) for r in self.records.values() if r.state == 'belt']
+        moved = True
+        while moved:
+            moved = False
+            for lo, hi in boxes:
+                if (lo[0] - half - INLET_GAP < x < hi[0] + half + INLET_GAP
+                        and lo[1] - half - INLET_GAP < y < hi[1] + half + INLET_GAP):
+                    x, moved = lo[0] - half - INLET_GAP, True
+        return x
 
     # --- items ----------------------------------------------------------------------------
     def create_item(self, cls: str, pos, mass: float, state: str,
