@@ -2,7 +2,7 @@
 import pytest
 
 from scara_collab.core.line import Handoff
-from scara_collab.sim.conveyor import Feed, SectionEnds
+from scara_collab.sim.conveyor import Feed, INLET_GAP, SectionEnds
 
 
 def test_the_feed_comes_once_a_period_and_restarts_from_a_change():
@@ -26,9 +26,18 @@ def test_handed_items_arrive_in_order_once_and_bad_ones_are_refused(cell):
     ends.expect(Handoff(9, red, 0.0, 4.0), at=5.0, known=lambda item: False)
     ends.expect(Handoff(3, red, 0.1, 4.0), at=5.0, known=lambda item: False)
     ends.expect(Handoff(4, red, -0.1, 3.0), at=4.0, known=lambda item: False)
-    assert ends.arrivals(3.99) == []
-    assert [(at, h.item) for at, h in ends.arrivals(5.0)] == [(4.0, 4), (5.0, 3), (5.0, 9)]
-    assert ends.arrivals(6.0) == []
+    none = list
+    assert ends.arrivals(3.99, none) == []
+    x0, speed, half = cell.belt.x_start, cell.belt.speed, cell.item_size / 2
+    came = ends.arrivals(5.0, none)  # 4 rode 1 s; 9 would come on into 3: it waits
+    assert [(h.item, x) for h, x in came] == [(4, pytest.approx(x0 + speed)), (3, x0)]
+    later = 1.0  # s: item 3 has moved on, 9 comes on right behind it
+    x3 = x0 + speed * later
+    item3 = ((x3 - half, 0.1 - half, 0.2), (x3 + half, 0.1 + half, 0.3))
+    came = ends.arrivals(5.0 + later, lambda: [item3])
+    assert [(h.item, x) for h, x in came] == [
+        (9, pytest.approx(x0 + speed * later - 2 * half - INLET_GAP))]
+    assert ends.arrivals(7.0, none) == []
     with pytest.raises(ValueError, match='unknown class'):
         ends.expect(Handoff(5, 'purple', 0.0, 1.0), 2.0, lambda item: False)
     with pytest.raises(ValueError, match='off the belt'):

@@ -169,6 +169,32 @@ class Feed:
         return False
 
 
+def behind(x: float, y: float, boxes, half: float, gap: float = INLET_GAP) -> float:
+    """Return ``x``, or less: where an item coming on at ``y`` overlaps none of ``boxes``.
+
+    Items handed on arrive as far apart as their centres crossed the boundary; two that
+    touched upstream, one turned or nudged, can cross closer than an item's size. Put one into
+    the other and the simulator pushes them apart, one off the belt. It comes on behind the
+    item in its way, ``gap`` apart, as it would on a real belt.
+
+    :param boxes: ``(lo, hi)`` corners of the items on the belt (PyBullet's ``getAABB``).
+    :param half: half the item's size.
+
+    >>> round(behind(0.05, 0.0, [((0.0, -0.05, 0.2), (0.1, 0.05, 0.3))], 0.05, 0.002), 6)
+    -0.052
+    >>> behind(0.05, 0.2, [((0.0, -0.05, 0.2), (0.1, 0.05, 0.3))], 0.05, 0.002)
+    0.05
+    """
+    moved = True
+    while moved:
+        moved = False
+        for lo, hi in boxes:
+            if (lo[0] - half - gap < x < hi[0] + half + gap
+                    and lo[1] - half - gap < y < hi[1] + half + gap):
+                x, moved = lo[0] - half - gap, True
+    return x
+
+
 class SectionEnds:
     """Where a belt meets its neighbours in a line of cells: items coming on, items handed on.
 
@@ -198,15 +224,31 @@ class SectionEnds:
             raise ValueError(f'handed item {h.item}: already on this belt')
         self._arriving.append((float(at), h))
 
-    def arrivals(self, now: float) -> List[Tuple[float, Handoff]]:
-        """Return the items due by ``now`` (arrival time, item), in order; forget them."""
+    def arrivals(self, now: float, boxes: Callable[[], list]) -> List[Tuple[Handoff, float]]:
+        """Return the items that come on by ``now``, in order, each with its ``x``; forget them.
+
+        An item comes on as far along as it rode since it crossed, or behind the item in its
+        way (:func:`behind`); if that is not on the belt yet, it stays due for a later call.
+
+        :param boxes: returns the axis-aligned boxes ``(lo, hi)`` of the items on the belt.
+        """
         if not self._arriving:  # the usual case, at every belt update
             return []
         due = sorted((a for a in self._arriving if a[0] <= now + 1e-9),
                      key=lambda a: (a[0], a[1].item))
-        if due:
-            self._arriving = [a for a in self._arriving if a[0] > now + 1e-9]
-        return due
+        if not due:
+            return []
+        belt, half = self.cell.belt, self.cell.item_size / 2.0
+        taken, placed, around = set(), [], boxes()
+        for at, h in due:
+            x = behind(min(belt.x_start + (now - at) * belt.speed, belt.x_end), h.y, around,
+                       half)
+            if x >= belt.x_start:
+                taken.add(h.item)
+                placed.append((h, x))
+                around.append(((x - half, h.y - half), (x + half, h.y + half)))
+        self._arriving = [a for a in self._arriving if a[1].item not in taken]
+        return placed
 
     def pop_handoffs(self) -> List[Handoff]:
         """Return the items handed on since the last call, in crossing order."""
@@ -310,39 +352,14 @@ class Conveyor:
         return self.ends.pop_handoffs()
 
     def _arrive(self, now: float) -> None:
-        due = self.ends.arrivals(now)
-        if not due:
-            return
         belt = self.cell.belt
         z = belt.top_z + self.cell.item_size / 2.0
-        for at, h in due:
-            x = self._room(min(belt.x_start + (now - at) * belt.speed, belt.x_end), h.y)
-            if x < belt.x_start:  # the item ahead still fills the inlet: on at a later update
-                self.ends.expect(h, at, lambda item: False)
-                continue
+        for h, x in self.ends.arrivals(now, lambda: [
+                self._pb.getAABB(r.body) for r in self.records.values() if r.state == 'belt']):
             rec = self.create_item(h.cls, (x, h.y, z), self.cell.item_mass, 'belt',
                                    item_id=h.item)
             self._set_vel(rec.body, [belt.speed, 0.0, 0.0], [0.0, 0.0, 0.0])
             self.event('received', rec)
-
-    def _room(self, x: float, y: float) -> float:
-        """Return ``x``, or less: where an item coming on at ``y`` overlaps none on the belt.
-
-        Items handed on arrive as far apart as their centres crossed the boundary; two that
-        touched upstream, one turned or nudged, can cross closer than an item's size. Put one
-        into the other and the simulator pushes them apart, one off the belt. It comes on
-        behind the item in its way (``INLET_GAP`` apart), as it would on a real belt.
-        """
-        half = self.cell.item_size / 2.0
-        boxes = [self._pb.getAABB(r.body) for r in self.records.values() if r.state == 'belt']
-        moved = True
-        while moved:
-            moved = False
-            for lo, hi in boxes:
-                if (lo[0] - half - INLET_GAP < x < hi[0] + half + INLET_GAP
-                        and lo[1] - half - INLET_GAP < y < hi[1] + half + INLET_GAP):
-                    x, moved = lo[0] - half - INLET_GAP, True
-        return x
 
     # --- items ----------------------------------------------------------------------------
     def create_item(self, cls: str, pos, mass: float, state: str,
