@@ -194,8 +194,9 @@ class LaneDecisions:
             self.log('info', f'{lane.robot}: grasp of item {item.id} failed ({main.message})')
             lane.idle()
         elif s.carry_z > s.pick_z + 1e-6 and self.moves.would_sweep(lane, self.items, now):
+            up = np.array([lane.target[0], lane.target[1], s.carry_z])
             lane.bin_tries, lane.holding = 0, True
-            self.moves.lift(lane, now)
+            self.moves.move(lane, 'lift', up, self.moves.asap_start(lane, now), now)
         else:
             lane.bin_tries, lane.holding = 0, True
             self.moves.to_bin(lane, now)

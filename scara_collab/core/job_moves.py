@@ -87,26 +87,6 @@ class JobMoves:
             drop[2] = max(drop[2], self.settings.carry_z)
         self.move_safely(lane, 'to_bin', drop, self.asap_start(lane, now), now)
 
-    def lift(self, lane: Lane, now: float) -> None:
-        """Lift the item ``lane`` just grasped to ``carry_z``, going along with the belt.
-
-        Lifted straight up, the held item would stand still while the belt brings the item
-        behind it into it (2 cm behind at three times the rated feed), and that one pushes the
-        next off the belt. It goes up and along the belt as far as the belt moves from now to
-        the lift's end, so it ends the lift where it would have ridden (straight up if that is
-        out of reach).
-        """
-        start, q = self.asap_start(lane, now), self.protocol.q[lane.robot]
-        up = np.array([lane.target[0], lane.target[1], self.settings.carry_z])
-        try:
-            span = float(self.plan(lane.robot, q, up).t[-1])
-            along = up + [self.cell.belt.speed * (start - now + span), 0.0, 0.0]
-            self.plan(lane.robot, q, along)
-            up = along
-        except ValueError:
-            pass
-        self.move(lane, 'lift', up, start, now)
-
     def park(self, lane: Lane, now: float) -> None:
         """Wait clear of the shared zone, above the first bin, so the other arm is free."""
         park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
