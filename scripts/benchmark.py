@@ -58,8 +58,10 @@ def parse(argv=None) -> argparse.Namespace:
     p.add_argument('--hogs', type=int, default=None, help='protocol: CPU hogs (2)')
     p.add_argument('--cells', type=int, nargs='+', default=None,
                    help='line: line lengths (2 3), each beside one cell')
-    p.add_argument('--scenarios', nargs='+', default=None, choices=('capacity', 'rated', 'kill'),
+    p.add_argument('--scenarios', nargs='+', default=None,
+                   choices=('capacity', 'rated', 'realtime', 'kill'),
                    help='line: capacity (default), rated (N x the rated feed, lossy handoffs), '
+                   'realtime (N x the rated feed, unthrottled and at 1x), '
                    'kill (cell 1 of 3 killed at 300 sim s)')
     return p.parse_args(argv)
 

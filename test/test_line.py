@@ -215,6 +215,9 @@ def test_a_two_cell_line_hands_items_on_through_lost_and_repeated_messages(tmp_p
     assert s['handoff_problems'] == [] and s['balanced']
     assert s['spawned'] == c0['spawned'] and c1['spawned'] == 0  # only cell 0 is fed
     assert 'line of 2 cells finished' in proc.stdout
+    paces = [c['real_time_factor'] for c in s['cells']]
+    assert all(p > 0 for p in paces) and s['real_time_factor'] == min(paces)
+    assert f'{min(paces):.2f}x real time (its slowest cell)' in proc.stdout
     log = (out / 'cell_0' / 'logs').glob('*.log')
     assert any('fault injection: loss /cell_0/line/handoff' in p.read_text() for p in log)
 
@@ -323,6 +326,13 @@ def test_the_line_benchmark_writes_each_scenario_into_its_own_block(tmp_path):
     logs.write_text('[INFO] [1796198515.138241243] [x]: other\n'
                     '[WARN] [1796198520.500000000] [pybullet_bridge]: line: sorting again: ...\n')
     assert bench.wall_of(logs, 'line: sorting again') == pytest.approx(1796198520.5)
+    paced = dict(rated, cells=3, duration=120.0, rtf=1.0, real_time_factor=[0.99, 0.96, None],
+                 cpu_per_cell=[0.5, 0.4, 0.3], sorted=150)
+    write_block(page, 'line:realtime', 'Real time', bench.realtime_text(
+        [dict(paced, rtf=0.0, real_time_factor=[1.6, 1.5, 1.7]), paced], 'd'))
+    text = page.read_text()
+    assert '| 3 | unthrottled | 120 | 1.60, 1.50, 1.70 | 1.50 | 0.50, 0.40, 0.30 | 150 |' in text
+    assert '| 3 | 1x | 120 | 0.99, 0.96, - | - |' in text  # a cell without a pace: none
 
 
 def test_the_line_capacity_block_sets_each_cells_cpu_beside_one_cells():

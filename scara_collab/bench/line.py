@@ -9,6 +9,8 @@ Every run: each cell in one process, unthrottled, in lockstep (docs/benchmarks.m
   received once;
 - ``rated``: N cells at N times the rated feed, a third of the handoffs lost and a third
   repeated; target 0 missed, every handoff received once, the items balanced;
+- ``realtime``: N cells at N times the rated feed, unthrottled and paced at 1x; targets:
+  every cell faster than real time unthrottled, at least :data:`PACED` x real time paced;
 - ``kill``: three cells at three times the rated feed, undisturbed and with cell 1's bridge
   killed at 300 sim s; targets: cell 0's events identical, cell 2 sorting again within the
   lookahead + 10 s wall of the kill, the report naming cell 1, a non-zero exit.
@@ -33,6 +35,7 @@ from scara_collab.records.line_report import read_events
 SATURATING = 0.9  # s per item: one cell's saturating feed at 0.2 m/s
 WARM = 40.0  # sim s left out of the rates: three sections at 0.6 m/s, and the job's start
 LOSSY = ('loss:/cell_{k}/line/handoff:0.3', 'repeat:/cell_{k}/line/handoff:0.3')
+PACED = 0.97  # real-time factor a cell paced at 1x must keep (the start's catch-up aside)
 STAMP = re.compile(r'\[(\d+\.\d+)\]')  # a ROS log line's wall stamp
 
 
@@ -49,12 +52,12 @@ def belt_share(speed: float, into: Path) -> Path:
 
 
 def run(cells: int, speed: float, feed: float, duration: float, out: Path, log: Log,
-        seed: int = 1, flags: Sequence[str] = ()) -> Dict[str, object]:
+        seed: int = 1, flags: Sequence[str] = (), rtf: float = 0.0) -> Dict[str, object]:
     """Run a line of ``cells`` (1: a lone cell) at ``speed`` and ``feed``; return its row."""
     env = dict(os.environ)
     if speed != load_cell().belt.speed:
         env['SCARA_COLLAB_SHARE'] = str(belt_share(speed, out.parent / f'share_{speed:g}'))
-    s = Launch('collaborative', duration, out, 0.0, env=env, flags=[
+    s = Launch('collaborative', duration, out, rtf, env=env, flags=[
         '--cells', str(cells), '--one-process', '--feed-interval', f'{feed:g}', '--seed',
         str(seed), *flags]).finish(None)
     rows = s.get('cells') or [dict(s, cell=0)]
@@ -63,6 +66,8 @@ def run(cells: int, speed: float, feed: float, duration: float, out: Path, log: 
            * 60.0 / (duration - WARM) if (f / 'events.csv').is_file() else 0.0
            for f in folders]
     row = {'cells': cells, 'belt_speed': speed, 'feed_interval': feed, 'duration': duration,
+           'rtf': rtf, 'real_time_factor': [r.get('real_time_factor') for r in rows],
+           'sorted': s.get('sorted'),
            'exit_code': s['exit_code'], 'items_per_minute': round(sum(per), 2),
            'per_cell': per, 'min_separation_m': [r.get('min_separation_m') for r in rows],
            'cpu_per_cell': [r.get('cpu_s_per_sim_s')
@@ -100,6 +105,13 @@ def rated(n: int, duration: float, folder: Path, log: Log) -> Dict[str, object]:
     flags = [a for k in range(n - 1) for f in LOSSY for a in ('--fault', f.format(k=k))]
     return run(n, load_cell().belt.speed, feed, duration, folder / f'rated_{n}', log,
                flags=flags)
+
+
+def realtime(n: int, duration: float, folder: Path, log: Log) -> List[Dict[str, object]]:
+    """N cells at N times the rated feed, unthrottled and paced at 1x: the pace each keeps."""
+    feed = float(load_config('simulation')['feed_interval']) / n
+    return [run(n, load_cell().belt.speed, feed, duration, folder / f'pace_{n}_{rtf:g}', log,
+                rtf=rtf) for rtf in (0.0, 1.0)]
 
 
 def wall_of(path: Path, text: str) -> float:
@@ -168,6 +180,27 @@ def rated_text(rows: List[Dict[str, object]], command: str) -> str:
                       for k in head} for r in rows]) + '\n')
 
 
+def realtime_text(rows: List[Dict[str, object]], command: str) -> str:
+    """Return the paced runs as a Markdown block."""
+    return (f'Measured with `{command}`: N cells at N times the rated feed, each cell in one '
+            'process, in lockstep, unthrottled (`--rtf 0`) and paced at real time '
+            "(`--rtf 1`); real-time factor: each cell's sim s over its job's wall s.\n\n"
+            + table([{
+                'cells': r['cells'], 'paced': f'{r["rtf"]:g}x' if r['rtf'] else 'unthrottled',
+                'sim s': f'{r["duration"]:g}',
+                'real-time factor per cell': ', '.join(_f(x) for x in r['real_time_factor']),
+                'line (its slowest cell)': _f(_slowest(r)),
+                'CPU s per sim s per cell': ', '.join(_f(c) for c in r['cpu_per_cell']),
+                'sorted': r['sorted'], 'missed': r['missed'], 'exit': r['exit_code']}
+                for r in rows]) + '\n')
+
+
+def _slowest(row: Dict[str, object]):
+    """Return the line's real-time factor: its slowest cell's (None if one is missing)."""
+    paces = row['real_time_factor']
+    return None if not paces or None in paces else min(paces)
+
+
 def kill_text(r: Dict[str, object], command: str) -> str:
     """Return the killed-cell run as a Markdown block."""
     return (f'Measured with `{command}`: three cells at three times the rated feed, '
@@ -205,6 +238,11 @@ def section(args, page: Path, command: str, log: Log) -> bool:
             text, heading = rated_text(rows, command), 'At N times the rated feed'
             bad += [f'rated {r["cells"]}' for r in rows if r['exit_code'] or r['missed']
                     or r['handoff_problems'] or not r['balanced']]
+        elif name == 'realtime':
+            rows = [r for n in lines for r in realtime(n, args.duration or 120.0, folder, log)]
+            text, heading = realtime_text(rows, command), 'Real time'
+            bad += [f'realtime {r["cells"]} at {r["rtf"]:g}x' for r in rows if r['exit_code']
+                    or (_slowest(r) or 0.0) < (PACED if r['rtf'] else 1.0)]
         else:
             duration = args.duration or 330.0
             r = kill(duration, min(300.0, duration - 30.0), folder, log)

@@ -37,7 +37,7 @@ EXIT_HANDOFF = 7
 #: what the line's summary keeps of each cell's summary
 CELL_KEYS = ('spawned', 'received', 'sorted', 'missed', 'handed_on', 'wrong_bin', 'dropped',
              'in_progress', 'items_per_minute', 'min_separation_m', 'sim_seconds',
-             'exit_code', 'exit_reason')
+             'real_time_factor', 'exit_code', 'exit_reason')
 LINE_REPORT = 'line_report.txt'
 LINE_PLOT = 'line_sorted.png'
 
@@ -164,6 +164,8 @@ def line_summary(output: Union[str, Path], cells: int, transit: float, duration:
         'died': sorted(died), 'through_dead': check['through'],
     }
     summary['items_per_minute'] = round(summary['sorted'] * 60.0 / duration, 2)
+    paces = [r.get('real_time_factor') for r in rows]  # a line goes at its slowest cell's pace
+    summary['real_time_factor'] = None if None in paces or not paces else min(paces)
     gone = sum(summary[k] for k in ('sorted', 'wrong_bin', 'missed', 'dropped', 'in_cells',
                                     'between_cells'))
     # items held in a dead cell, or on their way through it at the end, are not counted
@@ -189,19 +191,22 @@ def format_line_report(s: Mapping[str, object]) -> str:
     head = (f'line of {s["line_cells"]} cells finished ({s["exit_reason"]})' if code == 0 else
             f'line of {s["line_cells"]} cells FAILED, exit {code}: {s["exit_reason"]}')
     lines = [head, f'  {"cell":<6} {"sorted":>6} {"missed":>6} {"handed":>6} {"recvd":>6} '
-             f'{"drop":>5} {"stops":>5} {"min sep m":>9} {"CPU s/sim s":>11}  exit']
+             f'{"drop":>5} {"stops":>5} {"min sep m":>9} {"CPU s/sim s":>11} {"RTF":>6}  exit']
     for r in s['cells']:
         sep = r.get('min_separation_m')
-        cpu = r.get('cpu_s_per_sim_s')
+        cpu, rtf = r.get('cpu_s_per_sim_s'), r.get('real_time_factor')
         lines.append(f'  {r["cell"]:<6} {r.get("sorted") or 0:>6} {r.get("missed") or 0:>6} '
                      f'{r.get("handed_on") or 0:>6} {r.get("received") or 0:>6} '
                      f'{r.get("dropped") or 0:>5} {r.get("stops") or 0:>5} '
                      f'{"-" if sep is None else f"{sep:.3f}":>9} '
-                     f'{"-" if cpu is None else f"{cpu:.2f}":>11}  {r.get("exit_code")}')
+                     f'{"-" if cpu is None else f"{cpu:.2f}":>11} '
+                     f'{"-" if rtf is None else f"{rtf:.2f}x":>6}  {r.get("exit_code")}')
     lines.append(f'  line: spawned {s["spawned"]}, sorted {s["sorted"]} '
                  f'({s["items_per_minute"]} items/min), missed {s["missed"]}, dropped '
                  f'{s["dropped"]}, wrong bin {s["wrong_bin"]}; {s["in_cells"]} in cells and '
-                 f'{s["between_cells"]} between cells at the end')
+                 f'{s["between_cells"]} between cells at the end'
+                 + ('' if s.get('real_time_factor') is None else
+                    f'; {s["real_time_factor"]:.2f}x real time (its slowest cell)'))
     lines.append(f'  handoffs: {s["handoffs"]} checked, '
                  + ('each received once' if not s['handoff_problems'] else
                     f'{len(s["handoff_problems"])} problem(s): {s["handoff_problems"][0]}')
