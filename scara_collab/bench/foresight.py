@@ -217,15 +217,5 @@ def figure(f: dict):
 SECTION = Section(
     key='foresight', title='collision foresight on crossing moves',
     heading='Collision foresight and margins', claims=('foresight', 'collision_risk'),
-    text='Random pairs of crossing moves (seed 1): each arm between two random reachable points '
-    'of its side and the shared zone, the tool paths crossing in plan view, the resting poses '
-    'compatible (so a delay can always resolve a conflict). Both moves are decided at t = 0 '
-    'and asked to start after the decision lead, planned and scheduled by the motion core '
-    'exactly as the planner nodes do (left has priority; the right arm waits the smallest '
-    "delay that keeps the margin plus the planners' buffer). Distances are predicted on a 5 "
-    'ms grid; the first conflicting pairs are then executed in physics with their delays. A '
-    'conflict is found when the moves are planned, before either starts; the collision '
-    'monitor (runtime stop below the margin) is the safety net behind this. Target: zero '
-    'breaches.',
     measure=measure, tables=tables, summary=summary, figure=figure,
     figure_alt='foresight and separation histograms')

@@ -135,11 +135,5 @@ SECTION = Section(
     key='paths', title='path deviation: straight line vs joint interpolation',
     heading='Path deviation: straight line vs joint interpolation',
     claims=('joint_deviation', 'line_deviation', 'path_length'),
-    text='The seeds\' "1.5m move from the rest position to the conveyor center", taken as '
-    '(3.2, -0.9, 0.4) → (2.0, 0.0, 0.4) m in world for `scara_left`, planned by the motion '
-    'core as a straight line and as a joint move, each time-optimal under the same joint '
-    'limits, then executed in the PyBullet cell (1 kHz physics) and measured from the joint '
-    'states every 10 ms. Jerk is the third difference of those tool positions. Targets: the '
-    'line within 1e-6 m planned and 1 mm executed.',
     measure=measure, tables=tables, summary=summary, figure=figure,
     figure_alt='tool paths seen from above and their deviation')

@@ -126,12 +126,5 @@ def figure(pay: dict):
 SECTION = Section(
     key='payload', title='payload response', heading='Payload response: PID vs computed torque',
     claims=('payload',),
-    text='A planned straight line (3.3, -0.8, 0.5) → (1.8, -0.8, 0.5) m (`scara_left`, 1.5 m, '
-    'time-optimal) executed in the PyBullet cell with the payload hung on the tool (a fixed '
-    "constraint, so physics feels it), by the seeds' PID gains (planar 15/0.5/2, quill "
-    '10/0.1/1) and by computed torque (the Lagrangian model as feed-forward). Settling: time '
-    'after the trajectory ends until the tool stays within 1 mm of the goal. Overshoot: '
-    'furthest tool travel past the goal along the line, % of the line. Peak effort: the '
-    'largest commanded joint effort (N·m, N·m, N). The SPEC sets no target here.',
     measure=measure, tables=tables, summary=summary, figure=figure,
     figure_alt='distance to the goal over time, per payload')

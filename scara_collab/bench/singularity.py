@@ -133,11 +133,5 @@ SECTION = Section(
     key='singularity', title='singularity: pseudo-inverse vs DLS',
     heading='Singularity: pseudo-inverse vs damped least squares',
     claims=('singularity', 'unreachable'),
-    text="Straight lines (base frame of `scara_left`) at 0.3 m/s through the seeds' "
-    'differential-kinematics loop at 1 kHz (`core.trajectory.resolved_rate`, position '
-    'feedback 5/s), once with the plain pseudo-inverse, once with DLS (damping as in '
-    "`controllers.yaml`). The inner cases need elbow angles beyond the arm's ±150° limit: "
-    'they test the solver where the seeds put their claim, not a move the cell can make. The '
-    'planner times its own line so that no joint exceeds the limit. Target: ≤ 2 rad/s.',
     measure=measure, tables=tables, summary=summary, figure=figure,
     figure_alt='joint speed along the study paths')

@@ -256,12 +256,5 @@ SECTION = Section(
     key='solvers', title='solver speed vs reference implementations',
     heading='Solver speed, against reference implementations',
     claims=('ik_latency', 'solver_latency'),
-    text='The motion core beside reference implementations, in the same process on the same '
-    'random inputs: one call (median of several loops of many calls) and N at once (100,000 '
-    'states; arm-to-arm: 5,000). "ours vs reference" = how many times faster ours is (< 1: '
-    'slower); references without a batch API are called once per item. The last row times '
-    'the one collision formula on one state pair against the same formula written with '
-    'branches on plain floats. Targets: IK ≤ 5 µs for one target, ≥ 10⁶ targets/s at once. '
-    'On a shared machine absolute figures are noisy, ratios less so.',
     measure=measure, tables=tables, summary=summary, figure=figure,
     figure_alt='speed-up over the references')

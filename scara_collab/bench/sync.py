@@ -193,13 +193,5 @@ def figure(g: dict):
 SECTION = Section(
     key='sync', title='synchronisation: mirrored moves through the graph',
     heading='Synchronisation: mirror error and start lag', claims=('mirror_error', 'lag'),
-    text='Mirrored straight-line moves through the ROS graph (bridge, both planners and the '
-    'replication manager in one process on sim time, unthrottled): each target goes to '
-    '`collab/target`, the left arm moves there, the right arm to the mirror image, with one '
-    "start stamp. Mirror error: the right tool's distance from the mirror of the left tool over "
-    'the move, from the joint states. Start lag three ways: the start stamps of the two '
-    'trajectories, the starts the bridge reports having executed, and the measured onsets '
-    '(first state 0.1 mm from rest; resolution one state period). Targets: mirror error ≤ 1 mm, '
-    'lag ≤ one physics step.',
     measure=measure, tables=tables, summary=summary, figure=figure,
     figure_alt='mirror error over the moves')
