@@ -1,9 +1,4 @@
-"""The design documents' result claims, quoted once: the figures the benchmarks are set beside.
-
-None of these was ever measured (``../shared/SPEC.md``). Markdown emphasis is dropped from the
-quotes; the words are the documents' own. ``seeds/000`` is the paper, ``seeds/001`` the
-phase-I report.
-"""
+"""The design documents' result claims, quoted verbatim (emphasis dropped): never measured."""
 from typing import Dict, NamedTuple
 
 

@@ -1,8 +1,4 @@
-"""The fault matrix: bad input, lost answers, hung and killed nodes against the launcher.
-
-Each case starts the launcher in its own ROS domain, waits for the job, injects one fault (a
-probe node in this process, a launcher flag or a signal) and judges the run from its files.
-"""
+"""The fault matrix: each case one launcher run, one fault injected, judged from its files."""
 from contextlib import suppress
 from dataclasses import dataclass
 import os
@@ -230,10 +226,7 @@ CASES = (
 
 
 def run_case(case: Case, out: Path, domain: int, log: Log) -> Dict:
-    """Run one case in ROS domain ``domain``; return its row: case, expected, observed, pass.
-
-    An injection returns None or the pid of a process it stopped (SIGCONT after the run).
-    """
+    """Run one case in ROS domain ``domain``; return its row (a stopped pid is resumed after)."""
     use_domain(domain)
     run, frozen = Launch(case.mode, case.duration, out, 1.0, case.flags, quiet=False), None
     try:
@@ -258,10 +251,7 @@ def run_case(case: Case, out: Path, domain: int, log: Log) -> Dict:
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the fault cases into the ``faults`` block of ``page``; True if every case passed.
-
-    ``--cases``: 1-based case numbers (default all; the block is written for all only).
-    """
+    """Run the ``--cases`` (all: into the ``faults`` block); True if every one passed."""
     out = Path(tempfile.mkdtemp(prefix='scara_faults_'))
     start = time.monotonic()
     rows = [run_case(c, out / f'case_{k}', 50 + k, log) for k, c in enumerate(CASES, 1)

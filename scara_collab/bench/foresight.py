@@ -27,14 +27,7 @@ def _cross(a0, a1, b0, b1) -> bool:
 
 
 def random_pair(cell: CellModel, rng: np.random.Generator, clearance: float):
-    """Draw and plan one crossing pair; return ``(left Trajectory, right Trajectory)``.
-
-    Each arm moves between two random reachable points of its side of the cell and the shared
-    zone, at least 0.4 m apart, planned as the planners do; the tool paths cross in plan view.
-    What a delay cannot change is kept ``clearance`` apart: both starts, both goals, the left
-    move against the right arm at rest, the right move against the left arm at its goal.
-    Only the timing decides whether the pair conflicts.
-    """
+    """Draw and plan two moves crossing in plan view that only their timing can bring together."""
     left, right = cell.leader, cell.follower
 
     def draw(y_lo, y_hi):
@@ -78,11 +71,7 @@ def _execute(sim: CellSim, cell: CellModel, moves) -> float:
 
 
 def measure(smoke: bool, scratch: Path) -> dict:
-    """Draw, schedule and (the first conflicts) execute 200 crossing pairs (seed 1; smoke: 6).
-
-    Per pair: when the margin would break and the capsules touch if both started together,
-    the outcome (``'waits'``: no delay keeps the margin), the delay and the separations.
-    """
+    """Draw, schedule and predict 200 crossing pairs (smoke: 6); execute the first 30 conflicts."""
     cell = load_cell()
     left, right = cell.leader, cell.follower
     margin = cell.safety_margin

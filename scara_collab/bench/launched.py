@@ -1,9 +1,4 @@
-"""The launcher as a subprocess, for every section that runs it, and a run's row and blocks.
-
-:class:`Launch` starts ``scara_collab.run.launcher`` and keeps its output lines; :func:`launch`
-runs it to the end in a ROS domain of its own, beside CPU hogs if asked, and returns its
-:func:`row`; :func:`cells`, :func:`stamp` and :func:`publish` make the sections' blocks.
-"""
+"""The launcher as a subprocess for the sections that run it; a run's row; their blocks."""
 from contextlib import contextmanager
 import json
 import os
@@ -17,7 +12,7 @@ import threading
 import time
 from typing import Dict, Iterator, List, Optional, Sequence
 
-from scara_collab.bench.util import Log, num, table, write_block
+from scara_collab.bench.util import Log, mm, num, table, write_block
 
 Summary = Dict[str, object]
 HOG = 'import time\nend = time.monotonic() + {limit}\nwhile time.monotonic() < end: pass\n'
@@ -83,10 +78,7 @@ class Launch:
         return path.read_text(errors='replace') if path.is_file() else ''
 
     def finish(self, timeout: Optional[float]) -> Summary:
-        """Wait for the end (SIGINT, then SIGKILL, after ``timeout`` wall s); return the summary.
-
-        ``summary.json`` plus ``exit_code``, ``launcher_wall_seconds`` and maybe an ``error``.
-        """
+        """Wait (SIGINT, SIGKILL after ``timeout`` wall s); return ``summary.json`` and exit."""
         error = None
         for stop in (None, signal.SIGINT, signal.SIGKILL):
             if stop is not None:  # SIGINT: the launcher stops its nodes and writes its files
@@ -127,11 +119,7 @@ KEYS = ('exit_code', 'exit_reason', 'error', 'sorted', 'missed', 'dropped', 'wro
 
 
 def row(summary: Summary) -> Dict[str, object]:
-    """Return one run's figures: :data:`KEYS`, the job's give-ups, and its stops.
-
-    ``own_moves``: stops the job's own moves caused (``predicted``); ``lost_s``: sim s the
-    stops cost; ``cpu_s``: CPU s per sim s (every process); ``overspeed``: a joint too fast.
-    """
+    """Return one run's figures: :data:`KEYS`, the job's give-ups, its stops, CPU, overspeed."""
     job = summary.get('job') or {}
     cpu = summary.get('cpu_per_sim_s') or {}
     both = stops(summary, 'protective') + stops(summary, 'emergency')
@@ -149,10 +137,7 @@ def row(summary: Summary) -> Dict[str, object]:
 
 def launch(what: str, domain: int, mode: str, duration: float, out: Path, log: Log,
            hogs: int = 0, **kwargs) -> Dict[str, object]:
-    """Run the launcher in ``domain`` beside ``hogs`` CPU hogs; log and return its :func:`row`.
-
-    ``kwargs``: :func:`run_launcher`'s; ``timeout`` defaults to 3 × duration + 300 s.
-    """
+    """Run the launcher in ``domain`` beside ``hogs`` CPU hogs; log and return its :func:`row`."""
     use_domain(domain)
     kwargs.setdefault('timeout', duration * 3 + 300)
     with cpu_hogs(hogs, kwargs['timeout']):
@@ -165,7 +150,7 @@ def launch(what: str, domain: int, mode: str, duration: float, out: Path, log: L
 
 
 FORMATS = {'min_separation_m': lambda v: num(v, 3, 'm'), 'real_time_factor': num,
-           'mirror_error_max_m': lambda v: num(None if v is None else v * 1e3, 3, 'mm')}
+           'mirror_error_max_m': mm}
 
 
 def cells(rows: Sequence[Dict[str, object]], keys: Sequence[str]) -> str:

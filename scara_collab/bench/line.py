@@ -1,18 +1,4 @@
-"""A line of cells through the launcher (``--only line``): one block of ``LINE.md`` a scenario.
-
-Every run: each cell in one process, unthrottled, in lockstep (docs/benchmarks.md says more).
-
-- ``capacity``: N cells (``--cells``, 2 and 3) fed N times one cell's saturating feed (an item
-  every 0.9 / N s) at N times the belt speed, beside one cell at that speed and feed (a share
-  folder with the faster belt: ``SCARA_COLLAB_SHARE``); items/min after :data:`WARM` sim s.
-  Targets: line >= 0.9 x N x one cell's, every cell >= 0.85 x, the margin kept, every handoff
-  received once;
-- ``rated``: N cells at N times the rated feed, a third of the handoffs lost and a third
-  repeated; target 0 missed, every handoff received once, the items balanced;
-- ``kill``: three cells at three times the rated feed, undisturbed and with cell 1's bridge
-  killed at 300 sim s; targets: cell 0's events identical, cell 2 sorting again within the
-  lookahead + 10 s wall of the kill, the report naming cell 1, a non-zero exit.
-"""
+"""A line of cells through the launcher (``--only line``): a block of ``LINE.md`` a scenario."""
 import os
 from pathlib import Path
 import re
@@ -182,11 +168,7 @@ def kill_text(r: Dict[str, object], command: str) -> str:
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the ``--scenarios`` (default capacity) into blocks of ``LINE.md``; False if one missed.
-
-    ``--cells``: line lengths (2 3); ``--duration``: sim s per run (capacity 240, rated 600,
-    kill 330 with the kill at 300 or 30 s before the end).
-    """
+    """Run the ``--scenarios`` (capacity) into blocks of ``LINE.md``; False if one missed."""
     target = page.parent / 'LINE.md'
     folder = Path(tempfile.mkdtemp(prefix='scara_line_'))
     log(f'run folders in {folder}')

@@ -21,10 +21,7 @@ METHODS = {'joint': 'joint interp.', 'line': 'straight line'}
 
 
 def execute(cell: CellModel, arm: ArmModel, traj: Trajectory, settle: float = 0.3) -> dict:
-    """Execute ``traj`` in a fresh simulator (``settle`` s more); return its path metrics.
-
-    ``duration``: until the tool stays within :data:`ARRIVED` of the goal (None: never).
-    """
+    """Execute ``traj`` in a fresh simulator, ``settle`` s more; return its path metrics."""
     with CellSim(cell, dict(load_config('simulation'), feed_interval=0.0)) as sim:
         sim.reset_arm(arm.name, traj.q[0])
         t0 = sim.time

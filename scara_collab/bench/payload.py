@@ -20,10 +20,7 @@ CONTROLLERS = {'pid': "PID (seeds' gains)", 'computed_torque': 'computed torque'
 
 
 def tracking(cell: CellModel, mode: str, payload: float, settle: float) -> dict:
-    """Run the left arm's line with ``payload`` kg by ``mode``, ``settle`` s more; the metrics.
-
-    ``settling``: s after the move until within :data:`SETTLED` (None: not in the window).
-    """
+    """Run the left arm's line with ``payload`` kg by ``mode``, ``settle`` s more; the metrics."""
     arm = cell.leader
     start, goal = (np.array(p) for p in LINES[arm.name])
     with CellSim(cell, dict(load_config('simulation'), feed_interval=0.0),

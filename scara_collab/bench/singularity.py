@@ -25,10 +25,7 @@ FAR_TARGET = (3.0, 0.0, 0.4)
 
 
 def study(arm: ArmModel, a, b, damping: float, threshold: float, dt: float) -> dict:
-    """Run the seeds' loop along ``a`` -> ``b`` (base frame) at :data:`SPEED`.
-
-    ``damping``: the DLS ``max_damping`` (0: the plain pseudo-inverse).
-    """
+    """Run the seeds' loop along ``a`` -> ``b`` (base frame); ``damping`` 0: pseudo-inverse."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     duration = float(np.linalg.norm(b - a)) / SPEED
     s = np.linspace(0.0, 1.0, int(round(duration / dt)) + 1)

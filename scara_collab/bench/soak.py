@@ -1,9 +1,4 @@
-"""The soak: a long run through the launcher, every process's resident memory sampled.
-
-Each process's ``VmRSS`` is sampled against the run's sim time; the growth per sim hour after
-the warm-up is reported with the run's figures, lockstep drops from the bridge's log and
-missed items from the job's.
-"""
+"""The soak: a long launcher run, every process's resident memory sampled against sim time."""
 import json
 import os
 from pathlib import Path
@@ -61,11 +56,7 @@ def growth(samples: List[Tuple[float, int]], warm: float) -> Dict[str, Optional[
 
 
 def soak(out: Path, duration: float, warm: float, log: Log, every: float = 10.0) -> dict:
-    """Run the job ``duration`` sim s, sampling RSS every ``every`` wall s; return its row.
-
-    :func:`~scara_collab.bench.launched.row` plus ``processes`` (name -> :func:`growth`),
-    ``lockstep_drops``, ``missed_items`` and ``samples``.
-    """
+    """Run the job ``duration`` sim s, sampling RSS every ``every`` wall s; return its row."""
     run = Launch('collaborative', duration, out)
     samples: Dict[str, List[Tuple[float, int]]] = {}
     next_log = time.monotonic() + 60.0
@@ -95,11 +86,7 @@ def soak(out: Path, duration: float, warm: float, log: Log, every: float = 10.0)
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the soak into the ``soak`` block of ``page``; True if it met its targets.
-
-    ``--duration`` sim s (3600), ``--warm`` sim s left out (300). Targets: a clean end, 0
-    missed, 0 lockstep drops, every process growing < 5 % per sim hour.
-    """
+    """Run the soak into the ``soak`` block of ``page``; True if it met its targets."""
     out = Path(tempfile.mkdtemp(prefix='scara_soak_')) / 'soak'
     duration, warm = args.duration or 3600.0, 300.0 if args.warm is None else args.warm
     start = time.monotonic()

@@ -1,9 +1,4 @@
-"""Section 2, solver speed: the motion core against reference implementations, same run.
-
-IK against a textbook numpy IK, the Jacobian and dynamics against Pinocchio, capsule distances
-against coal, and the one collision formula on one state pair against the same formula written
-with branches on plain floats.
-"""
+"""Section 2, solver speed: the motion core against reference implementations, same run."""
 from functools import partial
 import math
 from pathlib import Path
@@ -31,11 +26,7 @@ def textbook_ik(l1: float, l2: float, xy: np.ndarray) -> np.ndarray:
 
 
 def branchy_segment(p0, p1, q0, q1) -> float:
-    """Return the segment distance of one pair of float 3-tuples: ``if`` instead of ``where``.
-
-    :func:`scara_collab.core.collision.segment_distance`'s formula written for one pair only,
-    the reference its single-pair speed is set beside.
-    """
+    """Return one pair's segment distance: the core's formula with ``if`` for ``where``."""
     (p0x, p0y, p0z), (p1x, p1y, p1z), (q0x, q0y, q0z), (q1x, q1y, q1z) = p0, p1, q0, q1
     d1x, d1y, d1z = p1x - p0x, p1y - p0y, p1z - p0z
     d2x, d2y, d2z = q1x - q0x, q1y - q0y, q1z - q0z

@@ -30,12 +30,7 @@ TIMEOUT = 120.0  # wall s to wait for any one step
 
 
 def mirrored_targets(n_moves: int, seed: int = 0) -> List[np.ndarray]:
-    """Return ``n_moves + 1`` left-arm targets: :data:`MOVE`, then random straight lines.
-
-    Random targets keep the left tool at ``y <= -0.25`` (its mirror at ``y >= 0.25``, so the
-    two arms never need to wait for each other), 0.5 m or more from the previous one, with a
-    straight line from it that the planner accepts.
-    """
+    """Return :data:`MOVE`, then random lines at ``y <= -0.25`` (no waiting): ``n_moves + 1``."""
     arm = load_cell().leader
     targets = list(MOVE)
     rng = np.random.default_rng(seed)
@@ -54,11 +49,7 @@ def mirrored_targets(n_moves: int, seed: int = 0) -> List[np.ndarray]:
 
 
 def measure(smoke: bool, scratch: Path) -> dict:
-    """Send the targets one after another to ``collab/target`` through a fresh graph.
-
-    The first target only positions the arms. :return: ``{'moves': [per move dict],
-    'physics_step_s', 'state_period_s'}``.
-    """
+    """Send the targets to ``collab/target`` through a fresh graph (the first only positions)."""
     targets = mirrored_targets(1 if smoke else 6)
     g = InProcess('single')
     own = {'pybullet_bridge': {'real_time_factor': 0.0, 'feed_interval': 0.0},
