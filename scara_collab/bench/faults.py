@@ -257,9 +257,6 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     rows = [run_case(c, out / f'case_{k}', 50 + k, log) for k, c in enumerate(CASES, 1)
             if not args.cases or k in args.cases]
     passed = sum(r['pass'] == 'yes' for r in rows)
-    text = stamp(command, start, 'each case is one run of the launcher (real time; the '
-                 'collaborative job unless the case says no job), the fault injected once the '
-                 "job runs, judged from the run's `summary.json` and node logs. "
-                 f'{passed} of {len(rows)} cases pass.') + '\n\n' + table(rows)
+    text = stamp(command, start, f'{passed} of {len(rows)} cases pass.') + '\n\n' + table(rows)
     publish(text, None if args.cases else page, 'faults', 'Faults against the launcher', log, out)
     return passed == len(rows)

@@ -122,12 +122,7 @@ def _f(v, d=2) -> str:
 
 def capacity_text(rows: List[Dict[str, object]], command: str) -> str:
     """Return the capacity runs as a Markdown block."""
-    return (f'Measured with `{command}` (`scara_collab/bench/line.py`): '
-            "each line fed N times one cell's saturating feed, at N times the belt speed, "
-            'beside one cell at the same speed and feed; each cell in one process, '
-            f'unthrottled, in lockstep; items per minute counted after the first {WARM:g} '
-            "sim s; CPU: each cell's process with its launcher, per sim s over the job "
-            "(SPEC: within 10 % of one cell's, at most 0.15).\n\n" + table([{
+    return (f'Measured with `{command}` (`scara_collab/bench/line.py`).\n\n' + table([{
                 'cells': r['cells'], 'belt m/s': f'{r["belt_speed"]:g}',
                 'item every s': f'{r["feed_interval"]:.3g}',
                 'one cell items/min': _f(r['one_cell'], 1),
@@ -147,11 +142,9 @@ def rated_text(rows: List[Dict[str, object]], command: str) -> str:
     """Return the rated-feed runs as a Markdown block."""
     head = ('cells', 'duration', 'feed_interval', 'missed', 'dropped', 'handoffs',
             'handoff_problems', 'balanced', 'min_separation_m', 'exit_code')
-    return (f'Measured with `{command}`: N cells at N times the rated feed, the belt at its '
-            'own speed, a third of the handoff messages lost and a third repeated '
-            '(`loss:`, `repeat:`); `missed`: at the end of the line.\n\n'
-            + table([{k: ', '.join(_f(x, 3) for x in r[k]) if isinstance(r[k], list) else r[k]
-                      for k in head} for r in rows]) + '\n')
+    return (f'Measured with `{command}`.\n\n' + table(
+        [{k: ', '.join(_f(x, 3) for x in r[k]) if isinstance(r[k], list) else r[k] for k in head}
+         for r in rows]) + '\n')
 
 
 def kill_text(r: Dict[str, object], command: str) -> str:

@@ -24,8 +24,7 @@ def section(args, page: Path, command: str, log: Log) -> bool:
             for k in range(1, runs + 1)]
     done = [r['exit_code'] == 0 and (r['sorted'] or 0) > 0 and r['missed'] == 0 for r in demo]
     text = '\n\n'.join([
-        stamp(command, t0, 'each row is one launcher run (separate processes, unthrottled, '
-              'lockstep on), its figures from its `summary.json`.'),
+        stamp(command, t0),
         f'**Collaborative, default feed, {long_s:g} sim s through the launcher**',
         cells([long], ('sorted', 'missed', 'dropped', 'wrong_bin', 'give_ups', 'retries',
                        'items_per_minute', 'min_separation_m', 'emergency', 'real_time_factor'))

@@ -58,14 +58,9 @@ def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]]
     """Return the runs and the capacity as a Markdown block."""
     def cell(v):
         return f'{v:.3f}' if isinstance(v, float) else ('' if v is None else str(v))
-    lines = [f'Measured with `{command}`: the collaborative job through the launcher at '
-             f'`--rtf 1`, {"one process" if one_process else "one process per node"}, '
-             f'{duration:g} sim s a run, the rated feed (conditions: '
-             "`scara_collab/bench/realtime.py`). `own_moves`: stops caused by the job's own "
-             'moves (a predicted conflict); `lost_s`: sim seconds the stops cost; `overspeed`: '
-             'times a joint ran faster than its limit allows (the arm left its trajectory); '
-             "`cpu_s`: the graph's CPU seconds per sim second, all its processes, on a machine "
-             f'of {os.cpu_count()} cores (a hog takes one).', '',
+    layout = 'one process' if one_process else 'one process per node'
+    lines = [f'Measured with `{command}`: {layout}, {duration:g} sim s a run, on a machine of '
+             f'{os.cpu_count()} cores.', '',
              table([{k: cell(r.get(k)) for k in COLUMNS} for r in rows])]
     causes = [f'- {r["condition"]} seed {r["seed"]}: {r["causes"]}' for r in rows
               if r.get('causes')]
