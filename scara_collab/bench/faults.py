@@ -22,21 +22,22 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.trajectory import joint_move
 from scara_collab.nodes import conversions as conv
 
-#: the readers of joint_states in a collaborative run: both planners, the collision monitor,
-#: the automation manager and the launcher's recorder
-STATE_READERS = 5
+STATE_READERS = 5  # of joint_states: both planners, the monitor, the job, the recorder
+
+
+def _states(t: float, position: float) -> JointState:
+    names = [n for arm in load_cell().arms for n in arm.joint_names]
+    return conv.joint_state(t, names, [position] * 6, [0.0] * 6, [0.0] * 6)
 
 
 def nan_state_then_target(run: Launch) -> None:
     """Publish a NaN joint state (on sim time) five times, then a target for the left arm."""
-    names = [n for arm in load_cell().arms for n in arm.joint_names]
     with Probe() as probe:
         pub = probe.publisher(JointState, 'joint_states', STATE_READERS)
         probe.wait_state()
         for _ in range(5):
             probe.spin(0.1)  # take the newest state, stamp a little ahead of it: only not finite
-            pub.publish(conv.joint_state(conv.to_sec(probe.state.header.stamp) + 0.1, names,
-                                         [float('nan')] * 6, [0.0] * 6, [0.0] * 6))
+            pub.publish(_states(conv.to_sec(probe.state.header.stamp) + 0.1, float('nan')))
             probe.spin(0.05)
         target = probe.publisher(PointStamped, 'scara_left/target')
         target.publish(conv.make_point_stamped([2.4, -0.6, 0.5], 'world', 0.0))
@@ -45,11 +46,10 @@ def nan_state_then_target(run: Launch) -> None:
 
 def wall_clock_states(run: Launch) -> None:
     """Publish states stamped with wall time (1.79e9 s) for 3 s."""
-    names = [n for arm in load_cell().arms for n in arm.joint_names]
     with Probe() as probe:
         pub = probe.publisher(JointState, 'joint_states', STATE_READERS)
         for _ in range(60):
-            pub.publish(conv.joint_state(1.79e9, names, [0.0] * 6, [0.0] * 6, [0.0] * 6))
+            pub.publish(_states(1.79e9, 0.0))
             probe.spin(0.05)
 
 
@@ -113,12 +113,10 @@ def sigkill_planner(run: Launch) -> None:
 
 
 def _died(s: Summary) -> List[str]:
-    """Return the nodes that did not end with the run (died)."""
     return [n for n, v in (s.get('nodes') or {}).items() if v.get('exit_code') not in (0, None)]
 
 
 def _sep(s: Summary) -> float:
-    """Return the run's minimum separation (NaN if none)."""
     return float('nan') if s.get('min_separation_m') is None else float(s['min_separation_m'])
 
 

@@ -60,8 +60,7 @@ def tracking(cell: CellModel, mode: str, payload: float, settle: float) -> dict:
             't': times[::every] - t0, 'to_goal': to_goal[::every]}
 
 
-PAYLOADS = (0.0, 1.0, 2.5)
-"""kg in the gripper."""
+PAYLOADS = (0.0, 1.0, 2.5)  # kg in the gripper
 
 
 def measure(smoke: bool, scratch: Path) -> dict:

@@ -68,9 +68,8 @@ def render(results: dict, previous: str = '') -> str:
 
 def cpu_seconds() -> float:
     """CPU seconds (user + system) of this process and its finished children so far."""
-    own = resource.getrusage(resource.RUSAGE_SELF)
-    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+    return sum(u.ru_utime + u.ru_stime for u in map(resource.getrusage, (
+        resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)))
 
 
 def run(out: Path, smoke: bool, only: Sequence[str], progress: Progress,

@@ -20,8 +20,7 @@ CASES = {
 """Study lines in the arm's base frame (m): start and end of the tool path."""
 PLANNER_LINE = ((1.0, 0.85, 0.4), (-1.0, 0.85, 0.4))
 """The closest tangent graze of the inner circle that the joint limits allow (base frame)."""
-FAR_TARGET = (3.0, 0.0, 0.4)
-"""The seeds' target 3.0 m from the shoulder axis (base frame)."""
+FAR_TARGET = (3.0, 0.0, 0.4)  # the seeds' target 3.0 m from the shoulder axis (base frame)
 
 
 def study(arm: ArmModel, a, b, damping: float, threshold: float, dt: float) -> dict:
