@@ -5,8 +5,7 @@ import time
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import (axes, finish, fmt_seconds, met, num, Rows,
-                                     Section, spread, table)
+from scara_collab.bench.util import axes, finish, fmt_seconds, met, num, Rows, spread, table
 from scara_collab.core import collision
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik, IKError
@@ -201,10 +200,3 @@ def figure(f: dict):
     finish(ax2, 'smallest arm-to-arm distance over the pair (m)', 'pairs',
            'separation of the conflicting pairs')
     return fig
-
-
-SECTION = Section(
-    key='foresight', title='collision foresight on crossing moves',
-    heading='Collision foresight and margins', claims=('foresight', 'collision_risk'),
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='foresight and separation histograms')

@@ -5,8 +5,7 @@ import time
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import (axes, finish, fmt_seconds, met, mm, num, Rows,
-                                     Section, table)
+from scara_collab.bench.util import axes, finish, fmt_seconds, met, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import ArmModel, CellModel, load_cell
@@ -126,11 +125,3 @@ def figure(p: dict):
     finish(ax2, 'time from start (s)', 'distance from the straight segment (mm)',
            'deviation from the line (1e-6 mm floor)', {1.0: '1 mm'})
     return fig
-
-
-SECTION = Section(
-    key='paths', title='path deviation: straight line vs joint interpolation',
-    heading='Path deviation: straight line vs joint interpolation',
-    claims=('joint_deviation', 'line_deviation', 'path_length'),
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='tool paths seen from above and their deviation')

@@ -4,7 +4,7 @@ from pathlib import Path
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS, PAYLOAD_CLAIMS
-from scara_collab.bench.util import axes, finish, mm, num, Rows, Section, table
+from scara_collab.bench.util import axes, finish, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import CellModel, load_cell
@@ -117,10 +117,3 @@ def figure(pay: dict):
            '1.5 m line with a payload: distance to the goal (the grey line: trajectory ends)',
            {1.0: '1 mm'})
     return fig
-
-
-SECTION = Section(
-    key='payload', title='payload response', heading='Payload response: PID vs computed torque',
-    claims=('payload',),
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='distance to the goal over time, per payload')

@@ -4,7 +4,7 @@ from pathlib import Path
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, met, mm, num, Rows, Section, table
+from scara_collab.bench.util import axes, finish, met, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import base_to_world, fk, ik, ik_both, IKError, manipulability
 from scara_collab.core.model import ArmModel, load_cell
@@ -123,11 +123,3 @@ def figure(sg: dict):
            f"straight lines at {SPEED} m/s through the seeds' differential-kinematics loop",
            {sg['velocity_limit']: 'joint limit'})
     return fig
-
-
-SECTION = Section(
-    key='singularity', title='singularity: pseudo-inverse vs DLS',
-    heading='Singularity: pseudo-inverse vs damped least squares',
-    claims=('singularity', 'unreachable'),
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='joint speed along the study paths')

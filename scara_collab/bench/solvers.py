@@ -8,8 +8,7 @@ from typing import Callable, List, Sequence
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import (axes, finish, fmt_seconds, met, per_call, Rows,
-                                     Section, table)
+from scara_collab.bench.util import axes, finish, fmt_seconds, met, per_call, Rows, table
 from scara_collab.core import collision, dynamics, kinematics
 from scara_collab.core.model import expand_xacro, load_cell
 
@@ -241,11 +240,3 @@ def figure(s: dict):
     finish(ax, 'how many times faster ours is (log; < 1 = slower)', '',
            'motion core vs references, same run')
     return fig
-
-
-SECTION = Section(
-    key='solvers', title='solver speed vs reference implementations',
-    heading='Solver speed, against reference implementations',
-    claims=('ik_latency', 'solver_latency'),
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='speed-up over the references')

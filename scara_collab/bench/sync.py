@@ -11,7 +11,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from scara_collab import graph
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, met, mm, num, Rows, Section, table
+from scara_collab.bench.util import axes, finish, met, mm, num, Rows, table
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import load_cell
@@ -179,10 +179,3 @@ def figure(g: dict):
            f'{len(g["moves"])} mirrored moves through the ROS graph (1e-6 mm floor)',
            {1.0: 'target 1 mm', 4.0: "seeds' claim: 4 mm average"})
     return fig
-
-
-SECTION = Section(
-    key='sync', title='synchronisation: mirrored moves through the graph',
-    heading='Synchronisation: mirror error and start lag', claims=('mirror_error', 'lag'),
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='mirror error over the moves')

@@ -11,7 +11,7 @@ from scara_collab.bench import job
 from scara_collab.bench.claims import CLAIMS
 from scara_collab.bench.launched import run_launcher
 from scara_collab.bench.payload import LINES
-from scara_collab.bench.util import axes, finish, met, num, Rows, Section, spread, table
+from scara_collab.bench.util import axes, finish, met, num, Rows, spread, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik, IKError
 from scara_collab.core.model import load_cell
@@ -339,10 +339,3 @@ def figure(t: dict):
            f'capacity: an item every {t["feed_interval"]:g} s, {t["duration"]:g} sim s per run',
            {60.0 / t['feed_interval']: 'item feed'})
     return fig
-
-
-SECTION = Section(
-    key='throughput', title='throughput: the sorting job',
-    heading='Throughput and real-time factor', claims=('throughput', 'rtf'),
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='items per minute per mode and seed')
