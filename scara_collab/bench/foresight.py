@@ -115,9 +115,15 @@ def _values(f: dict, key: str, conflicts: bool = True) -> dict:
     return spread(p[key] for p in f['pairs'] if p['conflict'] or not conflicts)
 
 
+def _of(s: dict, keys: str, unit: str = 's') -> str:
+    """Format the :func:`spread` ``s`` at ``keys`` ('min median'): ``'0.1 s / 0.2 s'``."""
+    return ' / '.join(fmt_seconds(s[k]) if unit == 'wall' else num(s[k], 3, unit)
+                      for k in keys.split())
+
+
 def tables(f: dict) -> list:
     """Return the study's figures: conflicts, foresight, outcomes, delays, separations."""
-    pairs = f['pairs']
+    pairs, margin = f['pairs'], f['margin']
     conflicts = [p for p in pairs if p['conflict']]
     ahead, impact, delay = (_values(f, k) for k in ('foresight_s', 'impact_s', 'delay_s'))
     decision, together = _values(f, 'decision_s', False), _values(f, 'unresolved_min_m')
@@ -128,37 +134,29 @@ def tables(f: dict) -> list:
                           for k in ('delayed', 'clear', 'waits'))
 
     def breaches(key):
-        return sum(p[key] is not None and p[key] < f['margin'] for p in pairs)
-
-    def sec(x):
-        return num(x, 3, 's')
-
-    def dist(s):
-        return f'{num(s["min"], 3, "m")} / {num(s["mean"], 3, "m")}'
+        return sum(p[key] is not None and p[key] < margin for p in pairs)
     rows = [
         ('crossing pairs drawn', len(pairs), ''),
-        (f'conflicts (closer than the {f["margin"]:g} m margin if started together)',
+        (f'conflicts (closer than the {margin:g} m margin if started together)',
          f'{len(conflicts)} ({impact["n"]} would touch)', ''),
         ('when a conflict is found', 'at the decision, before either arm moves (t = 0)',
          CLAIMS['foresight'].figure),
-        ('decision → margin would break: min / median / max',
-         f'{sec(ahead["min"])} / {sec(ahead["median"])} / {sec(ahead["max"])}',
+        ('decision → margin would break: min / median / max', _of(ahead, 'min median max'),
          '200 ms before impact'),
-        ('decision → capsules would touch: min / median',
-         f'{sec(impact["min"])} / {sec(impact["median"])}', ''),
-        ('motion starts after the decision (start lead)', sec(f['lead']), ''),
+        ('decision → capsules would touch: min / median', _of(impact, 'min median'), ''),
+        ('motion starts after the decision (start lead)', num(f['lead'], 3, 's'), ''),
         ('conflicts: delayed / clear / unresolvable (the follower waits)', outcomes(conflicts),
          ''),
         ('all pairs: delayed (incl. the planning buffer) / clear / waits', outcomes(pairs), ''),
-        ('delay applied to conflicting pairs: median / max',
-         f'{sec(delay["median"])} / {sec(delay["max"])}', ''),
-        ('scheduling wall time per pair: median / max',
-         f'{fmt_seconds(decision["median"])} / {fmt_seconds(decision["max"])}', ''),
-        ('conflicting pairs started together: smallest distance, min / mean', dist(together), ''),
+        ('delay applied to conflicting pairs: median / max', _of(delay, 'median max'), ''),
+        ('scheduling wall time per pair: median / max', _of(decision, 'median max', 'wall'), ''),
+        ('conflicting pairs started together: smallest distance, min / mean',
+         _of(together, 'min mean', 'm'), ''),
         ('every pair as scheduled (planned): smallest distance, min / mean',
-         f'{dist(planned)}; breaches {breaches("planned_min_m")}', 'near-zero risk'),
+         f'{_of(planned, "min mean", "m")}; breaches {breaches("planned_min_m")}',
+         'near-zero risk'),
         (f'conflicting pairs executed in physics with their delays ({executed["n"]}): smallest '
-         'measured distance, min / mean', f'{dist(executed)}; breaches '
+         f'measured distance, min / mean', f'{_of(executed, "min mean", "m")}; breaches '
          f'{breaches("executed_min_m")}', '')]
     return [table([{'what': w, 'measured': v, "seeds' claim": c} for w, v, c in rows])]
 

@@ -153,10 +153,7 @@ def finish(ax, xlabel: str, ylabel: str, title: str, hlines: Dict[float, str] = 
 
 @dataclass(frozen=True)
 class Section:
-    """A numbered section of ``RESULTS.md``: ``measure(smoke, scratch) -> data``, then its parts.
-
-    ``key``: the ``--only`` name and ``figures/<key>.png``; ``title``: on the progress lines.
-    """
+    """A numbered section of ``RESULTS.md`` (``key``: ``--only`` and ``figures/<key>.png``)."""
 
     key: str
     title: str
