@@ -100,16 +100,12 @@ def rogue_input(run: Launch) -> None:
             probe.spin(0.1)
 
 
-def sigstop_monitor(run: Launch) -> int:
-    """Freeze the collision monitor (SIGSTOP) until the run ends; return its pid to resume."""
-    pid = run.pid('collision_monitor')
-    os.kill(pid, signal.SIGSTOP)
-    return pid
-
-
-def sigkill_planner(run: Launch) -> None:
-    """Kill the left planner (SIGKILL)."""
-    os.kill(run.pid('left_planner'), signal.SIGKILL)
+def send(node: str, sig: int) -> Callable[[Launch], Optional[int]]:
+    """Return an injection that sends ``sig`` to ``node`` (SIGSTOP: its pid, resumed after)."""
+    def inject(run: Launch) -> Optional[int]:
+        os.kill(pid := run.pid(node), sig)
+        return pid if sig == signal.SIGSTOP else None
+    return inject
 
 
 def _died(s: Summary) -> List[str]:
@@ -217,9 +213,10 @@ CASES = (
     Case('saturated feed (an item every 0.8 s)', 'margin kept, no e-stop', 60.0,
          judge_saturated, flags=('--feed-interval', '0.8')),
     Case('collision monitor frozen (SIGSTOP)', 'the bridge holds the arms; the run ends '
-         'non-zero naming the monitor', 120.0, judge_sigstop, sigstop_monitor),
+         'non-zero naming the monitor', 120.0, judge_sigstop,
+         send('collision_monitor', signal.SIGSTOP)),
     Case('left planner killed (SIGKILL)', 'the run ends with exit 1 naming it', 120.0,
-         judge_sigkill, sigkill_planner),
+         judge_sigkill, send('left_planner', signal.SIGKILL)),
 )
 
 
