@@ -40,7 +40,8 @@ class Probe:
         return self.state
 
     def publisher(self, msg_type, topic: str, readers: int = 1, timeout: float = 10.0):
-        """Return a publisher on ``topic`` once ``readers`` of the graph match it (DDS)."""
+        """Return a publisher on ``topic`` once ``readers`` of the graph match it (or timeout)."""
+        # DDS drops what is published before a reader matched; the probe's own reader not counted
         pub = self.node.create_publisher(msg_type, topic, 10)
         own = sum(1 for sub in self.node.subscriptions
                   if sub.topic_name == pub.topic_name)

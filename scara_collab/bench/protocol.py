@@ -8,7 +8,7 @@ from scara_collab.bench.util import Log
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the long, mirrored and hogged runs into ``job-protocol``; True if every demo did."""
+    """Run the long, mirrored and hogged runs into ``job-protocol``; True if each demo finished."""
     smoke = args.smoke
     long_s, mirrored_s, hog_s = (60.0, 30.0, 30.0) if smoke else (600.0, 90.0, 60.0)
     seeds = (args.seeds or [11, 12, 13])[:1 if smoke else None]
