@@ -1,10 +1,5 @@
 #!/usr/bin/env python3
-"""Measure every result the design documents claim, on this machine; write docs/RESULTS.md.
-
-Default: the seven numbered sections of ``RESULTS.md``; ``--only`` also runs those through the
-launcher (``REALTIME.md``, ``LINE.md``, blocks of ``RESULTS.md``): docs/benchmarks.md. Exit
-status 1 if a section failed or missed its targets.
-"""
+"""Measure every result the design documents claim, on this machine; write docs/RESULTS.md."""
 import argparse
 import os
 from pathlib import Path
@@ -30,39 +25,36 @@ def keys(text: str) -> list:
     return out
 
 
+OPTIONS = (  # flag, argparse keywords, help
+    ('--smoke', dict(action='store_true'), 'tiny sizes: seconds, not minutes'),
+    ('--out', dict(type=Path), 'folder for RESULTS.md, REALTIME.md and figures/ (default docs/); '
+     'a .md path is the real-time page'),
+    ('--json', dict(type=Path), 'also write every measured value of the numbered sections here'),
+    ('--duration', dict(type=float), 'sim s per run: realtime (600), soak (3600)'),
+    ('--seeds', dict(type=int, nargs='+'), 'seeds: realtime (1 2 3), protocol mirrored runs '
+     '(11 12 13)'),
+    ('--conditions', dict(nargs='+', choices=list(realtime.CONDITIONS)),
+     'realtime conditions (default all)'),
+    ('--one-process', dict(action='store_true'),
+     'realtime: every node of the cell in one process, in every run'),
+    ('--capacity-duration', dict(type=float), 'realtime: sim s per capacity run (240; 0: none)'),
+    ('--warm', dict(type=float), 'soak: sim s left out (300)'),
+    ('--cases', dict(type=int, nargs='+'), 'faults: case numbers, 1-based (default all)'),
+    ('--runs', dict(type=int), 'protocol: demo runs with hogs (5)'),
+    ('--hogs', dict(type=int), 'protocol: CPU hogs (2)'),
+    ('--cells', dict(type=int, nargs='+'), 'line: line lengths (2 3), each beside one cell'),
+    ('--scenarios', dict(nargs='+', choices=('capacity', 'rated', 'realtime', 'kill')),
+     'line: capacity (default), rated (N x the rated feed, lossy handoffs), realtime (N x the '
+     'rated feed, unthrottled and at 1x), kill (cell 1 of 3 killed at 300 sim s)'))
+
+
 def parse(argv=None) -> argparse.Namespace:
     """Return the parsed command line."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument('--only', type=keys, action='append', metavar='SECTION',
                    help=f'run only these sections: {", ".join(KEYS)}')
-    p.add_argument('--smoke', action='store_true', help='tiny sizes: seconds, not minutes')
-    p.add_argument('--out', type=Path, default=None,
-                   help='folder for RESULTS.md, REALTIME.md and figures/ (default docs/); '
-                   'a .md path is the real-time page')
-    p.add_argument('--json', type=Path, default=None,
-                   help='also write every measured value of the numbered sections here')
-    p.add_argument('--duration', type=float, default=None,
-                   help='sim s per run: realtime (600), soak (3600)')
-    p.add_argument('--seeds', type=int, nargs='+', default=None,
-                   help='seeds: realtime (1 2 3), protocol mirrored runs (11 12 13)')
-    p.add_argument('--conditions', nargs='+', default=None, choices=list(realtime.CONDITIONS),
-                   help='realtime conditions (default all)')
-    p.add_argument('--one-process', action='store_true',
-                   help='realtime: every node of the cell in one process, in every run')
-    p.add_argument('--capacity-duration', type=float, default=None,
-                   help='realtime: sim s per capacity run (240; 0: none)')
-    p.add_argument('--warm', type=float, default=None, help='soak: sim s left out (300)')
-    p.add_argument('--cases', type=int, nargs='+', default=None,
-                   help='faults: case numbers, 1-based (default all)')
-    p.add_argument('--runs', type=int, default=None, help='protocol: demo runs with hogs (5)')
-    p.add_argument('--hogs', type=int, default=None, help='protocol: CPU hogs (2)')
-    p.add_argument('--cells', type=int, nargs='+', default=None,
-                   help='line: line lengths (2 3), each beside one cell')
-    p.add_argument('--scenarios', nargs='+', default=None,
-                   choices=('capacity', 'rated', 'realtime', 'kill'),
-                   help='line: capacity (default), rated (N x the rated feed, lossy handoffs), '
-                   'realtime (N x the rated feed, unthrottled and at 1x), '
-                   'kill (cell 1 of 3 killed at 300 sim s)')
+    for flag, kwargs, text in OPTIONS:
+        p.add_argument(flag, help=text, **kwargs)
     return p.parse_args(argv)
 
 
@@ -74,16 +66,12 @@ def main(argv=None) -> int:
     # a domain of our own unless the caller chose one, and discovery on this host only.
     os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    out = args.out
-    if out is None:
-        out = Path(tempfile.mkdtemp(prefix='scara_bench_')) if args.smoke else ROOT / 'docs'
-    page = out if out.suffix == '.md' else out / 'REALTIME.md'
-    out = out.parent if out.suffix == '.md' else out
+    out = args.out or (Path(tempfile.mkdtemp(prefix='scara_bench_')) if args.smoke
+                       else ROOT / 'docs')
+    page, out = (out, out.parent) if out.suffix == '.md' else (out / 'REALTIME.md', out)
     out.mkdir(parents=True, exist_ok=True)
-    given = sys.argv[1:] if argv is None else list(argv)
-    command = shlex.join(['scripts/benchmark.py', *given])
-    progress = Progress()
-    bad = []
+    command = shlex.join(['scripts/benchmark.py', *(sys.argv[1:] if argv is None else argv)])
+    progress, bad = Progress(), []
     numbered = [k for k in only if k not in LAUNCHER]
     if numbered:
         progress.note(f'writing {out / "RESULTS.md"} and {out / "figures"}/')

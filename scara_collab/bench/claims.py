@@ -1,9 +1,4 @@
-"""The design documents' result claims, quoted once: the figures the benchmarks are set beside.
-
-None of these was ever measured (``../shared/SPEC.md``). Markdown emphasis is dropped from the
-quotes; the words are the documents' own. ``seeds/000`` is the paper, ``seeds/001`` the
-phase-I report.
-"""
+"""The design documents' result claims, quoted verbatim (emphasis dropped): never measured."""
 from typing import Dict, NamedTuple
 
 
@@ -70,7 +65,6 @@ CLAIMS: Dict[str, Claim] = {
         'Solver: QuickStep iterations set to 50 for a balance between numerical stability '
         'and real-time factor (RTF ≈ 1.0).'),
 }
-"""Every claim the results are set beside, by key."""
 
 PAYLOAD_CLAIMS = {0.0: (0.45, 12.5, 0.2), 1.0: (0.72, 34.2, 1.5), 2.5: (1.15, 88.7, 4.8)}
 """seeds/000 §9.3 as numbers: payload kg -> (settling s, peak torque N·m, overshoot %)."""

@@ -1,8 +1,4 @@
-"""The fault matrix: bad input, lost answers, hung and killed nodes against the launcher.
-
-Each case starts the launcher in its own ROS domain, waits for the job, injects one fault (a
-probe node in this process, a launcher flag or a signal) and judges the run from its files.
-"""
+"""The fault matrix: each case one launcher run, one fault injected, judged from its files."""
 from contextlib import suppress
 from dataclasses import dataclass
 import os
@@ -26,21 +22,22 @@ from scara_collab.core.model import load_cell
 from scara_collab.core.trajectory import joint_move
 from scara_collab.nodes import conversions as conv
 
-#: the readers of joint_states in a collaborative run: both planners, the collision monitor,
-#: the automation manager and the launcher's recorder
-STATE_READERS = 5
+STATE_READERS = 5  # of joint_states: both planners, the monitor, the job, the recorder
+
+
+def _states(t: float, position: float) -> JointState:
+    names = [n for arm in load_cell().arms for n in arm.joint_names]
+    return conv.joint_state(t, names, [position] * 6, [0.0] * 6, [0.0] * 6)
 
 
 def nan_state_then_target(run: Launch) -> None:
     """Publish a NaN joint state (on sim time) five times, then a target for the left arm."""
-    names = [n for arm in load_cell().arms for n in arm.joint_names]
     with Probe() as probe:
         pub = probe.publisher(JointState, 'joint_states', STATE_READERS)
         probe.wait_state()
         for _ in range(5):
             probe.spin(0.1)  # take the newest state, stamp a little ahead of it: only not finite
-            pub.publish(conv.joint_state(conv.to_sec(probe.state.header.stamp) + 0.1, names,
-                                         [float('nan')] * 6, [0.0] * 6, [0.0] * 6))
+            pub.publish(_states(conv.to_sec(probe.state.header.stamp) + 0.1, float('nan')))
             probe.spin(0.05)
         target = probe.publisher(PointStamped, 'scara_left/target')
         target.publish(conv.make_point_stamped([2.4, -0.6, 0.5], 'world', 0.0))
@@ -49,11 +46,10 @@ def nan_state_then_target(run: Launch) -> None:
 
 def wall_clock_states(run: Launch) -> None:
     """Publish states stamped with wall time (1.79e9 s) for 3 s."""
-    names = [n for arm in load_cell().arms for n in arm.joint_names]
     with Probe() as probe:
         pub = probe.publisher(JointState, 'joint_states', STATE_READERS)
         for _ in range(60):
-            pub.publish(conv.joint_state(1.79e9, names, [0.0] * 6, [0.0] * 6, [0.0] * 6))
+            pub.publish(_states(1.79e9, 0.0))
             probe.spin(0.05)
 
 
@@ -104,25 +100,19 @@ def rogue_input(run: Launch) -> None:
             probe.spin(0.1)
 
 
-def sigstop_monitor(run: Launch) -> int:
-    """Freeze the collision monitor (SIGSTOP) until the run ends; return its pid to resume."""
-    pid = run.pid('collision_monitor')
-    os.kill(pid, signal.SIGSTOP)
-    return pid
-
-
-def sigkill_planner(run: Launch) -> None:
-    """Kill the left planner (SIGKILL)."""
-    os.kill(run.pid('left_planner'), signal.SIGKILL)
+def send(node: str, sig: int) -> Callable[[Launch], Optional[int]]:
+    """Return an injection that sends ``sig`` to ``node`` (SIGSTOP: its pid, resumed after)."""
+    def inject(run: Launch) -> Optional[int]:
+        os.kill(pid := run.pid(node), sig)
+        return pid if sig == signal.SIGSTOP else None
+    return inject
 
 
 def _died(s: Summary) -> List[str]:
-    """Return the nodes that did not end with the run (died)."""
     return [n for n, v in (s.get('nodes') or {}).items() if v.get('exit_code') not in (0, None)]
 
 
 def _sep(s: Summary) -> float:
-    """Return the run's minimum separation (NaN if none)."""
     return float('nan') if s.get('min_separation_m') is None else float(s['min_separation_m'])
 
 
@@ -223,17 +213,15 @@ CASES = (
     Case('saturated feed (an item every 0.8 s)', 'margin kept, no e-stop', 60.0,
          judge_saturated, flags=('--feed-interval', '0.8')),
     Case('collision monitor frozen (SIGSTOP)', 'the bridge holds the arms; the run ends '
-         'non-zero naming the monitor', 120.0, judge_sigstop, sigstop_monitor),
+         'non-zero naming the monitor', 120.0, judge_sigstop,
+         send('collision_monitor', signal.SIGSTOP)),
     Case('left planner killed (SIGKILL)', 'the run ends with exit 1 naming it', 120.0,
-         judge_sigkill, sigkill_planner),
+         judge_sigkill, send('left_planner', signal.SIGKILL)),
 )
 
 
 def run_case(case: Case, out: Path, domain: int, log: Log) -> Dict:
-    """Run one case in ROS domain ``domain``; return its row: case, expected, observed, pass.
-
-    An injection returns None or the pid of a process it stopped (SIGCONT after the run).
-    """
+    """Run one case in ROS domain ``domain``; return its row (a stopped pid is resumed after)."""
     use_domain(domain)
     run, frozen = Launch(case.mode, case.duration, out, 1.0, case.flags, quiet=False), None
     try:
@@ -258,18 +246,12 @@ def run_case(case: Case, out: Path, domain: int, log: Log) -> Dict:
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the fault cases into the ``faults`` block of ``page``; True if every case passed.
-
-    ``--cases``: 1-based case numbers (default all; the block is written for all only).
-    """
+    """Run the ``--cases`` (all: into the ``faults`` block); True if every one passed."""
     out = Path(tempfile.mkdtemp(prefix='scara_faults_'))
     start = time.monotonic()
     rows = [run_case(c, out / f'case_{k}', 50 + k, log) for k, c in enumerate(CASES, 1)
             if not args.cases or k in args.cases]
     passed = sum(r['pass'] == 'yes' for r in rows)
-    text = stamp(command, start, 'each case is one run of the launcher (real time; the '
-                 'collaborative job unless the case says no job), the fault injected once the '
-                 "job runs, judged from the run's `summary.json` and node logs. "
-                 f'{passed} of {len(rows)} cases pass.') + '\n\n' + table(rows)
+    text = stamp(command, start, f'{passed} of {len(rows)} cases pass.') + '\n\n' + table(rows)
     publish(text, None if args.cases else page, 'faults', 'Faults against the launcher', log, out)
     return passed == len(rows)

@@ -5,8 +5,7 @@ import time
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import (axes, finish, fmt_seconds, met, num, Rows,
-                                     Section, spread, table)
+from scara_collab.bench.util import axes, finish, fmt_seconds, met, num, Rows, spread, table
 from scara_collab.core import collision
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik, IKError
@@ -27,14 +26,7 @@ def _cross(a0, a1, b0, b1) -> bool:
 
 
 def random_pair(cell: CellModel, rng: np.random.Generator, clearance: float):
-    """Draw and plan one crossing pair; return ``(left Trajectory, right Trajectory)``.
-
-    Each arm moves between two random reachable points of its side of the cell and the shared
-    zone, at least 0.4 m apart, planned as the planners do; the tool paths cross in plan view.
-    What a delay cannot change is kept ``clearance`` apart: both starts, both goals, the left
-    move against the right arm at rest, the right move against the left arm at its goal.
-    Only the timing decides whether the pair conflicts.
-    """
+    """Draw and plan two moves crossing in plan view that only their timing can bring together."""
     left, right = cell.leader, cell.follower
 
     def draw(y_lo, y_hi):
@@ -78,11 +70,7 @@ def _execute(sim: CellSim, cell: CellModel, moves) -> float:
 
 
 def measure(smoke: bool, scratch: Path) -> dict:
-    """Draw, schedule and (the first conflicts) execute 200 crossing pairs (seed 1; smoke: 6).
-
-    Per pair: when the margin would break and the capsules touch if both started together,
-    the outcome (``'waits'``: no delay keeps the margin), the delay and the separations.
-    """
+    """Draw, schedule and predict 200 crossing pairs (smoke: 6); execute the first 30 conflicts."""
     cell = load_cell()
     left, right = cell.leader, cell.follower
     margin = cell.safety_margin
@@ -127,9 +115,15 @@ def _values(f: dict, key: str, conflicts: bool = True) -> dict:
     return spread(p[key] for p in f['pairs'] if p['conflict'] or not conflicts)
 
 
+def _of(s: dict, keys: str, unit: str = 's') -> str:
+    """Format the :func:`spread` ``s`` at ``keys`` ('min median'): ``'0.1 s / 0.2 s'``."""
+    return ' / '.join(fmt_seconds(s[k]) if unit == 'wall' else num(s[k], 3, unit)
+                      for k in keys.split())
+
+
 def tables(f: dict) -> list:
     """Return the study's figures: conflicts, foresight, outcomes, delays, separations."""
-    pairs = f['pairs']
+    pairs, margin = f['pairs'], f['margin']
     conflicts = [p for p in pairs if p['conflict']]
     ahead, impact, delay = (_values(f, k) for k in ('foresight_s', 'impact_s', 'delay_s'))
     decision, together = _values(f, 'decision_s', False), _values(f, 'unresolved_min_m')
@@ -140,37 +134,29 @@ def tables(f: dict) -> list:
                           for k in ('delayed', 'clear', 'waits'))
 
     def breaches(key):
-        return sum(p[key] is not None and p[key] < f['margin'] for p in pairs)
-
-    def sec(x):
-        return num(x, 3, 's')
-
-    def dist(s):
-        return f'{num(s["min"], 3, "m")} / {num(s["mean"], 3, "m")}'
+        return sum(p[key] is not None and p[key] < margin for p in pairs)
     rows = [
         ('crossing pairs drawn', len(pairs), ''),
-        (f'conflicts (closer than the {f["margin"]:g} m margin if started together)',
+        (f'conflicts (closer than the {margin:g} m margin if started together)',
          f'{len(conflicts)} ({impact["n"]} would touch)', ''),
         ('when a conflict is found', 'at the decision, before either arm moves (t = 0)',
          CLAIMS['foresight'].figure),
-        ('decision → margin would break: min / median / max',
-         f'{sec(ahead["min"])} / {sec(ahead["median"])} / {sec(ahead["max"])}',
+        ('decision → margin would break: min / median / max', _of(ahead, 'min median max'),
          '200 ms before impact'),
-        ('decision → capsules would touch: min / median',
-         f'{sec(impact["min"])} / {sec(impact["median"])}', ''),
-        ('motion starts after the decision (start lead)', sec(f['lead']), ''),
+        ('decision → capsules would touch: min / median', _of(impact, 'min median'), ''),
+        ('motion starts after the decision (start lead)', num(f['lead'], 3, 's'), ''),
         ('conflicts: delayed / clear / unresolvable (the follower waits)', outcomes(conflicts),
          ''),
         ('all pairs: delayed (incl. the planning buffer) / clear / waits', outcomes(pairs), ''),
-        ('delay applied to conflicting pairs: median / max',
-         f'{sec(delay["median"])} / {sec(delay["max"])}', ''),
-        ('scheduling wall time per pair: median / max',
-         f'{fmt_seconds(decision["median"])} / {fmt_seconds(decision["max"])}', ''),
-        ('conflicting pairs started together: smallest distance, min / mean', dist(together), ''),
+        ('delay applied to conflicting pairs: median / max', _of(delay, 'median max'), ''),
+        ('scheduling wall time per pair: median / max', _of(decision, 'median max', 'wall'), ''),
+        ('conflicting pairs started together: smallest distance, min / mean',
+         _of(together, 'min mean', 'm'), ''),
         ('every pair as scheduled (planned): smallest distance, min / mean',
-         f'{dist(planned)}; breaches {breaches("planned_min_m")}', 'near-zero risk'),
+         f'{_of(planned, "min mean", "m")}; breaches {breaches("planned_min_m")}',
+         'near-zero risk'),
         (f'conflicting pairs executed in physics with their delays ({executed["n"]}): smallest '
-         'measured distance, min / mean', f'{dist(executed)}; breaches '
+         f'measured distance, min / mean', f'{_of(executed, "min mean", "m")}; breaches '
          f'{breaches("executed_min_m")}', '')]
     return [table([{'what': w, 'measured': v, "seeds' claim": c} for w, v, c in rows])]
 
@@ -212,20 +198,3 @@ def figure(f: dict):
     finish(ax2, 'smallest arm-to-arm distance over the pair (m)', 'pairs',
            'separation of the conflicting pairs')
     return fig
-
-
-SECTION = Section(
-    key='foresight', title='collision foresight on crossing moves',
-    heading='Collision foresight and margins', claims=('foresight', 'collision_risk'),
-    text='Random pairs of crossing moves (seed 1): each arm between two random reachable points '
-    'of its side and the shared zone, the tool paths crossing in plan view, the resting poses '
-    'compatible (so a delay can always resolve a conflict). Both moves are decided at t = 0 '
-    'and asked to start after the decision lead, planned and scheduled by the motion core '
-    'exactly as the planner nodes do (left has priority; the right arm waits the smallest '
-    "delay that keeps the margin plus the planners' buffer). Distances are predicted on a 5 "
-    'ms grid; the first conflicting pairs are then executed in physics with their delays. A '
-    'conflict is found when the moves are planned, before either starts; the collision '
-    'monitor (runtime stop below the margin) is the safety net behind this. Target: zero '
-    'breaches.',
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='foresight and separation histograms')

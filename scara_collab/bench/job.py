@@ -1,9 +1,4 @@
-"""The sorting job measured in one process (:func:`run_job`), free of separate processes' latency.
-
-The whole graph runs on one executor, unthrottled, so sim time cannot run ahead of the nodes.
-The bridge's lockstep gate stays on: even in one process messages travel through DDS
-asynchronously, and a loaded machine would let the bridge step on before they arrive.
-"""
+"""The sorting job in one process on one executor, unthrottled, lockstep gate on (DDS is async)."""
 import time
 from typing import Callable, Dict, Optional, Sequence
 
@@ -21,11 +16,7 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
             seed: Optional[int] = None, faults: Sequence[str] = (),
             during: Optional[Callable[[InProcess, Dict[str, object], float], None]] = None
             ) -> Dict[str, object]:
-    """Run ``mode`` for ``duration`` sim s in one process; return the job's figures.
-
-    ``feed``, ``seed``: default ``simulation.yaml``'s; ``faults``: fault entries for every
-    node; ``during(g, nodes, sim_time)`` is called after every turn of the executor.
-    """
+    """Run ``mode`` for ``duration`` sim s in one process; ``during(g, nodes, t)`` each turn."""
     feed = default_feed() if feed is None else float(feed)
     seed = int(load_config('simulation')['item_seed'] if seed is None else seed)
     g = InProcess()

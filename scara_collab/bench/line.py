@@ -1,20 +1,4 @@
-"""A line of cells through the launcher (``--only line``): one block of ``LINE.md`` a scenario.
-
-Every run: each cell in one process, unthrottled, in lockstep (docs/benchmarks.md says more).
-
-- ``capacity``: N cells (``--cells``, 2 and 3) fed N times one cell's saturating feed (an item
-  every 0.9 / N s) at N times the belt speed, beside one cell at that speed and feed (a share
-  folder with the faster belt: ``SCARA_COLLAB_SHARE``); items/min after :data:`WARM` sim s.
-  Targets: line >= 0.9 x N x one cell's, every cell >= 0.85 x, the margin kept, every handoff
-  received once;
-- ``rated``: N cells at N times the rated feed, a third of the handoffs lost and a third
-  repeated; target 0 missed, every handoff received once, the items balanced;
-- ``realtime``: N cells at N times the rated feed, unthrottled and paced at 1x; targets:
-  every cell faster than real time unthrottled, at least :data:`PACED` x real time paced;
-- ``kill``: three cells at three times the rated feed, undisturbed and with cell 1's bridge
-  killed at 300 sim s; targets: cell 0's events identical, cell 2 sorting again within the
-  lookahead + 10 s wall of the kill, the report naming cell 1, a non-zero exit.
-"""
+"""A line of cells through the launcher (``--only line``): a block of ``LINE.md`` a scenario."""
 import os
 from pathlib import Path
 import re
@@ -148,12 +132,7 @@ def _f(v, d=2) -> str:
 
 def capacity_text(rows: List[Dict[str, object]], command: str) -> str:
     """Return the capacity runs as a Markdown block."""
-    return (f'Measured with `{command}` (`scara_collab/bench/line.py`): '
-            "each line fed N times one cell's saturating feed, at N times the belt speed, "
-            'beside one cell at the same speed and feed; each cell in one process, '
-            f'unthrottled, in lockstep; items per minute counted after the first {WARM:g} '
-            "sim s; CPU: each cell's process with its launcher, per sim s over the job "
-            "(SPEC: within 10 % of one cell's, at most 0.15).\n\n" + table([{
+    return (f'Measured with `{command}` (`scara_collab/bench/line.py`).\n\n' + table([{
                 'cells': r['cells'], 'belt m/s': f'{r["belt_speed"]:g}',
                 'item every s': f'{r["feed_interval"]:.3g}',
                 'one cell items/min': _f(r['one_cell'], 1),
@@ -173,19 +152,14 @@ def rated_text(rows: List[Dict[str, object]], command: str) -> str:
     """Return the rated-feed runs as a Markdown block."""
     head = ('cells', 'duration', 'feed_interval', 'missed', 'dropped', 'handoffs',
             'handoff_problems', 'balanced', 'min_separation_m', 'exit_code')
-    return (f'Measured with `{command}`: N cells at N times the rated feed, the belt at its '
-            'own speed, a third of the handoff messages lost and a third repeated '
-            '(`loss:`, `repeat:`); `missed`: at the end of the line.\n\n'
-            + table([{k: ', '.join(_f(x, 3) for x in r[k]) if isinstance(r[k], list) else r[k]
-                      for k in head} for r in rows]) + '\n')
+    return (f'Measured with `{command}`.\n\n' + table(
+        [{k: ', '.join(_f(x, 3) for x in r[k]) if isinstance(r[k], list) else r[k] for k in head}
+         for r in rows]) + '\n')
 
 
 def realtime_text(rows: List[Dict[str, object]], command: str) -> str:
     """Return the paced runs as a Markdown block."""
-    return (f'Measured with `{command}`: N cells at N times the rated feed, each cell in one '
-            'process, in lockstep, unthrottled (`--rtf 0`) and paced at real time '
-            "(`--rtf 1`); real-time factor: each cell's sim s over its job's wall s.\n\n"
-            + table([{
+    return (f'Measured with `{command}`.\n\n' + table([{
                 'cells': r['cells'], 'paced': f'{r["rtf"]:g}x' if r['rtf'] else 'unthrottled',
                 'sim s': f'{r["duration"]:g}',
                 'real-time factor per cell': ', '.join(_f(x) for x in r['real_time_factor']),
@@ -215,11 +189,7 @@ def kill_text(r: Dict[str, object], command: str) -> str:
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the ``--scenarios`` (default capacity) into blocks of ``LINE.md``; False if one missed.
-
-    ``--cells``: line lengths (2 3); ``--duration``: sim s per run (capacity 240, rated 600,
-    kill 330 with the kill at 300 or 30 s before the end).
-    """
+    """Run the ``--scenarios`` (capacity) into blocks of ``LINE.md``; False if one missed."""
     target = page.parent / 'LINE.md'
     folder = Path(tempfile.mkdtemp(prefix='scara_line_'))
     log(f'run folders in {folder}')

@@ -5,8 +5,7 @@ import time
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import (axes, finish, fmt_seconds, met, mm, num, Rows,
-                                     Section, table)
+from scara_collab.bench.util import axes, finish, fmt_seconds, met, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import ArmModel, CellModel, load_cell
@@ -21,10 +20,7 @@ METHODS = {'joint': 'joint interp.', 'line': 'straight line'}
 
 
 def execute(cell: CellModel, arm: ArmModel, traj: Trajectory, settle: float = 0.3) -> dict:
-    """Execute ``traj`` in a fresh simulator (``settle`` s more); return its path metrics.
-
-    ``duration``: until the tool stays within :data:`ARRIVED` of the goal (None: never).
-    """
+    """Execute ``traj`` in a fresh simulator, ``settle`` s more; return its path metrics."""
     with CellSim(cell, dict(load_config('simulation'), feed_interval=0.0)) as sim:
         sim.reset_arm(arm.name, traj.q[0])
         t0 = sim.time
@@ -129,17 +125,3 @@ def figure(p: dict):
     finish(ax2, 'time from start (s)', 'distance from the straight segment (mm)',
            'deviation from the line (1e-6 mm floor)', {1.0: '1 mm'})
     return fig
-
-
-SECTION = Section(
-    key='paths', title='path deviation: straight line vs joint interpolation',
-    heading='Path deviation: straight line vs joint interpolation',
-    claims=('joint_deviation', 'line_deviation', 'path_length'),
-    text='The seeds\' "1.5m move from the rest position to the conveyor center", taken as '
-    '(3.2, -0.9, 0.4) → (2.0, 0.0, 0.4) m in world for `scara_left`, planned by the motion '
-    'core as a straight line and as a joint move, each time-optimal under the same joint '
-    'limits, then executed in the PyBullet cell (1 kHz physics) and measured from the joint '
-    'states every 10 ms. Jerk is the third difference of those tool positions. Targets: the '
-    'line within 1e-6 m planned and 1 mm executed.',
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='tool paths seen from above and their deviation')

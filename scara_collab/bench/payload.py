@@ -4,7 +4,7 @@ from pathlib import Path
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS, PAYLOAD_CLAIMS
-from scara_collab.bench.util import axes, finish, mm, num, Rows, Section, table
+from scara_collab.bench.util import axes, finish, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import CellModel, load_cell
@@ -20,10 +20,7 @@ CONTROLLERS = {'pid': "PID (seeds' gains)", 'computed_torque': 'computed torque'
 
 
 def tracking(cell: CellModel, mode: str, payload: float, settle: float) -> dict:
-    """Run the left arm's line with ``payload`` kg by ``mode``, ``settle`` s more; the metrics.
-
-    ``settling``: s after the move until within :data:`SETTLED` (None: not in the window).
-    """
+    """Run the left arm's line with ``payload`` kg by ``mode``, ``settle`` s more; the metrics."""
     arm = cell.leader
     start, goal = (np.array(p) for p in LINES[arm.name])
     with CellSim(cell, dict(load_config('simulation'), feed_interval=0.0),
@@ -63,8 +60,7 @@ def tracking(cell: CellModel, mode: str, payload: float, settle: float) -> dict:
             't': times[::every] - t0, 'to_goal': to_goal[::every]}
 
 
-PAYLOADS = (0.0, 1.0, 2.5)
-"""kg in the gripper."""
+PAYLOADS = (0.0, 1.0, 2.5)  # kg in the gripper
 
 
 def measure(smoke: bool, scratch: Path) -> dict:
@@ -121,17 +117,3 @@ def figure(pay: dict):
            '1.5 m line with a payload: distance to the goal (the grey line: trajectory ends)',
            {1.0: '1 mm'})
     return fig
-
-
-SECTION = Section(
-    key='payload', title='payload response', heading='Payload response: PID vs computed torque',
-    claims=('payload',),
-    text='A planned straight line (3.3, -0.8, 0.5) → (1.8, -0.8, 0.5) m (`scara_left`, 1.5 m, '
-    'time-optimal) executed in the PyBullet cell with the payload hung on the tool (a fixed '
-    "constraint, so physics feels it), by the seeds' PID gains (planar 15/0.5/2, quill "
-    '10/0.1/1) and by computed torque (the Lagrangian model as feed-forward). Settling: time '
-    'after the trajectory ends until the tool stays within 1 mm of the goal. Overshoot: '
-    'furthest tool travel past the goal along the line, % of the line. Peak effort: the '
-    'largest commanded joint effort (N·m, N·m, N). The SPEC sets no target here.',
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='distance to the goal over time, per payload')

@@ -1,8 +1,4 @@
-"""A measuring node in a benchmark's own process that talks to a launched graph.
-
-The fault matrix (:mod:`scara_collab.bench.faults`) injects its faults through it: it
-publishes bad input and keeps the newest ``joint_states`` for the stamps it forges.
-"""
+"""A measuring node in the benchmark's process: the fault matrix injects through it."""
 import time
 from typing import Optional
 
@@ -44,12 +40,8 @@ class Probe:
         return self.state
 
     def publisher(self, msg_type, topic: str, readers: int = 1, timeout: float = 10.0):
-        """Return a publisher on ``topic`` once ``readers`` of the graph have matched it.
-
-        A message published before a reader has matched is lost to that reader (DDS), so an
-        injection waits for the readers it means to reach; the probe's own subscription does
-        not count. After ``timeout`` wall seconds it is returned anyway.
-        """
+        """Return a publisher on ``topic`` once ``readers`` of the graph match it (or timeout)."""
+        # DDS drops what is published before a reader matched; the probe's own reader not counted
         pub = self.node.create_publisher(msg_type, topic, 10)
         own = sum(1 for sub in self.node.subscriptions
                   if sub.topic_name == pub.topic_name)

@@ -8,11 +8,7 @@ from scara_collab.bench.util import Log
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the three measurements into the ``job-protocol`` block; True if every demo completed.
-
-    600 sim s collaborative, mirrored ``--seeds`` (11 12 13) 90 sim s each, ``--runs`` (5) demo
-    runs of 60 sim s beside ``--hogs`` (2); ``--smoke``: 60, one seed of 30, 2 runs of 30.
-    """
+    """Run the long, mirrored and hogged runs into ``job-protocol``; True if each demo finished."""
     smoke = args.smoke
     long_s, mirrored_s, hog_s = (60.0, 30.0, 30.0) if smoke else (600.0, 90.0, 60.0)
     seeds = (args.seeds or [11, 12, 13])[:1 if smoke else None]
@@ -28,8 +24,7 @@ def section(args, page: Path, command: str, log: Log) -> bool:
             for k in range(1, runs + 1)]
     done = [r['exit_code'] == 0 and (r['sorted'] or 0) > 0 and r['missed'] == 0 for r in demo]
     text = '\n\n'.join([
-        stamp(command, t0, 'each row is one launcher run (separate processes, unthrottled, '
-              'lockstep on), its figures from its `summary.json`.'),
+        stamp(command, t0),
         f'**Collaborative, default feed, {long_s:g} sim s through the launcher**',
         cells([long], ('sorted', 'missed', 'dropped', 'wrong_bin', 'give_ups', 'retries',
                        'items_per_minute', 'min_separation_m', 'emergency', 'real_time_factor'))

@@ -1,10 +1,4 @@
-"""The cell in real time, without lockstep, as against hardware: figures beside lockstep's.
-
-Every run goes through the launcher at ``--rtf 1`` against a clock that does not wait for the
-nodes (``--lockstep off``), on the same seeds as a lockstep reference, in the
-:data:`CONDITIONS`; :func:`capacity` measures items per minute at an item every 0.9 s (faster
-than the arms) with and without lockstep.
-"""
+"""The cell in real time without lockstep (``--rtf 1 --lockstep off``), beside lockstep."""
 import os
 from pathlib import Path
 import tempfile
@@ -64,14 +58,9 @@ def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]]
     """Return the runs and the capacity as a Markdown block."""
     def cell(v):
         return f'{v:.3f}' if isinstance(v, float) else ('' if v is None else str(v))
-    lines = [f'Measured with `{command}`: the collaborative job through the launcher at '
-             f'`--rtf 1`, {"one process" if one_process else "one process per node"}, '
-             f'{duration:g} sim s a run, the rated feed (conditions: '
-             "`scara_collab/bench/realtime.py`). `own_moves`: stops caused by the job's own "
-             'moves (a predicted conflict); `lost_s`: sim seconds the stops cost; `overspeed`: '
-             'times a joint ran faster than its limit allows (the arm left its trajectory); '
-             "`cpu_s`: the graph's CPU seconds per sim second, all its processes, on a machine "
-             f'of {os.cpu_count()} cores (a hog takes one).', '',
+    layout = 'one process' if one_process else 'one process per node'
+    lines = [f'Measured with `{command}`: {layout}, {duration:g} sim s a run, on a machine of '
+             f'{os.cpu_count()} cores.', '',
              table([{k: cell(r.get(k)) for k in COLUMNS} for r in rows])]
     causes = [f'- {r["condition"]} seed {r["seed"]}: {r["causes"]}' for r in rows
               if r.get('causes')]
@@ -86,13 +75,7 @@ def markdown(rows: Sequence[Dict[str, object]], cap: Optional[Dict[str, object]]
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the conditions and the capacity into ``page``; False if a target was missed.
-
-    ``--duration`` sim s a run (600, in wall time), ``--seeds`` (1 2 3), ``--conditions``
-    (all), ``--capacity-duration`` (240; 0: none), ``--one-process``. Missed: a run broke the
-    margin, missed or dropped an item, or stopped for the job's own moves (``two_hogs`` may
-    stop, protectively), or the capacity ratio < 0.95.
-    """
+    """Run the conditions and the capacity into ``page``; False if a target was missed."""
     duration, seeds, one = args.duration or 600.0, args.seeds or [1, 2, 3], args.one_process
     runs = Path(tempfile.mkdtemp(prefix='scara_realtime_'))
     log(f'run folders in {runs}')

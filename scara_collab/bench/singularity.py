@@ -4,7 +4,7 @@ from pathlib import Path
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, met, mm, num, Rows, Section, table
+from scara_collab.bench.util import axes, finish, met, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import base_to_world, fk, ik, ik_both, IKError, manipulability
 from scara_collab.core.model import ArmModel, load_cell
@@ -20,15 +20,11 @@ CASES = {
 """Study lines in the arm's base frame (m): start and end of the tool path."""
 PLANNER_LINE = ((1.0, 0.85, 0.4), (-1.0, 0.85, 0.4))
 """The closest tangent graze of the inner circle that the joint limits allow (base frame)."""
-FAR_TARGET = (3.0, 0.0, 0.4)
-"""The seeds' target 3.0 m from the shoulder axis (base frame)."""
+FAR_TARGET = (3.0, 0.0, 0.4)  # the seeds' target 3.0 m from the shoulder axis (base frame)
 
 
 def study(arm: ArmModel, a, b, damping: float, threshold: float, dt: float) -> dict:
-    """Run the seeds' loop along ``a`` -> ``b`` (base frame) at :data:`SPEED`.
-
-    ``damping``: the DLS ``max_damping`` (0: the plain pseudo-inverse).
-    """
+    """Run the seeds' loop along ``a`` -> ``b`` (base frame); ``damping`` 0: pseudo-inverse."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     duration = float(np.linalg.norm(b - a)) / SPEED
     s = np.linspace(0.0, 1.0, int(round(duration / dt)) + 1)
@@ -127,17 +123,3 @@ def figure(sg: dict):
            f"straight lines at {SPEED} m/s through the seeds' differential-kinematics loop",
            {sg['velocity_limit']: 'joint limit'})
     return fig
-
-
-SECTION = Section(
-    key='singularity', title='singularity: pseudo-inverse vs DLS',
-    heading='Singularity: pseudo-inverse vs damped least squares',
-    claims=('singularity', 'unreachable'),
-    text="Straight lines (base frame of `scara_left`) at 0.3 m/s through the seeds' "
-    'differential-kinematics loop at 1 kHz (`core.trajectory.resolved_rate`, position '
-    'feedback 5/s), once with the plain pseudo-inverse, once with DLS (damping as in '
-    "`controllers.yaml`). The inner cases need elbow angles beyond the arm's ±150° limit: "
-    'they test the solver where the seeds put their claim, not a move the cell can make. The '
-    'planner times its own line so that no joint exceeds the limit. Target: ≤ 2 rad/s.',
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='joint speed along the study paths')

@@ -1,9 +1,4 @@
-"""Section 2, solver speed: the motion core against reference implementations, same run.
-
-IK against a textbook numpy IK, the Jacobian and dynamics against Pinocchio, capsule distances
-against coal, and the one collision formula on one state pair against the same formula written
-with branches on plain floats.
-"""
+"""Section 2, solver speed: the motion core against reference implementations, same run."""
 from functools import partial
 import math
 from pathlib import Path
@@ -13,8 +8,7 @@ from typing import Callable, List, Sequence
 import numpy as np
 
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import (axes, finish, fmt_seconds, met, per_call, Rows,
-                                     Section, table)
+from scara_collab.bench.util import axes, finish, fmt_seconds, met, per_call, Rows, table
 from scara_collab.core import collision, dynamics, kinematics
 from scara_collab.core.model import expand_xacro, load_cell
 
@@ -31,11 +25,7 @@ def textbook_ik(l1: float, l2: float, xy: np.ndarray) -> np.ndarray:
 
 
 def branchy_segment(p0, p1, q0, q1) -> float:
-    """Return the segment distance of one pair of float 3-tuples: ``if`` instead of ``where``.
-
-    :func:`scara_collab.core.collision.segment_distance`'s formula written for one pair only,
-    the reference its single-pair speed is set beside.
-    """
+    """Return one pair's segment distance: the core's formula with ``if`` for ``where``."""
     (p0x, p0y, p0z), (p1x, p1y, p1z), (q0x, q0y, q0z), (q1x, q1y, q1z) = p0, p1, q0, q1
     d1x, d1y, d1z = p1x - p0x, p1y - p0y, p1z - p0z
     d2x, d2y, d2z = q1x - q0x, q1y - q0y, q1z - q0z
@@ -250,18 +240,3 @@ def figure(s: dict):
     finish(ax, 'how many times faster ours is (log; < 1 = slower)', '',
            'motion core vs references, same run')
     return fig
-
-
-SECTION = Section(
-    key='solvers', title='solver speed vs reference implementations',
-    heading='Solver speed, against reference implementations',
-    claims=('ik_latency', 'solver_latency'),
-    text='The motion core beside reference implementations, in the same process on the same '
-    'random inputs: one call (median of several loops of many calls) and N at once (100,000 '
-    'states; arm-to-arm: 5,000). "ours vs reference" = how many times faster ours is (< 1: '
-    'slower); references without a batch API are called once per item. The last row times '
-    'the one collision formula on one state pair against the same formula written with '
-    'branches on plain floats. Targets: IK ≤ 5 µs for one target, ≥ 10⁶ targets/s at once. '
-    'On a shared machine absolute figures are noisy, ratios less so.',
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='speed-up over the references')

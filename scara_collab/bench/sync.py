@@ -11,7 +11,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from scara_collab import graph
 from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, met, mm, num, Rows, Section, table
+from scara_collab.bench.util import axes, finish, met, mm, num, Rows, table
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import load_cell
@@ -30,12 +30,7 @@ TIMEOUT = 120.0  # wall s to wait for any one step
 
 
 def mirrored_targets(n_moves: int, seed: int = 0) -> List[np.ndarray]:
-    """Return ``n_moves + 1`` left-arm targets: :data:`MOVE`, then random straight lines.
-
-    Random targets keep the left tool at ``y <= -0.25`` (its mirror at ``y >= 0.25``, so the
-    two arms never need to wait for each other), 0.5 m or more from the previous one, with a
-    straight line from it that the planner accepts.
-    """
+    """Return :data:`MOVE`, then random lines at ``y <= -0.25`` (no waiting): ``n_moves + 1``."""
     arm = load_cell().leader
     targets = list(MOVE)
     rng = np.random.default_rng(seed)
@@ -54,11 +49,7 @@ def mirrored_targets(n_moves: int, seed: int = 0) -> List[np.ndarray]:
 
 
 def measure(smoke: bool, scratch: Path) -> dict:
-    """Send the targets one after another to ``collab/target`` through a fresh graph.
-
-    The first target only positions the arms. :return: ``{'moves': [per move dict],
-    'physics_step_s', 'state_period_s'}``.
-    """
+    """Send the targets to ``collab/target`` through a fresh graph (the first only positions)."""
     targets = mirrored_targets(1 if smoke else 6)
     g = InProcess('single')
     own = {'pybullet_bridge': {'real_time_factor': 0.0, 'feed_interval': 0.0},
@@ -188,18 +179,3 @@ def figure(g: dict):
            f'{len(g["moves"])} mirrored moves through the ROS graph (1e-6 mm floor)',
            {1.0: 'target 1 mm', 4.0: "seeds' claim: 4 mm average"})
     return fig
-
-
-SECTION = Section(
-    key='sync', title='synchronisation: mirrored moves through the graph',
-    heading='Synchronisation: mirror error and start lag', claims=('mirror_error', 'lag'),
-    text='Mirrored straight-line moves through the ROS graph (bridge, both planners and the '
-    'replication manager in one process on sim time, unthrottled): each target goes to '
-    '`collab/target`, the left arm moves there, the right arm to the mirror image, with one '
-    "start stamp. Mirror error: the right tool's distance from the mirror of the left tool over "
-    'the move, from the joint states. Start lag three ways: the start stamps of the two '
-    'trajectories, the starts the bridge reports having executed, and the measured onsets '
-    '(first state 0.1 mm from rest; resolution one state period). Targets: mirror error ≤ 1 mm, '
-    'lag ≤ one physics step.',
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='mirror error over the moves')

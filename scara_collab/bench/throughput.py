@@ -1,9 +1,4 @@
-"""Section 7, throughput and real-time factor: the sorting job's capacity, and what bounds it.
-
-The job in one process (:func:`scara_collab.bench.job.run_job`) over seeds and modes, and
-through the launcher; a single arm's cycle bound; line timing against TOPP-RA (``toppra``, an
-independent reference); the simulator's own speed.
-"""
+"""Section 7, throughput: the job's capacity in one process and through the launcher; bounds."""
 from dataclasses import dataclass
 import logging
 from pathlib import Path
@@ -16,7 +11,7 @@ from scara_collab.bench import job
 from scara_collab.bench.claims import CLAIMS
 from scara_collab.bench.launched import run_launcher
 from scara_collab.bench.payload import LINES
-from scara_collab.bench.util import axes, finish, met, num, Rows, Section, spread, table
+from scara_collab.bench.util import axes, finish, met, num, Rows, spread, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik, IKError
 from scara_collab.core.model import load_cell
@@ -25,11 +20,9 @@ from scara_collab.core.sorting import drop_point, pick_height
 from scara_collab.core.trajectory import line_move, Trajectory
 from scara_collab.sim.cell_sim import CellSim
 
-CLAIMED = {'single': 12.0, 'collaborative': 22.0}
-"""The seeds' capacity per mode, items/min."""
+CLAIMED = {'single': 12.0, 'collaborative': 22.0}  # the seeds' capacity per mode, items/min
 SAME = ('sorted', 'missed', 'dropped', 'wrong_bin', 'give_ups', 'retries', 'min_separation_m',
-        'min_separation_time')
-"""What "the same job result" compares, to the last bit."""
+        'min_separation_time')  # what "the same job result" compares, to the last bit
 
 
 @dataclass(frozen=True)
@@ -56,40 +49,28 @@ SMOKE = Sizes(job_seeds=(1,), job_modes=('collaborative',), job_duration=8.0, re
               rated_duration=0.0, launcher_duration=0.0, cycle_step=0.6, topp_lines=2,
               speed_items=(0,), speed_modes=('computed_torque',), speed_seconds=0.5,
               speed_repeat=1)
-"""The seconds-long smoke run's sizes."""
 
 
 def cycle_bound(step: float = 0.1) -> Dict[str, object]:
-    """Time the leader's bin -> pick -> bin motion (no grasp, no release) over pick points.
-
-    The belt in ``step`` m by its items' lateral spread in 5 cm, at the pick height, each with
-    both bins; the planners' own moves to and from the bin's drop point.
-    """
+    """Time the leader's bin -> pick -> bin moves (no grasp) over the belt in ``step`` m x 5 cm."""
     cell = load_cell()
-    arm = cell.leader
-    auto, sim = load_config('automation'), load_config('simulation')
+    arm, belt = cell.leader, cell.belt
+    auto, jitter = load_config('automation'), float(load_config('simulation')['lateral_jitter'])
     z = pick_height(cell, float(auto['pick_clearance']))
-    belt = cell.belt
-    jitter = float(sim['lateral_jitter'])
     ys = np.arange(belt.centre_y - jitter, belt.centre_y + jitter + 1e-9, 0.05)
     xs = np.arange(belt.x_start, belt.x_end + 1e-9, step)
-    times: List[float] = []
-    best = (np.inf, None)
+    times, best = [], (np.inf, None)
     for cls in cell.item_classes:
         drop = drop_point(cell, arm.name, cls, float(auto['drop_clearance']))
         q_drop = ik(arm, drop).unwrap()
-        for x in xs:
-            for y in ys:
-                pick = np.array([x, y, z])
-                try:
-                    there = plan_path(arm, q_drop, pick, mode='line_or_joint')
-                    back = plan_path(arm, there.q[-1], drop, mode='line_or_joint')
-                except (IKError, ValueError):
-                    continue
-                t = there.duration + back.duration
-                times.append(t)
-                if t < best[0]:
-                    best = (t, pick)
+        for pick in (np.array([x, y, z]) for x in xs for y in ys):
+            try:
+                there = plan_path(arm, q_drop, pick, mode='line_or_joint')
+                back = plan_path(arm, there.q[-1], drop, mode='line_or_joint')
+            except (IKError, ValueError):
+                continue
+            times.append(there.duration + back.duration)
+            best = min(best, (times[-1], pick), key=lambda b: b[0])
     med = float(np.median(times))
     return {'best_s': float(best[0]), 'median_s': med, 'cases': len(times),
             'items_per_min_best': 60.0 / best[0], 'items_per_min_median': 60.0 / med,
@@ -128,10 +109,7 @@ def topp_ratios(n: int = 100, seed: int = 1) -> np.ndarray:
 
 
 def sim_speed(mode: str, n_items: int, seconds: float) -> float:
-    """Return the simulator's real-time factor, both arms shuttling, ``n_items`` on the belt.
-
-    Each leg: a two-point cubic to the other end of the arm's ``payload.LINES`` line.
-    """
+    """Return the simulator's real-time factor, both arms shuttling along ``payload.LINES``."""
     cell = load_cell()
     with CellSim(cell, dict(load_config('simulation'), feed_interval=0.0),
                  control_mode=mode) as sim:
@@ -361,21 +339,3 @@ def figure(t: dict):
            f'capacity: an item every {t["feed_interval"]:g} s, {t["duration"]:g} sim s per run',
            {60.0 / t['feed_interval']: 'item feed'})
     return fig
-
-
-SECTION = Section(
-    key='throughput', title='throughput: the sorting job',
-    heading='Throughput and real-time factor', claims=('throughput', 'rtf'),
-    text='**Capacity** is items sorted per minute with the feed faster than the arms can take '
-    '(an item every 1 s; mirrored mode: a mirror pair every 2 s). The whole graph runs in one '
-    "process on one executor, unthrottled on sim time with the bridge's lockstep gate on, "
-    'over three item-feed seeds per mode. Give-ups: moves the job abandoned; dropped + wrong '
-    'bin: items that left the belt some other way. The cycle bound is what a single arm could '
-    "sort with the planners' own moves if grasping took no time. The **rated feed** is the "
-    'default feed over 600 sim s. Real-time factor = sim seconds per wall second (physics at '
-    '1 kHz); on a shared machine a lower bound. Targets: pair ≥ 1.9× single with the margin '
-    'kept and no stop; '
-    '≥ 30 items/min at the rated feed, none missed; line time ≤ 1.01 × TOPP-RA; ≥ 5× real '
-    'time in one process, ≥ 3.5× as separate processes; the same run, the same result.',
-    measure=measure, tables=tables, summary=summary, figure=figure,
-    figure_alt='items per minute per mode and seed')

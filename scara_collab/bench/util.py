@@ -118,9 +118,7 @@ def quote(*keys: str) -> str:
 
 
 def table(rows: Sequence[Dict[str, object]], align: str = '') -> str:
-    """Return rows of dicts as a Markdown table, the first row's keys as the head.
-
-    :param align: one of ``l r`` per column (default left).
+    """Return rows of dicts as a Markdown table, the first row's keys as the head, aligned ``l r``.
 
     >>> print(table([{'a': 1, 'b': 2}], 'lr'))
     | a | b |
@@ -155,18 +153,12 @@ def finish(ax, xlabel: str, ylabel: str, title: str, hlines: Dict[float, str] = 
 
 @dataclass(frozen=True)
 class Section:
-    """One numbered section of ``RESULTS.md``, all of it in one module.
-
-    ``key``: the ``--only`` name and the figure's (``<key>.png``); ``title``: on the progress
-    lines; ``text``: the fixed paragraph; ``measure(smoke, scratch) -> data``; ``tables(data)
-    -> [Markdown]``; ``summary(data) -> rows`` of the summary table; ``figure(data)``.
-    """
+    """A numbered section of ``RESULTS.md`` (``key``: ``--only`` and ``figures/<key>.png``)."""
 
     key: str
     title: str
     heading: str
     claims: Tuple[str, ...]
-    text: str
     measure: Callable[[bool, Path], dict]
     tables: Callable[[dict], List[str]]
     summary: Callable[[dict], Rows]
@@ -175,12 +167,7 @@ class Section:
 
 
 def put_block(page: str, name: str, heading: str, body: str) -> str:
-    """Return ``page`` with ``body`` as its block ``name`` under the heading ``## heading``.
-
-    The block replaces the one between the page's markers; without markers, the text under
-    the heading (numbered or not) up to the next ``## `` heading; without either, it is
-    appended under a new heading.
-    """
+    """Return ``page`` with block ``name``: between its markers, else under ``## heading``."""
     begin, end = f'<!-- {name}:begin -->', f'<!-- {name}:end -->'
     block = f'{begin}\n{body.strip()}\n{end}'
     if begin in page and end in page:
