@@ -26,3 +26,16 @@ def test_the_solver_section_runs_alone_and_compares_the_collision_formula(tmp_pa
     page = (tmp_path / 'RESULTS.md').read_text()
     assert '<!-- benchmark:solvers:begin -->' in page and '<!-- benchmark:paths:' not in page
     assert (tmp_path / 'figures' / 'solvers.png').is_file()
+
+
+def test_the_foresight_study_executes_its_conflicts_at_full_size(tmp_path):
+    """All 200 pairs drawn and the first 30 conflicts executed in physics, none refused.
+
+    Both arms are put at their starts before either move is sent: the simulator's door checks
+    a move against where the other arm stands, which is the previous pair's end otherwise.
+    """
+    from scara_collab.bench import foresight
+    result = foresight.measure(False, tmp_path)
+    executed = [p['executed_min_m'] for p in result['pairs'] if p['executed_min_m'] is not None]
+    assert result['n_pairs'] == 200 and len(executed) == 30
+    assert min(executed) >= result['margin']

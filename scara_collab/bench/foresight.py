@@ -57,8 +57,9 @@ def random_pair(cell: CellModel, rng: np.random.Generator, clearance: float):
 def _execute(sim: CellSim, cell: CellModel, moves) -> float:
     """Run ``[(Trajectory, start s)]`` of both arms in physics; return the least separation."""
     t0 = sim.time
+    for arm, (traj, _) in zip(cell.arms, moves):  # both at their starts before either is sent:
+        sim.reset_arm(arm.name, traj.q[0])  # the door checks a move against the other arm
     for arm, (traj, start) in zip(cell.arms, moves):
-        sim.reset_arm(arm.name, traj.q[0])
         sim.execute(arm.name, t0 + start + traj.t, traj.q, traj.qd, traj.qdd)
     end = t0 + max(start + traj.duration for traj, start in moves) + 0.2
     q = []
