@@ -40,6 +40,10 @@ class BridgeOutputs:
         self.periods = {'state': 1.0 / rates['state'], 'clock': 1.0 / rates['clock'],
                         'markers': 1.0 / rates['markers'], 'diagnostics': 1.0}
         self.next = {k: 0.0 for k in self.periods}
+        # next = origin + count x period, never a running sum: 0.01 added 200,000 times drifts
+        # past the 1e-9 s the grid is matched within, and the states then came 1 ms late
+        self._origin = {k: 0.0 for k in self.periods}
+        self._count = {k: 0 for k in self.periods}
         self.clock_pub = node.create_publisher(ClockMsg, CLOCK, STATE_QOS)
         self.state_pub = FaultyPublisher(node, faults, node.create_publisher(
             JointState, 'joint_states', STATE_QOS))  # direct when no fault names it
@@ -56,24 +60,30 @@ class BridgeOutputs:
         t = self.sim.time + 1e-9
         if t >= self.next['clock']:
             self.clock()
-            self.next['clock'] += self.periods['clock']
+            self._step('clock')
             self._on_clock()
         if t >= self.next['state']:
             self.state()
-            self.next['state'] += self.periods['state']
+            self._step('state')
         if t >= self.next['markers']:
             items = self.sim.conveyor.items()
             self.items_pub.publish(conv.item_markers(items, self.cell.item_classes,
                                                      self.cell.item_size, self.sim.time))
-            self.next['markers'] += self.periods['markers']
+            self._step('markers')
         if t >= self.next['diagnostics']:
             self.diagnostics.publish(self._status())
-            self.next['diagnostics'] += self.periods['diagnostics']
+            self._step('diagnostics')
+
+    def _step(self, key: str) -> None:
+        """Move ``key``'s next publication one period on its grid."""
+        self._count[key] += 1
+        self.next[key] = self._origin[key] + self._count[key] * self.periods[key]
 
     def publish_all(self) -> None:
         """Publish everything now, and from now on on its grid."""
         for k in self.next:
-            self.next[k] = self.sim.time
+            self.next[k] = self._origin[k] = self.sim.time
+            self._count[k] = 0
         self.publish_due()
 
     def publish_off_grid(self) -> None:
