@@ -200,7 +200,8 @@ def _joined(runs: Sequence[dict], key: str) -> str:
 def tables(t: dict) -> list:
     """Return capacity per mode, what bounds it, repeatability, real-time factor, CPU cost."""
     cap = []
-    for mode, runs in ((m, jobs(t, m)) for m in t['modes']):
+    for mode in t['modes']:
+        runs = jobs(t, mode)
         ipm = spread(r['items_per_minute'] for r in runs)
         cap.append({
             'mode': mode, 'seeds': ', '.join(str(r['seed']) for r in runs),
