@@ -166,8 +166,8 @@ def summary(f: dict) -> Rows:
     """Return the summary row: conflicts found, how early, breaches planned and executed."""
     pairs = f['pairs']
     conflicts = [p for p in pairs if p['conflict']]
-    executed = [p['executed_min_m'] for p in pairs if p['executed_min_m'] is not None]
-    planned = [p['planned_min_m'] for p in pairs if p['planned_min_m'] is not None]
+    executed, planned = ([p[k] for p in pairs if p[k] is not None]
+                         for k in ('executed_min_m', 'planned_min_m'))
     breaches = sum(v < f['margin'] for v in planned + executed)
     return [('collision foresight (crossing pairs)', CLAIMS['foresight'].figure,
              f'{len(conflicts)} conflicts in {len(pairs)} pairs, all found at the decision, '

@@ -122,12 +122,11 @@ def row(summary: Summary) -> Dict[str, object]:
     """Return one run's figures: :data:`KEYS`, the job's give-ups, its stops, CPU, overspeed."""
     job = summary.get('job') or {}
     cpu = summary.get('cpu_per_sim_s') or {}
-    both = stops(summary, 'protective') + stops(summary, 'emergency')
+    protective, emergency = stops(summary, 'protective'), stops(summary, 'emergency')
+    both = protective + emergency
     return {**{k: summary.get(k) for k in KEYS},
-            'give_ups': job.get('give_ups'), 'retries': job.get('retries'),
-            'last_give_up': job.get('last_give_up'),
-            'protective': len(stops(summary, 'protective')),
-            'emergency': len(stops(summary, 'emergency')),
+            **{k: job.get(k) for k in ('give_ups', 'retries', 'last_give_up')},
+            'protective': len(protective), 'emergency': len(emergency),
             'own_moves': sum('predicted' in str(s.get('cause', '')) for s in both),
             'lost_s': round(sum(float(s.get('lost') or 0.0) for s in both), 3),
             'causes': '; '.join(sorted({str(s.get('cause', ''))[:60] for s in both})),

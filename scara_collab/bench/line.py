@@ -8,9 +8,9 @@ from typing import Dict, List, Sequence
 
 import yaml
 
+from scara_collab.bench.job import default_feed
 from scara_collab.bench.launched import Launch
 from scara_collab.bench.util import Log, table, write_block
-from scara_collab.core.config import load_config
 from scara_collab.core.line import Section
 from scara_collab.core.model import load_cell
 from scara_collab.core.paths import share_dir
@@ -40,9 +40,8 @@ def run(cells: int, speed: float, feed: float, duration: float, out: Path, log: 
         copies: int = 1) -> Dict[str, object]:
     """Run a line of ``cells`` (1: a lone cell) at ``speed`` and ``feed``; return its row.
 
-    ``copies`` > 1: that many identical runs side by side, each in its own ROS domain, so a lone
-    cell's CPU is measured with the machine as busy as a line of ``copies`` cells keeps it; the
-    row is the first run's, its CPU the median of all.
+    ``copies`` > 1: that many runs side by side (own ROS domains), so a lone cell's CPU is
+    measured on a machine as busy as a line keeps it; the first run's row, the median CPU.
     """
     env = dict(os.environ)
     if speed != load_cell().belt.speed:
@@ -60,8 +59,7 @@ def run(cells: int, speed: float, feed: float, duration: float, out: Path, log: 
         rows = [dict(rows[0], cpu_s_per_sim_s=costs[len(costs) // 2] if costs else None)]
     folders = [out / f'cell_{k}' for k in range(cells)] if cells > 1 else [out]
     per = [sum(1 for t, kind, _, _ in read_events(f) if kind == 'sorted' and float(t) >= WARM)
-           * 60.0 / (duration - WARM) if (f / 'events.csv').is_file() else 0.0
-           for f in folders]
+           * 60.0 / (duration - WARM) for f in folders]
     row = {'cells': cells, 'belt_speed': speed, 'feed_interval': feed, 'duration': duration,
            'rtf': rtf, 'real_time_factor': [r.get('real_time_factor') for r in rows],
            'sorted': s.get('sorted'),
@@ -96,19 +94,21 @@ def capacity(lines: List[int], duration: float, folder: Path,
     return out
 
 
+def at_rated(n: int, duration: float, out: Path, log: Log, **kw) -> Dict[str, object]:
+    """Run ``n`` cells at the rated belt speed and ``n`` times the rated feed."""
+    return run(n, load_cell().belt.speed, default_feed() / n, duration, out, log, **kw)
+
+
 def rated(n: int, duration: float, folder: Path, log: Log) -> Dict[str, object]:
     """N cells at N times the rated feed, handoff messages lost and repeated."""
-    feed = float(load_config('simulation')['feed_interval']) / n
     flags = [a for k in range(n - 1) for f in LOSSY for a in ('--fault', f.format(k=k))]
-    return run(n, load_cell().belt.speed, feed, duration, folder / f'rated_{n}', log,
-               flags=flags)
+    return at_rated(n, duration, folder / f'rated_{n}', log, flags=flags)
 
 
 def realtime(n: int, duration: float, folder: Path, log: Log) -> List[Dict[str, object]]:
     """N cells at N times the rated feed, unthrottled and paced at 1x: the pace each keeps."""
-    feed = float(load_config('simulation')['feed_interval']) / n
-    return [run(n, load_cell().belt.speed, feed, duration, folder / f'pace_{n}_{rtf:g}', log,
-                rtf=rtf) for rtf in (0.0, 1.0)]
+    return [at_rated(n, duration, folder / f'pace_{n}_{rtf:g}', log, rtf=rtf)
+            for rtf in (0.0, 1.0)]
 
 
 def wall_of(path: Path, text: str) -> float:
@@ -119,11 +119,9 @@ def wall_of(path: Path, text: str) -> float:
 
 def kill(duration: float, at: float, folder: Path, log: Log) -> Dict[str, object]:
     """Three cells, undisturbed and with cell 1 killed at ``at``: what the others did."""
-    feed = float(load_config('simulation')['feed_interval']) / 3
-    speed = load_cell().belt.speed
-    calm = run(3, speed, feed, duration, folder / 'calm_3', log)
-    hit = run(3, speed, feed, duration, folder / 'kill_3', log,
-              flags=['--fault', f'crash:/cell_1/pybullet_bridge:{at:g}'])
+    calm = at_rated(3, duration, folder / 'calm_3', log)
+    hit = at_rated(3, duration, folder / 'kill_3', log,
+                   flags=['--fault', f'crash:/cell_1/pybullet_bridge:{at:g}'])
     logs = folder / 'kill_3'
     try:
         same = [(folder / r / 'cell_0' / 'events.csv').read_bytes() for r in ('calm_3', 'kill_3')]
@@ -143,43 +141,44 @@ def _f(v, d=2) -> str:
     return '-' if v is None else f'{v:.{d}f}'
 
 
+def _measured(command: str, rows: List[Dict[str, object]], how: str = '') -> str:
+    """Return a scenario's block: the command (and ``how`` it ran), its rows as a table."""
+    return f'Measured with `{command}`{how}.\n\n{table(rows)}\n'
+
+
 def capacity_text(rows: List[Dict[str, object]], command: str) -> str:
     """Return the capacity runs as a Markdown block."""
-    return (f'Measured with `{command}` (`scara_collab/bench/line.py`).\n\n' + table([{
-                'cells': r['cells'], 'belt m/s': f'{r["belt_speed"]:g}',
-                'item every s': f'{r["feed_interval"]:.3g}',
-                'one cell items/min': _f(r['one_cell'], 1),
-                'line items/min': _f(r['items_per_minute'], 1),
-                'ratio (>= 0.9)': _f(r['ratio'], 3),
-                'worst cell / one (>= 0.85)': _f(r['worst_cell_ratio'], 3),
-                'per cell': ', '.join(_f(p, 1) for p in r['per_cell']),
-                'min separation m': ', '.join(_f(s, 3) for s in r['min_separation_m']),
-                'CPU s per sim s per cell (one cell)': ', '.join(_f(c) for c in r['cpu_per_cell'])
-                + f' ({_f(r["one_cell_cpu"])})',
-                'worst CPU / one (<= 1.1)': _f(r['cpu_ratio'], 3),
-                'handoffs (problems)': f'{r["handoffs"]} ({r["handoff_problems"]})',
-                'exit': r['exit_code']} for r in rows]) + '\n')
+    return _measured(command, [{
+        'cells': r['cells'], 'belt m/s': f'{r["belt_speed"]:g}',
+        'item every s': f'{r["feed_interval"]:.3g}', 'one cell items/min': _f(r['one_cell'], 1),
+        'line items/min': _f(r['items_per_minute'], 1), 'ratio (>= 0.9)': _f(r['ratio'], 3),
+        'worst cell / one (>= 0.85)': _f(r['worst_cell_ratio'], 3),
+        'per cell': ', '.join(_f(p, 1) for p in r['per_cell']),
+        'min separation m': ', '.join(_f(s, 3) for s in r['min_separation_m']),
+        'CPU s per sim s per cell (one cell)': ', '.join(_f(c) for c in r['cpu_per_cell'])
+        + f' ({_f(r["one_cell_cpu"])})', 'worst CPU / one (<= 1.1)': _f(r['cpu_ratio'], 3),
+        'handoffs (problems)': f'{r["handoffs"]} ({r["handoff_problems"]})',
+        'exit': r['exit_code']} for r in rows], ' (`scara_collab/bench/line.py`)')
 
 
 def rated_text(rows: List[Dict[str, object]], command: str) -> str:
     """Return the rated-feed runs as a Markdown block."""
     head = ('cells', 'duration', 'feed_interval', 'missed', 'dropped', 'handoffs',
             'handoff_problems', 'balanced', 'min_separation_m', 'exit_code')
-    return (f'Measured with `{command}`.\n\n' + table(
-        [{k: ', '.join(_f(x, 3) for x in r[k]) if isinstance(r[k], list) else r[k] for k in head}
-         for r in rows]) + '\n')
+    return _measured(command, [
+        {k: ', '.join(_f(x, 3) for x in r[k]) if isinstance(r[k], list) else r[k] for k in head}
+        for r in rows])
 
 
 def realtime_text(rows: List[Dict[str, object]], command: str) -> str:
     """Return the paced runs as a Markdown block."""
-    return (f'Measured with `{command}`.\n\n' + table([{
-                'cells': r['cells'], 'paced': f'{r["rtf"]:g}x' if r['rtf'] else 'unthrottled',
-                'sim s': f'{r["duration"]:g}',
-                'real-time factor per cell': ', '.join(_f(x) for x in r['real_time_factor']),
-                'line (its slowest cell)': _f(_slowest(r)),
-                'CPU s per sim s per cell': ', '.join(_f(c) for c in r['cpu_per_cell']),
-                'sorted': r['sorted'], 'missed': r['missed'], 'exit': r['exit_code']}
-                for r in rows]) + '\n')
+    return _measured(command, [{
+        'cells': r['cells'], 'paced': f'{r["rtf"]:g}x' if r['rtf'] else 'unthrottled',
+        'sim s': f'{r["duration"]:g}',
+        'real-time factor per cell': ', '.join(_f(x) for x in r['real_time_factor']),
+        'line (its slowest cell)': _f(_slowest(r)),
+        'CPU s per sim s per cell': ', '.join(_f(c) for c in r['cpu_per_cell']),
+        'sorted': r['sorted'], 'missed': r['missed'], 'exit': r['exit_code']} for r in rows])
 
 
 def _slowest(row: Dict[str, object]):
@@ -190,15 +189,14 @@ def _slowest(row: Dict[str, object]):
 
 def kill_text(r: Dict[str, object], command: str) -> str:
     """Return the killed-cell run as a Markdown block."""
-    return (f'Measured with `{command}`: three cells at three times the rated feed, '
-            f'{r["duration"]:g} sim s, undisturbed and with cell 1 killed at '
-            f'{r["at"]:g} sim s.\n\n' + table([{
-                "cell 0's events identical": r['cell0_identical'],
-                'cell 2 sorting again after the kill (wall s)':
-                    _f(r['sorting_again_wall_s'], 1),
-                'target (lookahead + 10 s)': f'{r["lookahead_s"] + 10.0:.1f}',
-                'report names cell 1': r['named'], 'died': r['died'],
-                'exit (undisturbed, killed)': f'{r["calm_exit"]}, {r["exit_code"]}'}]) + '\n')
+    return _measured(command, [{
+        "cell 0's events identical": r['cell0_identical'],
+        'cell 2 sorting again after the kill (wall s)': _f(r['sorting_again_wall_s'], 1),
+        'target (lookahead + 10 s)': f'{r["lookahead_s"] + 10.0:.1f}',
+        'report names cell 1': r['named'], 'died': r['died'],
+        'exit (undisturbed, killed)': f'{r["calm_exit"]}, {r["exit_code"]}'}],
+        f': three cells at three times the rated feed, {r["duration"]:g} sim s, undisturbed '
+        f'and with cell 1 killed at {r["at"]:g} sim s')
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:

@@ -35,12 +35,8 @@ def execute(cell: CellModel, arm: ArmModel, traj: Trajectory, settle: float = 0.
     done = Trajectory(t=t, q=q, qd=qd, qdd=np.gradient(qd, t, axis=0), p=fk(arm, q))
     out = path_metrics(done, START, GOAL).as_dict()
     away = np.nonzero(np.linalg.norm(done.p - GOAL, axis=1) > ARRIVED)[0]
-    if not away.size:
-        arrived = 0.0
-    elif away[-1] + 1 < len(t):
-        arrived = float(t[away[-1] + 1])
-    else:
-        arrived = None
+    last = away[-1] + 1 if away.size else 0  # the first sample from which it stays there
+    arrived = float(t[last]) if last < len(t) else None
     out.update(end_error=float(np.linalg.norm(done.p[-1] - GOAL)), duration=arrived,
                tracking_error=float(np.linalg.norm(done.p - fk(arm, traj.sample(t)),
                                                    axis=1).max()),

@@ -48,10 +48,9 @@ def measure(smoke: bool, scratch: Path) -> dict:
     arm = load_cell().leader
     cfg = load_config('controllers')['trajectory']
     threshold, damping = float(cfg['dls_threshold']), float(cfg['dls_max_damping'])
-    cases, dt = [], 0.01 if smoke else 0.001  # s: the differential-kinematics step
-    for name, (a, b) in CASES.items():
-        cases.append({'name': name, 'pinv': study(arm, a, b, 0.0, threshold, dt),
-                      'dls': study(arm, a, b, damping, threshold, dt)})
+    dt = 0.01 if smoke else 0.001  # s: the differential-kinematics step
+    cases = [{'name': name, 'pinv': study(arm, a, b, 0.0, threshold, dt),
+              'dls': study(arm, a, b, damping, threshold, dt)} for name, (a, b) in CASES.items()]
     a, b = (base_to_world(arm, np.array(p)) for p in PLANNER_LINE)
     line = line_move(arm, ik(arm, a).unwrap(), b, dls_threshold=threshold,
                      dls_max_damping=damping)

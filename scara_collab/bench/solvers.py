@@ -71,12 +71,12 @@ def _row(what: str, kind: str, ours: float, ref: float, ref_name: str, **more) -
 
 
 def _pair_rows(name: str, ours: Callable, ref: Callable, ref_name: str, states: Sequence,
-               n_call: int, repeat: int, unit: str = '') -> List[dict]:
+               timed: Callable, unit: str = '') -> List[dict]:
     """Time ``ours`` and ``ref`` on one state, ``ours`` on all at once (``ref`` one by one)."""
     first = [x[0] for x in states]
-    one, theirs = (per_call(lambda fn=fn: fn(*first), n_call, repeat) for fn in (ours, ref))
+    one, theirs = (timed(lambda fn=fn: fn(*first)) for fn in (ours, ref))
     n = len(states[0])
-    many = per_call(lambda: ours(*states), 1, repeat)
+    many = timed(lambda: ours(*states), 1)
     k = min(200, n)
     ref_k = np.array([ref(*state) for state in zip(*(x[:k] for x in states))])
     diff = float(np.max(np.abs(ours(*(x[:k] for x in states)) - ref_k)))
@@ -122,11 +122,14 @@ def measure(smoke: bool, scratch: Path) -> dict:
     qd, qdd = rng.uniform(-2, 2, (n_vec, 3)), rng.uniform(-4, 4, (n_vec, 3))
     p = kinematics.fk(arm, q)
 
-    t_ik = per_call(lambda: kinematics.ik(arm, IK_TARGET), n_call, repeat)
-    t_ikv = per_call(lambda: kinematics.ik(arm, p, q), 1, repeat)
+    def timed(fn: Callable, number: int = n_call) -> float:
+        return per_call(fn, number, repeat)
+
+    t_ik = timed(lambda: kinematics.ik(arm, IK_TARGET))
+    t_ikv = timed(lambda: kinematics.ik(arm, p, q), 1)
     xy = kinematics.world_to_base(arm, p)[:, :2]
-    t_ref = per_call(lambda: textbook_ik(arm.l1, arm.l2, xy), 1, repeat)
-    t_ref1 = per_call(lambda: textbook_ik(arm.l1, arm.l2, xy[:1]), n_call, repeat)
+    t_ref = timed(lambda: textbook_ik(arm.l1, arm.l2, xy), 1)
+    t_ref1 = timed(lambda: textbook_ik(arm.l1, arm.l2, xy[:1]))
     sol = kinematics.ik(arm, p, q)
     ik_err = float(np.max(np.linalg.norm(kinematics.fk(arm, sol.q[sol.ok]) - p[sol.ok], axis=1)))
     rows = [_row('IK, one target', 'latency', t_ik, t_ref1, 'textbook numpy', target='<= 5 us',
@@ -144,29 +147,27 @@ def measure(smoke: bool, scratch: Path) -> dict:
     rows += _pair_rows('Jacobian', partial(kinematics.jacobian, arm),
                        lambda x: pin.computeFrameJacobian(model, data, x, fid,
                                                           pin.LOCAL_WORLD_ALIGNED)[:3],
-                       'Pinocchio', (q,), n_call, repeat)
+                       'Pinocchio', (q,), timed)
     rows += _pair_rows('inverse dynamics', ours_id, partial(pin.rnea, model, data),
-                       'Pinocchio RNEA', (q, qd, qdd), n_call, repeat, ' N m')
+                       'Pinocchio RNEA', (q, qd, qdd), timed, ' N m')
     rows += _pair_rows('forward dynamics', ours_fd, partial(pin.aba, model, data),
-                       'Pinocchio ABA', (q, qd, ours_id(q, qd, qdd)), n_call, repeat,
-                       ' (rad/s^2, m/s^2)')
+                       'Pinocchio ABA', (q, qd, ours_id(q, qd, qdd)), timed, ' (rad/s^2, m/s^2)')
 
     query = coal.DistanceRequest(), coal.DistanceResult()
     a0, a1, b0, b1 = (rng.uniform(-1, 1, (n_vec, 3)) for _ in range(4))
-    t_sd = per_call(lambda: collision.segment_distance(a0[0], a1[0], b0[0], b1[0]), n_call,
-                    repeat)
-    t_sdv = per_call(lambda: collision.segment_distance(a0, a1, b0, b1), 1, repeat)
+    t_sd = timed(lambda: collision.segment_distance(a0[0], a1[0], b0[0], b1[0]))
+    t_sdv = timed(lambda: collision.segment_distance(a0, a1, b0, b1), 1)
     caps = [coal_capsules(coal, s[:1], e[:1], [0.01]) for s, e in ((a0, a1), (b0, b1))]
-    t_coal = per_call(lambda: coal_distance(coal, query, *caps), n_call, repeat)
+    t_coal = timed(lambda: coal_distance(coal, query, *caps))
     seg_err = abs(coal_distance(coal, query, *caps) + 0.02
                   - float(collision.segment_distance(a0[0], a1[0], b0[0], b1[0])[0]))
     qr, ql = rng.uniform(right.lower, right.upper, (n_pair, 3)), q[:n_pair]
     poses = [[coal_capsules(coal, *collision.arm_capsules(a, x))
               for a, x in ((arm, u), (right, v))] for u, v in zip(ql, qr)]
     n_arm = max(n_call // 10, 50)
-    t_arm = per_call(lambda: collision.arm_distance(arm, ql[0], right, qr[0]), n_arm, repeat)
-    t_arm_coal = per_call(lambda: coal_distance(coal, query, *poses[0]), n_arm, repeat)
-    t_armv = per_call(lambda: collision.arm_distance(arm, ql, right, qr), 1, repeat)
+    t_arm = timed(lambda: collision.arm_distance(arm, ql[0], right, qr[0]), n_arm)
+    t_arm_coal = timed(lambda: coal_distance(coal, query, *poses[0]), n_arm)
+    t_armv = timed(lambda: collision.arm_distance(arm, ql, right, qr), 1)
     ours_d = collision.arm_distance(arm, ql, right, qr)
     apart = ours_d > 1e-3  # coal reports penetration depth differently: compare apart pairs
     ref_d = np.array([coal_distance(coal, query, *c) for c in poses])
@@ -183,16 +184,15 @@ def measure(smoke: bool, scratch: Path) -> dict:
 
     one = partial(collision.arm_pair_distances, arm, ql[0], right, qr[0])
     branchy = partial(branchy_pair_distances, arm, ql[0], right, qr[0])
-    best = [math.inf, math.inf]
+    best, number = [math.inf, math.inf], max(n_call // 20, 50)
     for _ in range(5 * repeat):  # interleaved, the minimum: robust to a shared machine
         for k, fn in enumerate((one, branchy)):
-            best[k] = min(best[k], timeit.timeit(fn, number=max(n_call // 20, 50)))
+            best[k] = min(best[k], timeit.timeit(fn, number=number))
     same = max(float(np.max(np.abs(branchy_pair_distances(arm, u, right, v)
                                    - collision.arm_pair_distances(arm, u, right, v))))
                for u, v in zip(ql, qr))
-    scale = max(n_call // 20, 50)
     rows.append(_row('capsule distances, one state pair (the one formula)', 'latency',
-                     best[0] / scale, best[1] / scale, 'branchy plain-float formula',
+                     best[0] / number, best[1] / number, 'branchy plain-float formula',
                      note=f'max diff over {n_pair} pairs {same:.1e} m'))
     return {'rows': rows}
 

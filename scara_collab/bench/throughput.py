@@ -203,20 +203,18 @@ def tables(t: dict) -> list:
     for mode in t['modes']:
         runs = jobs(t, mode)
         ipm = spread(r['items_per_minute'] for r in runs)
-        cap.append({'mode': mode, 'seeds': ', '.join(str(r['seed']) for r in runs),
-                    'items/min mean ± sd (min–max)': f'{num(ipm["mean"])} ± {num(ipm["std"], 2)} '
-                    f'({num(ipm["min"])}–{num(ipm["max"])})',
-                    'sorted': _joined(runs, 'sorted'), 'give-ups': _joined(runs, 'give_ups'),
-                    'dropped + wrong bin': ', '.join(str(r['dropped'] + r['wrong_bin'])
-                                                     for r in runs),
-                    'min separation (m)': 'n/a' if mode == 'single'
-                    else _joined(runs, 'min_separation_m'),
-                    'e-stops': sum(bool(r['estop']) for r in runs),
-                    'real-time factor': num(np.mean([r['real_time_factor'] for r in runs]), 2),
-                    'in-step mirror error (mm)': ', '.join(
-                        num(r['mirror_error_max_m'] * 1e3, 3) for r in runs)
-                    if mode == 'mirrored' else '',
-                    "seeds' claim": f'{CLAIMED[mode]:g} items/min' if mode in CLAIMED else ''})
+        cap.append({
+            'mode': mode, 'seeds': ', '.join(str(r['seed']) for r in runs),
+            'items/min mean ± sd (min–max)': f'{num(ipm["mean"])} ± {num(ipm["std"], 2)} '
+            f'({num(ipm["min"])}–{num(ipm["max"])})',
+            'sorted': _joined(runs, 'sorted'), 'give-ups': _joined(runs, 'give_ups'),
+            'dropped + wrong bin': ', '.join(str(r['dropped'] + r['wrong_bin']) for r in runs),
+            'min separation (m)': 'n/a' if mode == 'single' else _joined(runs, 'min_separation_m'),
+            'e-stops': sum(bool(r['estop']) for r in runs),
+            'real-time factor': num(np.mean([r['real_time_factor'] for r in runs]), 2),
+            'in-step mirror error (mm)': ', '.join(num(r['mirror_error_max_m'] * 1e3, 3)
+                                                   for r in runs) if mode == 'mirrored' else '',
+            "seeds' claim": f'{CLAIMED[mode]:g} items/min' if mode in CLAIMED else ''})
     ratio, cyc, topp, rated = pair_ratio(t), t['cycle'], t['topp'], t['rated']
     bounds = [
         ('pair / single items per minute, per seed', f'{num(ratio["mean"])} ± '
@@ -285,9 +283,9 @@ def _rated_ok(rated: dict) -> bool:
 
 def summary(t: dict) -> Rows:
     """Return the summary rows: capacity, rated feed, TOPP-RA, real-time factor, repeats."""
-    single, pair_runs = spread(r['items_per_minute'] for r in jobs(t, 'single')), \
-        jobs(t, 'collaborative')
-    pair, ratio = spread(r['items_per_minute'] for r in pair_runs), pair_ratio(t)
+    pair_runs, ratio = jobs(t, 'collaborative'), pair_ratio(t)
+    single, pair = (spread(r['items_per_minute'] for r in runs)
+                    for runs in (jobs(t, 'single'), pair_runs))
     margin = min((r['min_separation_m'] for r in pair_runs), default=None)
     stops = sum(bool(r['estop']) for r in pair_runs)
     rows = [(f'capacity single / pair (items/min, an item every {t["feed_interval"]:g} s)',
