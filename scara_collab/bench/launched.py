@@ -1,5 +1,6 @@
 """The launcher as a subprocess for the sections that run it; a run's row; their blocks."""
 from contextlib import contextmanager
+import fcntl
 import json
 import os
 from pathlib import Path
@@ -8,6 +9,7 @@ import re
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from typing import Dict, Iterator, List, Optional, Sequence
@@ -30,9 +32,31 @@ def cpu_hogs(n: int, limit: float) -> Iterator[None]:
             h.wait()
 
 
-def use_domain(k: int) -> None:
-    """Put this process and the launchers it starts in ROS domain ``140 + k % 90``, this host."""
-    os.environ.update(ROS_DOMAIN_ID=str(140 + k % 90), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+_HELD: List = []
+"""The lock file of the domain this process is in (none before :func:`use_domain`)."""
+
+
+def use_domain(k: int) -> int:
+    """Put this process and the launchers it starts in a ROS domain of their own; return it.
+
+    The first of 140..229 from ``140 + k % 90`` that no other process on this machine holds:
+    an advisory lock in the temp folder, held until the next call or the process's end. Two
+    benchmark runs side by side therefore never hear each other's launches.
+    """
+    while _HELD:
+        _HELD.pop().close()
+    for i in range(90):
+        domain = 140 + (k + i) % 90
+        lock = open(Path(tempfile.gettempdir()) / f'scara_collab_domain_{domain}.lock', 'w')
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        _HELD.append(lock)
+        os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+        return domain
+    raise RuntimeError('ROS domains 140..229 are all held by other benchmark runs on this host')
 
 
 class Launch:
