@@ -16,6 +16,7 @@ from scara_collab.core.arm_planner import (Answers, ArmPlanner, HISTORY, HoldArm
 from scara_collab.core.collision import arm_distance
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
+from scara_collab.core.move_time import Leads
 from scara_collab.core.planning import plan_path
 from scara_collab.core.trajectory import joint_move
 
@@ -42,11 +43,12 @@ class Clock:
         return self.t
 
 
-def _settings(cell, **overrides) -> PlannerSettings:
+def _settings(cell, planning_lead=LEAD, send_margin=MARGIN, **overrides) -> PlannerSettings:
     cfg = load_config('controllers')
-    return replace(PlannerSettings('line_or_joint', LEAD, 30.0, 60.0,
+    leads = Leads(planning=planning_lead, send=send_margin)
+    return replace(PlannerSettings('line_or_joint', leads, 30.0, 60.0,
                                    cell.safety_margin + float(cfg['planning_buffer']),
-                                   cfg['trajectory'], MARGIN), **overrides)
+                                   cfg['trajectory']), **overrides)
 
 
 def _pose(arm, xyz):
@@ -141,7 +143,7 @@ def test_a_requested_start_is_kept_and_a_past_one_starts_after_the_send_margin(
     clock.t = 30.0
     soon = _sent(_target(leader, [3.0, -1.0, 0.3], stamp=29.99))
     assert soon.plan.start == pytest.approx(30.0 + MARGIN)
-    leader.on_own_execution('accepted', soon.request, 30.1, stamped=True, late=0.08)
+    leader.on_own_execution('accepted', soon.request, 30.1, stamp=30.02)
     clock.t = 40.0
     late = _sent(_target(leader, [2.8, -1.2, 0.4], stamp=40.01))
     assert late.plan.start == pytest.approx(40.0 + MARGIN + 0.08)
@@ -312,7 +314,7 @@ def test_a_status_of_another_move_changes_nothing(clock, leader):
     first = _sent(_target(leader, [3.0, -1.0, 0.3]))
     assert leader.on_own_execution('refused', first.request - 1) == []
     assert leader.on_own_execution('accepted', first.request + 1, first.plan.start + 1.0,
-                                   True, 1.0) == []
+                                   first.plan.start) == []
     assert leader.committed.plan == first.plan
 
 
@@ -320,7 +322,7 @@ def test_a_status_of_another_move_changes_nothing(clock, leader):
 def test_a_late_start_rebases_the_move_and_lengthens_the_lead(cell, clock, leader):
     """Started late by the bridge: re-reported at its real start; the next lead adds it."""
     first = _sent(_target(leader, [3.0, -1.0, 0.3], stamp=11.0))
-    out = leader.on_own_execution('accepted', first.request, 11.2, stamped=True, late=0.2)
+    out = leader.on_own_execution('accepted', first.request, 11.2, stamp=11.0)
     st = _status(out)
     assert (st.state, st.start, st.kind) == ('planned', 11.2, 'line')
     assert st.end == pytest.approx(first.plan.end + 0.2)
@@ -334,13 +336,14 @@ def test_a_late_start_rebases_the_move_and_lengthens_the_lead(cell, clock, leade
 def test_an_on_time_start_shortens_the_lead_again_only_when_stamped(cell, clock, leader):
     """On-time starts of stamped moves push a late one out of the window; unstamped do not."""
     first = _sent(_target(leader, [3.0, -1.0, 0.3], stamp=11.0))
-    leader.on_own_execution('accepted', first.request, 11.1, stamped=True, late=0.1)
-    assert leader.start_lateness.worst == pytest.approx(0.1)
-    for k in range(2 * leader.start_lateness.window - 2):
-        leader.on_own_execution('accepted', first.request, 11.1, stamped=k % 2 == 0)
-    assert leader.start_lateness.worst == pytest.approx(0.1)  # 19 on-time after it
-    leader.on_own_execution('accepted', first.request, 11.1, stamped=True)
-    assert leader.start_lateness.worst == 0.0
+    leader.on_own_execution('accepted', first.request, 11.1, stamp=11.0)
+    assert leader.time.late.worst == pytest.approx(0.1)
+    for k in range(2 * leader.time.late.window - 2):
+        leader.on_own_execution('accepted', first.request, 11.1,
+                                stamp=11.1 if k % 2 == 0 else None)
+    assert leader.time.late.worst == pytest.approx(0.1)  # 19 on-time after it
+    leader.on_own_execution('accepted', first.request, 11.1, stamp=11.1)
+    assert leader.time.late.worst == 0.0
 
 
 # --- the other arm -------------------------------------------------------------------------------
@@ -452,7 +455,7 @@ def test_a_re_time_the_bridge_refuses_leaves_the_first_move_committed(cell, cloc
     leader_move = _move(cell.leader, OUT['scara_left'], ACROSS['scara_left'], back=True)
     again = _sent(_hear(follower, 'scara_left/1', 10.5, leader_move))
     assert follower.committed.plan == again.plan and follower.committed.retimed == first.plan
-    assert follower.on_own_execution('accepted', first.request, 11.0, stamped=True) == []
+    assert follower.on_own_execution('accepted', first.request, 11.0, stamp=11.0) == []
     assert follower.committed.plan == again.plan  # the first one's acceptance: still re-timed
     follower.on_own_execution('refused', first.request)
     assert follower.committed.plan == first.plan and follower.committed.retimed is None
@@ -466,7 +469,8 @@ def test_an_accepted_re_time_is_the_arms_commitment(cell, clock, follower):
     first = _sent(_target(follower, ACROSS['scara_right'], stamp=11.0))
     again = _sent(_hear(follower, 'scara_left/1', 10.5, _move(
         cell.leader, OUT['scara_left'], ACROSS['scara_left'], back=True)))
-    follower.on_own_execution('accepted', first.request, again.plan.start, stamped=True)
+    follower.on_own_execution('accepted', first.request, again.plan.start,
+                              stamp=again.plan.start)
     assert follower.committed.retimed is None
     follower.on_own_execution('refused', first.request)  # dropped as it would take over
     assert follower.committed is None
@@ -475,7 +479,7 @@ def test_an_accepted_re_time_is_the_arms_commitment(cell, clock, follower):
 def test_a_move_starting_within_the_measured_lateness_is_not_re_timed(cell, clock, follower):
     """The bridge may have started it already: its judgement at the start decides instead."""
     first = _sent(_target(follower, ACROSS['scara_right'], stamp=10.3))
-    follower.on_own_execution('accepted', first.request, 10.5, stamped=True, late=0.5)
+    follower.on_own_execution('accepted', first.request, 10.5, stamp=10.0)
     clock.t = 10.1
     assert _hear(follower, 'scara_left/1', 10.2, _move(
         cell.leader, OUT['scara_left'], ACROSS['scara_left'], back=True)) == []

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from scara_collab.core.mirror import mirror_joints
-from scara_collab.core.motion import stamp_time
+from scara_collab.core.move_time import stamp_time
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes import runner
@@ -88,7 +88,7 @@ def test_target_frames_are_world_or_the_arms_base():
 @settings(max_examples=300, deadline=None)
 @given(st.floats(min_value=0.0, max_value=1e5, allow_nan=False))
 def test_the_core_reads_a_start_as_its_stamp_says_it(t):
-    """``motion.stamp_time`` is what a stamp made by ``to_time`` reads back as, to the bit."""
+    """``move_time.stamp_time`` is what a stamp made by ``to_time`` reads back as, to the bit."""
     assert stamp_time(t) == conv.to_sec(conv.to_time(t))
 
 

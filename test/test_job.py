@@ -236,7 +236,7 @@ def test_a_grasped_item_is_lifted_only_when_it_would_sweep_the_belt(cell):
         k = len(path.t) // 8  # early in the move, while the held item is still low
         seen = [SeenItem(1, cell.item_classes[0], here, t)]
         for n, (dx, dy) in enumerate(neighbours):
-            x = path.p[k, 0] - cell.belt.speed * (job.settings.decision_lead + path.t[k]) + dx
+            x = path.p[k, 0] - cell.belt.speed * (job.settings.leads.decision + path.t[k]) + dx
             seen.append(SeenItem(10 + n, cell.item_classes[1],
                                  np.r_[x, path.p[k, 1] + dy, z], t))
         job.on_items(seen)
@@ -294,9 +294,9 @@ def test_mirrored_moves_are_one_request_for_both_arms(cell):
     assert pick.mirrored and pick.robot == lead
     assert job.claimed == {1: lead, 2: foll}
     # one hop more to both planners (the replication manager): asked a pair lead further ahead
-    assert pick.start >= job.settings.decision_lead + job.settings.pair_lead - 1e-9
+    assert pick.start >= job.settings.leads.decision + job.settings.leads.pair - 1e-9
     assert first_pick(cell, make_job(cell)).start < \
-        job.settings.decision_lead + job.settings.pair_lead
+        job.settings.leads.decision + job.settings.leads.pair
     t = pick.start + 1.0
     arrive(cell, job, pick, t)  # only the leader arrived: the lane waits for the follower
     job.tick(t)
@@ -710,7 +710,7 @@ def test_an_urgent_chase_is_timed_around_the_other_arms_booked_move(cell):
         job = make_job(cell)
         item = item_on_belt(cell, 97, x=2.6, y=0.1)
         job.on_items([item])
-        blind = intercept(cell, lead, job.q[lead.name], item, job.settings.decision_lead,
+        blind = intercept(cell, lead, job.q[lead.name], item, job.settings.leads.decision,
                           job.settings.pick_z, lambda q, p: job.plan(lead.name, q, p))
         stay = ik(foll, blind.target + [0.0, 0.12, 0.0]).q  # on the meeting point
         away = ik(foll, np.array([3.3, 1.6, job.settings.pick_z])).q
@@ -753,7 +753,7 @@ def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
     lane = job.lanes[0]
     arm = cell.arm(lane.robot)
     job.on_arm_state(lane.robot, ik(arm, sorting.drop_point(cell, lane.robot, 'red', 0.1)).q)
-    z, start = job.settings.pick_z, job.settings.decision_lead
+    z, start = job.settings.pick_z, job.settings.leads.decision
 
     def spare(it):
         return sorting.time_in_reach(cell, arm, sorting.predict(cell, it, start), z)
@@ -800,7 +800,7 @@ def test_every_item_in_reach_is_ranked_not_only_the_most_urgent(cell):
     lane = job.lanes[0]
     arm = cell.arm(lane.robot)
     job.on_arm_state(lane.robot, ik(arm, sorting.drop_point(cell, lane.robot, 'red', 0.1)).q)
-    z, start = job.settings.pick_z, job.settings.decision_lead
+    z, start = job.settings.pick_z, job.settings.leads.decision
     blues = [item_on_belt(cell, 1 + k, x=0.85 + 0.1 * k, y=-0.2, cls='blue') for k in range(7)]
     red = item_on_belt(cell, 20, x=0.7, y=-0.2, cls='red')
     items = blues + [red]

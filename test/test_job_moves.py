@@ -29,7 +29,7 @@ def test_a_chase_meets_an_item_in_reach_and_refuses_one_out_of_reach(cell):
     assert moves.chase(lane, item_on_belt(cell, x=1.2, y=-0.2), 0.0)
     (cmd,) = moves.out
     assert cmd.purpose == 'to_item' and lane.item.id == 1 and cmd.plan is not None
-    assert cmd.start >= job.settings.decision_lead
+    assert cmd.start >= job.settings.leads.decision
     assert abs(cmd.target[1] - (-0.2)) < 1e-9 and cmd.target[0] > 1.2  # downstream of x
     moves.out = []
     beyond = item_on_belt(cell, item_id=2, x=cell.belt.x_end - 0.01, y=0.0)

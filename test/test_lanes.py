@@ -144,14 +144,16 @@ def test_late_starts_of_its_own_moves_push_the_next_as_soon_as_possible_start(ce
     lateness is added, so a one-off spike does not move the aim.
     """
     proto, lane = protocol(cell)
-    lead = proto.settings.move_lead
+    lead = proto.settings.leads.move
     assert proto.asap_start(lane, 1.0) == pytest.approx(1.0 + lead)  # lockstep: nothing more
     for k in range(5):
         cmd = proto.move(lane, 'to_park', target(cell), proto.asap_start(lane, k), k)
-        proto.on_execution(lane.robot, cmd.request + 7, 'accepted', k + 1.0, k + 2.0, late=0.5)
+        proto.on_execution(lane.robot, cmd.request + 7, 'accepted', k + 1.0, k + 2.0,
+                           stamp=k + 0.5)
         proto.on_execution(lane.robot, cmd.request, 'accepted', k + 0.1, k + 2.0,
-                           late=0.04 if k != 2 else 0.9)
-    assert proto.start_lag.typical == pytest.approx(0.04) and proto.start_lag.worst == 0.9
+                           stamp=k + 0.1 - (0.04 if k != 2 else 0.9))
+    late = proto.time.late
+    assert late.typical == pytest.approx(0.04) and late.worst == pytest.approx(0.9)
     assert proto.asap_start(lane, 10.0) == pytest.approx(10.0 + lead + 0.04)
 
 
@@ -210,7 +212,7 @@ def test_a_mirrored_lane_moves_and_grips_both_arms_under_one_request(cell):
     proto, lane = protocol(cell, mirrored=True)
     lead, foll = cell.leader.name, cell.follower.name
     assert lane.mirrored and proto.asap_start(lane, 1.0) == pytest.approx(
-        1.0 + proto.settings.pair_lead)
+        1.0 + proto.settings.leads.pair)
     cmd = proto.move(lane, 'to_park', target(cell), 0.1, 0.0)
     assert cmd.mirrored and set(lane.moves) == {lead, foll}
     np.testing.assert_allclose(proto.target_of(lane, foll),

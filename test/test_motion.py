@@ -12,7 +12,8 @@ import pytest
 from scara_collab.core import collision, motion
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik
-from scara_collab.core.motion import ArmMotion, CellMotion, Heard, Move, Refused
+from scara_collab.core.motion import ArmMotion, CellMotion, Heard, Move
+from scara_collab.core.move_time import Refused, stamp_time, start_time
 from scara_collab.core.planning import schedule, Timeline
 from scara_collab.core.trajectory import joint_move, Trajectory
 from scara_collab.sim import CellSim
@@ -40,12 +41,12 @@ def _pose(cell, robot, xyz):
 # --- the start rule ---------------------------------------------------------------------------
 def test_stamp_zero_starts_now_a_future_stamp_waits_a_past_one_starts_late():
     """The start rule: now, at the stamp, or now (late); refused once it would have ended."""
-    assert motion.start_time(0.0, 1.0, 5.0, DT) == 5.0
-    assert motion.start_time(5.5, 1.0, 5.0, DT) == 5.5
-    assert motion.start_time(5.0 - DT / 2, 1.0, 5.0, DT) == 5.0 - DT / 2  # within a step
-    assert motion.start_time(4.2, 1.0, 5.0, DT) == 5.0                    # late
+    assert start_time(0.0, 1.0, 5.0, DT) == 5.0
+    assert start_time(5.5, 1.0, 5.0, DT) == 5.5
+    assert start_time(5.0 - DT / 2, 1.0, 5.0, DT) == 5.0 - DT / 2  # within a step
+    assert start_time(4.2, 1.0, 5.0, DT) == 5.0                    # late
     with pytest.raises(Refused, match='ended 0.500 s ago'):
-        motion.start_time(3.5, 1.0, 5.0, DT)
+        start_time(3.5, 1.0, 5.0, DT)
 
 
 def test_a_first_point_after_the_start_is_reached_from_where_the_arm_is():
@@ -211,7 +212,7 @@ def test_a_leader_planned_against_a_follower_moving_away_starts_after_it_and_is_
     the door admits that plan. Planned by the rule at the wanted start only, the leader
     relied on a follower move that does not bind it there, and the door refused it.
     """
-    start, now = motion.stamp_time(0.3), 0.0  # as both stamps say it
+    start, now = stamp_time(0.3), 0.0  # as both stamps say it
     in_way = poses['right_in'] + 0.3 * (poses['right_out'] - poses['right_in'])
     assert collision.arm_distance(cell.leader, poses['left_in'], cell.follower,
                                   in_way) < cell.safety_margin
@@ -230,7 +231,7 @@ def test_a_leader_planned_against_a_follower_moving_away_starts_after_it_and_is_
         return cm[RIGHT].motion(now, in_way, before=before)
     plan = motion.schedule_for_door(cell.leader, traj, start, cell.follower, view,
                                     cm[RIGHT].waiting.start, cell.safety_margin, True, 30.0, DT)
-    assert plan.start >= start + DT - 1e-12 and plan.start == motion.stamp_time(plan.start)
+    assert plan.start >= start + DT - 1e-12 and plan.start == stamp_time(plan.start)
     assert plan.delay == pytest.approx(plan.start - start)
     cm.take(LEFT, Move('L', Timeline(plan.start + traj.t, traj.q)), now, q)  # admitted
     # the rule applied at the wanted start only: the follower counted as moving away at once
@@ -329,8 +330,9 @@ def test_the_simulator_drops_a_move_made_unsafe_reports_it_once_and_refuses_it_a
     sim.execute(LEFT, 0.2 + lead.t, lead.q, lead.qd, lead.qdd, 'L', 0.2)  # leader first
     sim.step(int(0.6 / DT))
     assert not sim.active(RIGHT)
-    assert [(r, m) for r, m, _ in sim.pop_dropped()] == [(RIGHT, 'R')]
-    assert sim.pop_dropped() == []
+    dropped = [(r, m.id) for r, ev, m, _ in sim.motion.poll(sim.time) if ev == 'dropped']
+    assert dropped == [(RIGHT, 'R')]
+    assert [ev for _, ev, m, _ in sim.motion.poll(sim.time) if ev == 'dropped'] == []
     with pytest.raises(Refused, match='within'):
         sim.execute(RIGHT, sim.time + follow.t, follow.q, follow.qd, follow.qdd, 'R2', 0.0)
 
@@ -416,7 +418,7 @@ def test_random_raw_commands_never_bring_the_arms_within_the_margin(cell):
             q, _qd = sim._read()
             worst = min(worst, float(collision.arm_distance(cell.leader, q[0], cell.follower,
                                                             q[1])))
-        sim.pop_dropped()
+        sim.motion.poll(sim.time)
     print(f'admitted {admitted}, refused {refused}, closest {worst:.4f} m')
     assert admitted >= 40 and refused >= 20
     assert worst >= cell.safety_margin

@@ -51,7 +51,7 @@ def test_the_defaults_and_valid_overrides_are_taken(context):
     node = _planner(context, mode='joint', max_wait='5')
     settings = node.planner.settings
     assert node.arm.name == 'scara_left' and node.planner.leader and settings.mode == 'joint'
-    assert (settings.planning_lead, settings.send_margin, settings.max_delay,
+    assert (settings.leads.planning, settings.leads.send, settings.max_delay,
             settings.max_wait) == (0.05, 0.05, 30.0, 5.0)  # a lockstep's send margin
     assert settings.margin == pytest.approx(node.cell.safety_margin + 0.03)
     node.destroy_node()
@@ -72,7 +72,7 @@ def test_own_parameters_change_at_run_time_only_to_valid_values(context):
     bad = node.set_parameters([Parameter('mode', value='diagonal')])[0]
     assert not bad.successful and node.planner.settings.mode == 'line'
     assert node.set_parameters([Parameter('send_margin', value=1)])[0].successful
-    assert node.planner.settings.send_margin == 1.0
+    assert node.planner.settings.leads.send == 1.0
     for name, value in (('robot', 'scara_right'), ('profile', 'slim')):
         assert not node.set_parameters([Parameter(name, value=value)])[0].successful
     assert node.arm.name == 'scara_left'

@@ -178,7 +178,7 @@ def test_a_chase_is_timed_around_the_other_arms_booking(cell):
 
     def hit_for(lane, it):
         return sorting.intercept(cell, cell.arm(lane.robot), proto.q[lane.robot], it,
-                                 settings.decision_lead, settings.pick_z,
+                                 settings.leads.decision, settings.pick_z,
                                  lambda q, p: belt.plan(lane.robot, q, p))
 
     mine = hit_for(foll, ours)

@@ -132,7 +132,7 @@ def test_malformed_goals_are_rejected_and_the_arm_does_not_move(graph):
     np.testing.assert_allclose(q, q0, atol=1e-4)
     assert np.abs(qd).max() < 1e-3
     assert g.bridge.actions.count == 0 and not g.bridge.actions.active
-    assert g.arm.name not in g.bridge.execution.running
+    assert g.bridge.execution.current(g.arm.name) == ''
 
 
 def test_a_rejected_goal_leaves_the_running_goal_alone(graph):

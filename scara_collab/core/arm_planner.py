@@ -13,11 +13,11 @@ is sent again (:class:`Answers`).
 
 **Planning.** The move is planned from the arm's measured joints (a straight line, a joint
 move, or either, setting ``mode``); an offered plan that starts where the arm is (within
-``offer_tolerance``) is taken as is when the mode is ``line_or_joint`` (the job's). It starts
-at the requested time if it can still be sent ``send_margin`` ahead of it (a move asked for
-now, stamped 0: ``planning_lead`` after its receipt), else ``send_margin`` after it is sent;
-both margins grow by the worst lateness the bridge measured on this arm's recent starts. It
-is scheduled against the other arm's
+``offer_tolerance``) is taken as is when the mode is ``line_or_joint`` (the job's). When it
+starts is the start rule's (:class:`scara_collab.core.move_time.MoveTime`): at the requested
+time if it can still be sent in time, a move asked for now after the planning lead, else as
+soon as it can be sent, each lead grown by the worst lateness the bridge measured on this
+arm's recent starts. It is scheduled against the other arm's
 committed motion (:class:`scara_collab.core.motion.Heard`, kept from the other arm's
 trajectories and the bridge's statuses of them) by the priority rule of
 :mod:`scara_collab.core.planning`, applied here, once.
@@ -38,7 +38,7 @@ arm's commitment. Either way the bridge judges every waiting move again as it ta
 
 **Start lateness.** When the bridge reports the arm's move started late, the move is re-based
 to its real start (its ``planned`` status is sent again with the new window) and the
-lateness joins the measured lead (:class:`scara_collab.core.motion.Lateness`).
+lateness is measured into the start rule (:meth:`scara_collab.core.move_time.MoveTime.started`).
 
 All times are absolute sim seconds from the ``clock`` given to :class:`ArmPlanner`.
 """
@@ -52,7 +52,8 @@ from numpy.typing import ArrayLike
 from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.model import ArmModel
-from scara_collab.core.motion import Heard, Lateness, schedule_for_door
+from scara_collab.core.motion import Heard, schedule_for_door
+from scara_collab.core.move_time import lateness, Leads, MoveTime
 from scara_collab.core.planning import (MODES, offered_move, path_options, Plan, plan_path,
                                         schedule, starts_at)
 from scara_collab.core.trajectory import path_metrics, Trajectory
@@ -60,10 +61,10 @@ from scara_collab.core.trajectory import path_metrics, Trajectory
 #: the states of a request a planner reports
 STATES = ('planned', 'queued', 'waiting', 'refused', 'superseded')
 
-#: the planner's times, s, parameters of its node that may change while it runs: a move starts
-#: at least ``send_margin`` after it is sent (plus the worst start lateness measured;
-#: ``--lockstep off`` sets ``graph.REALTIME_SEND_MARGIN``), waits at most ``max_delay`` for the
-#: other arm, and is refused after ``max_wait`` blocked
+#: the planner's times, s, parameters of its node that may change while it runs: the send
+#: margin of the start rule (:class:`scara_collab.core.move_time.Leads`; ``--lockstep off`` sets
+#: ``graph.REALTIME_SEND_MARGIN``), the most a move waits for the other arm (``max_delay``),
+#: and how long a blocked move waits before it is refused (``max_wait``)
 TIMES = {'send_margin': 0.05, 'max_delay': 30.0, 'max_wait': 60.0}
 
 
@@ -99,26 +100,22 @@ class PlannerSettings:
     """How an arm's planner plans and schedules (its parameters and the cell's margin).
 
     :ivar mode: one of :data:`scara_collab.core.planning.MODES`.
-    :ivar planning_lead: s, the least time between the receipt of a move asked for now
-        (stamped 0) and its start (the worst start lateness measured lately is added).
+    :ivar leads: the start rule's leads (``planning``, ``send``:
+        :class:`scara_collab.core.move_time.Leads`).
     :ivar max_delay: s, the most a move is delayed for the other arm's committed motion.
     :ivar max_wait: s, how long a move blocked by the other arm waits before it is refused.
     :ivar margin: m between the arms' capsules that a move keeps (the cell's safety margin
         plus the planning buffer).
     :ivar trajectory: ``controllers.yaml`` ``trajectory`` (sample period, DLS,
         ``offer_tolerance``).
-    :ivar send_margin: s, the least time between sending a move and its start (the worst
-        start lateness measured lately is added): a move asked for a start that planning
-        has already eaten into starts this much after it is sent.
     """
 
     mode: str
-    planning_lead: float
+    leads: Leads
     max_delay: float
     max_wait: float
     margin: float
     trajectory: dict
-    send_margin: float
 
     @classmethod
     def of(cls, params: Mapping[str, object], safety_margin: float,
@@ -129,16 +126,17 @@ class PlannerSettings:
         :param controllers: ``controllers.yaml`` (``planning_lead``, ``planning_buffer``,
             ``trajectory``).
         """
-        return cls(str(params['mode']), float(controllers['planning_lead']),
+        return cls(str(params['mode']), Leads.of(controllers=controllers,
+                                                 send_margin=params['send_margin']),
                    margin=safety_margin + float(controllers['planning_buffer']),
-                   trajectory=controllers['trajectory'],
-                   **{k: float(params[k]) for k in TIMES})
+                   trajectory=controllers['trajectory'], max_delay=float(params['max_delay']),
+                   max_wait=float(params['max_wait']))
 
     def __post_init__(self):
         """Refuse a mode not in :data:`~scara_collab.core.planning.MODES` or a time <= 0."""
         if self.mode not in MODES:
             raise ValueError(f'mode must be one of {MODES}, got {self.mode!r}')
-        for key in ('planning_lead', 'max_delay', 'max_wait', 'send_margin'):
+        for key in ('max_delay', 'max_wait'):
             if not float(getattr(self, key)) > 0.0:
                 raise ValueError(f'{key} must be > 0, got {getattr(self, key)!r}')
 
@@ -311,6 +309,7 @@ class ArmPlanner:
                  settings: PlannerSettings, clock: Callable[[], float], dt: float):
         """Nothing known yet: no joint state, nothing committed, the other arm idle."""
         self.arm, self.other_arm, self.leader = arm, other_arm, bool(leader)
+        self.time = MoveTime(settings.leads)  # when its moves start, and how late they came
         self.settings = settings
         self.clock = clock
         self.joints: Optional[np.ndarray] = None        # (3,) this arm's measured joints
@@ -319,9 +318,18 @@ class ArmPlanner:
         self.committed: Optional[CommittedMove] = None  # this arm's move as sent
         self.queued: Optional[MoveRequest] = None       # to plan when the committed one ends
         self.blocked: Optional[MoveRequest] = None      # waiting for the other arm to move
-        self.start_lateness = Lateness()                # how late the bridge starts our moves
         self.other_motion = Heard(other_arm.name, dt=dt)  # the other arm's commitments
         self.out = Outbox()  # the commands decided, and the last answer to each request
+
+    @property
+    def settings(self) -> PlannerSettings:
+        """How it plans and schedules; replaced while it runs, the start rule's leads too."""
+        return self._settings
+
+    @settings.setter
+    def settings(self, settings: PlannerSettings) -> None:
+        self._settings = settings
+        self.time.leads = settings.leads
 
     # --- observations -------------------------------------------------------------------------
     def on_joint_state(self, joints: ArrayLike, other_joints: ArrayLike,
@@ -388,7 +396,7 @@ class ArmPlanner:
             blocked = self.blocked
             self._plan_and_schedule(blocked._replace(wanted=0.0), wanted=blocked.wanted)
         elif (not self.leader and self.committed is not None
-              and self.committed.plan.start > now + self.start_lateness.worst):
+              and self.time.ahead(self.committed.plan.start, now)):
             self._make_way(now)
         return self.out.take()
 
@@ -399,11 +407,11 @@ class ArmPlanner:
         return self.out.take()
 
     def on_own_execution(self, state: str, request: int, start: Optional[float] = None,
-                         stamped: bool = False, late: float = 0.0) -> List[Command]:
+                         stamp: Optional[float] = None) -> List[Command]:
         """Take the bridge's status of this arm's move for ``request``.
 
-        :param start: the start it reports, s; :param stamped: the move asked for a start;
-        :param late: s it started after that.
+        :param start: the start it reports, s; :param stamp: the start the move asked for, s
+            (None or 0: none).
 
         An ``accepted`` move adds its lateness to the measured lead and, if late, is re-based
         to its real start; once refused, preempted or held nothing of it runs, so the next
@@ -411,8 +419,9 @@ class ArmPlanner:
         """
         if self.committed is None or request != self.committed.request:
             return self.out.take()  # not the arm's current move
-        if state == 'accepted' and stamped:
-            self.start_lateness.add(late)
+        late = lateness(stamp, start) if state == 'accepted' and start is not None else 0.0
+        if state == 'accepted' and stamp:
+            self.time.started(stamp, start)
         retimed = self.committed.retimed
         if state == 'accepted' and retimed is not None:
             if start is not None and start < self.committed.plan.start - 1e-6:
@@ -464,11 +473,8 @@ class ArmPlanner:
         :param wanted: when it was first wanted (a retried move); None: its start now.
         """
         s = self.settings
-        late = self.start_lateness.worst  # how late the bridge's starts came, measured
         now = self.clock()
-        # a start asked for is kept if the move can still reach the bridge in time; one asked
-        # for now gets the planning lead from its receipt
-        start = asked.wanted if asked.wanted > 0 else now + s.planning_lead + late
+        start = self.time.wanted(asked.wanted, now)
         wanted = start if wanted is None else wanted
         if (asked.offer is not None and s.mode == 'line_or_joint'
                 and starts_at(asked.offer, self.joints, s.trajectory['offer_tolerance'])):
@@ -481,7 +487,7 @@ class ArmPlanner:
                 self.out.report('refused', asked.request, str(exc))
                 return
         now = self.clock()
-        start = max(start, now + s.send_margin + late)  # planning took (sim) time too
+        start = self.time.sendable(start, now)  # planning took (sim) time too
         # from now on (the past is past), by the priority rule at the start found, as the
         # door applies it (a follower move waiting to start at or after it yields)
         heard = self.other_motion

@@ -207,13 +207,13 @@ class SortingJob:
             self.belt.timed(robot, request, timed, self.q)
 
     def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
-                     end: Optional[float], reason: str = '', late: Optional[float] = None) -> None:
+                     end: Optional[float], reason: str = '',
+                     stamp: Optional[float] = None) -> None:
         """Take a bridge execution status about ``robot``'s move for ``request``.
 
-        :param late: s an ``accepted`` move starts after the start it asked for (None: it
-            asked for none, or not known).
+        :param stamp: the start an ``accepted`` move asked for (None or 0: none).
         """
-        timed = self.protocol.on_execution(robot, request, state, start, end, reason, late)
+        timed = self.protocol.on_execution(robot, request, state, start, end, reason, stamp)
         if timed is not None:
             self.belt.timed(robot, request, timed, self.q)
 

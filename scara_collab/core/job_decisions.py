@@ -152,12 +152,13 @@ class LaneDecisions:
         if how.half:  # the leader takes its half; the partner is mirrored
             side = np.sign(arm.base_position[1] - self.cell.belt.centre_y)
             free = [it for it in free if np.sign(it.position[1]) == side]
-        order = sorting.order_candidates(self.cell, arm, free, now + s.decision_lead,
+        start = self.protocol.time.decided(now)
+        order = sorting.order_candidates(self.cell, arm, free, start,
                                          s.pick_z, how.own, steal=others_busy,
                                          other_cycle=s.steal_cycle or None, groups=True)
         if how.by_cycle:  # the shortest cycles first, urgent savable items first
             order = sorting.rank_by_cycle(self.cell, arm, self.protocol.q[lane.robot], order,
-                                          now + s.decision_lead, s.pick_z,
+                                          start, s.pick_z,
                                           s.drop_clearance, sharing.URGENT_SLACK, SAVABLE)
         self.notes.ranked(lane.robot, order, now)
         for item in [it for _, it in order[:2]]:

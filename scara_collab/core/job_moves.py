@@ -51,7 +51,7 @@ class JobMoves:
         """Ask for the move that meets ``item``; return False if the arm cannot."""
         s = self.settings
         # a mirrored pair's move takes one hop more (the replication manager) to both planners
-        start = now + s.decision_lead + (s.pair_lead if lane.mirrored else 0.0)
+        start = self.protocol.time.decided(now, lane.mirrored)
         arm = self.cell.arm(lane.robot)
         q = self.protocol.q
         aim = pairing.pair_aim(self.cell, item, s.pair_offset) if lane.mirrored else item
@@ -99,7 +99,7 @@ class JobMoves:
             park = sorting.drop_point(self.cell, robot, self.cell.item_classes[0],
                                       self.settings.drop_clearance)
             self.out.append(self.protocol.move_once(
-                robot, park, now + self.settings.decision_lead, 'park'))
+                robot, park, self.protocol.time.decided(now), 'park'))
 
     def move_safely(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
         """Ask for a move like :meth:`move`; a mirrored pair may go round by a waypoint.
@@ -144,4 +144,4 @@ class JobMoves:
         spare = s.carry_z - s.pick_z - self.cell.item_size  # = carry_clearance
         return bool(others) and sorting.carry_sweeps(
             self.cell, traj.p, self.asap_start(lane, now) + traj.t, others, s.pick_z, spare,
-            mirrored=lane.mirrored, late=self.protocol.start_lag.worst)
+            mirrored=lane.mirrored, late=self.protocol.time.late.worst)

@@ -9,6 +9,7 @@ from typing import Optional
 from scara_collab.core import sorting
 from scara_collab.core.config import load_config
 from scara_collab.core.model import CellModel
+from scara_collab.core.move_time import Leads
 
 MODES = ('single', 'collaborative', 'mirrored')
 
@@ -22,7 +23,6 @@ class JobSettings:
     carry_z: float
     drop_clearance: float
     grasp_reach: float
-    decision_lead: float
     answer_timeout: float
     answer_retries: int
     move_timeout: float
@@ -33,11 +33,11 @@ class JobSettings:
     grip_retries: int
     pair_offset: float = 0.0
     pair_margin: float = 0.13
-    pair_lead: float = 0.1
     unblock_after: float = 0.5
     bin_retries: int = 3
     steal_cycle: float = 0.0
-    move_lead: float = 0.05
+    #: the start rule's leads (``decision``, ``move``, ``pair``)
+    leads: Leads = Leads()
     line_cell: int = 0
     line_cells: int = 1
     line_capacity: float = 40.0
@@ -50,7 +50,7 @@ class JobSettings:
         :param controllers: the ``controllers`` config tree (default ``controllers.yaml``), the
             planners' settings: mirrored pairs are checked against the planners' margin
             (safety margin + ``planning_buffer``), and a move asked for as soon as possible
-            is stamped ``planning_lead`` ahead (``move_lead``), as a planner would start it.
+            is asked with the planners' lead (:class:`~scara_collab.core.move_time.Leads`).
         :raises ValueError: a mode not in :data:`MODES`.
         """
         controllers = load_config('controllers') if controllers is None else controllers
@@ -68,17 +68,15 @@ class JobSettings:
         return JobSettings(
             mode=mode, pick_z=pick_z, carry_z=carry_z,
             drop_clearance=float(cfg['drop_clearance']), grasp_reach=float(cfg['grasp_reach']),
-            decision_lead=float(cfg['decision_lead']),
             answer_timeout=float(cfg['answer_timeout']), answer_retries=int(cfg['answer_retries']),
             move_timeout=float(cfg['move_timeout']), carry_timeout=float(cfg['carry_timeout']),
             arrive_timeout=float(cfg['arrive_timeout']),
             arrive_tolerance=float(cfg['arrive_tolerance']),
             grip_timeout=float(cfg['grip_timeout']), grip_retries=int(cfg['grip_retries']),
             pair_offset=float(cfg['mirror_pair_offset']),
-            pair_lead=float(cfg['mirror_start_lead']),
             unblock_after=float(cfg['unblock_after']),
             steal_cycle=float(cfg['steal_cycle']),
             pair_margin=cell.safety_margin + float(controllers['planning_buffer']),
-            move_lead=float(controllers['planning_lead']),
+            leads=Leads.of(cfg, controllers),
             line_cell=int(cfg['line_cell']), line_cells=int(cfg['line_cells']),
             line_capacity=float(cfg['line_capacity']))

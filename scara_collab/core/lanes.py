@@ -25,7 +25,7 @@ from scara_collab.core.job_settings import JobSettings
 from scara_collab.core.kinematics import fk
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import CellModel
-from scara_collab.core.motion import Lateness
+from scara_collab.core.move_time import Lateness, MoveTime
 from scara_collab.core.trajectory import Trajectory
 
 PHASES = ('idle', 'to_item', 'grasping', 'lift', 'via', 'to_bin', 'releasing', 'to_park')
@@ -241,9 +241,8 @@ class LaneProtocol:
         self.answer_lag = Lateness()
         #: the lanes' gripper calls
         self.grips = Grips(settings, self.lanes, log)
-        #: how late the bridge started the job's moves after the start they asked for (sim s):
-        #: what a move asked for "as soon as possible" allows for on top of the lead
-        self.start_lag = Lateness()
+        #: the start rule, with how late the bridge started the job's moves (sim s)
+        self.time = MoveTime(settings.leads)
 
     @property
     def grasp_lead(self) -> float:
@@ -279,16 +278,15 @@ class LaneProtocol:
 
     def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
                      end: Optional[float], reason: str = '',
-                     late: Optional[float] = None) -> Optional[MoveTrack]:
+                     stamp: Optional[float] = None) -> Optional[MoveTrack]:
         """Take a bridge execution status about ``robot``'s move for ``request``.
 
-        :param late: s the bridge started it after the start it asked for (``accepted`` of a
-            stamped move; None: not known): measured into :attr:`start_lag`.
+        :param stamp: the start it asked for (``accepted``; None or 0: none): how late it
+            started is measured into the start rule (:attr:`time`).
         :return: the move's track if this status timed it (``accepted``), else None.
         """
-        if (state == 'accepted' and late is not None
-                and self.open_track(robot, request) is not None):
-            self.start_lag.add(late)
+        if state == 'accepted' and stamp and self.open_track(robot, request) is not None:
+            self.time.started(stamp, start)
         return self._on_status(robot, request, BRIDGE_STATUS.get(state), start, end, reason)
 
     def _on_status(self, robot: str, request: int, new: Optional[str], start: Optional[float],
@@ -381,8 +379,7 @@ class LaneProtocol:
         lateness measured on the bridge's starts comes on top (0 in lockstep), so the start
         the job plans with is the one the move gets.
         """
-        lead = self.settings.pair_lead if lane.mirrored else self.settings.move_lead
-        return now + lead + self.start_lag.typical
+        return self.time.asap(now, lane.mirrored)
 
     def _command(self, lane: Lane) -> MoveCommand:
         return MoveCommand(lane.robot, lane.target, lane.request, lane.mirrored, lane.phase,

@@ -3,10 +3,10 @@
 An arm runs at most one trajectory and has at most one more waiting for its start, as
 ros2_control's joint trajectory controller keeps them. The rules, written here once:
 
-- **Start.** A trajectory stamped 0 starts now; one stamped in the future starts at its stamp;
-  one stamped in the past by more than a physics step starts now, *late*; one that would
-  already have ended is refused (:func:`start_time`). If its first point is after its start,
-  the arm moves there from where it is (:func:`resolve`).
+- **Start.** When a trajectory starts is the start rule's
+  (:func:`scara_collab.core.move_time.start_time`): stamp 0 now, a stamp in the future then,
+  one in the past now, *late*; one that would already have ended is refused. If its first
+  point is after its start, the arm moves there from where it is (:func:`from_here`).
 - **Replace.** A new trajectory takes over at its own start: until then the arm keeps what
   it runs (or holds), and a trajectory still waiting for its start is replaced at once
   (:meth:`ArmMotion.take`, :meth:`ArmMotion.advance`).
@@ -30,6 +30,11 @@ it admits). Observers that only hear the trajectories and the bridge's statuses 
 monitor, the planners) keep the same :class:`ArmMotion` through :class:`Heard`, so every node
 predicts the arms with the same rules.
 
+- **What the bridge reports.** Each arm's *latest* move (the newest it took, until it ends,
+  is dropped or held) is the one the bridge's statuses are about: taking a new one preempts
+  it (:meth:`CellMotion.take`), and :meth:`CellMotion.poll` says which were dropped at their
+  start and which have ended.
+
 All times are absolute sim seconds.
 """
 from dataclasses import dataclass, replace
@@ -40,12 +45,12 @@ from numpy.typing import ArrayLike
 
 from scara_collab.core import collision, safety
 from scara_collab.core.model import ArmModel
+from scara_collab.core.move_time import lateness, Refused, stamp_time, start_time
 from scara_collab.core.planning import binds_leader, Plan, schedule, Timeline
 from scara_collab.core.trajectory import Trajectory
 
-
-class Refused(ValueError):
-    """A trajectory the rules do not run; the message says why."""
+#: s: a move whose end is this close ahead counts as ended (the bridge's polls fall on a grid)
+END_SLACK = 1e-9
 
 
 @dataclass(frozen=True)
@@ -56,12 +61,14 @@ class Move:
     :ivar timeline: its motion in absolute time.
     :ivar stamp: the start it asked for (0: now).
     :ivar ref: the executor's own form of it (the servo's reference), or None.
+    :ivar braking: a stop at the acceleration limits (the bridge's own; no status is about it).
     """
 
     id: str
     timeline: Timeline
     stamp: float = 0.0
     ref: Any = None
+    braking: bool = False
 
     @property
     def start(self) -> float:
@@ -76,27 +83,11 @@ class Move:
     @property
     def late(self) -> float:
         """Seconds it starts after its stamp (0 if on time or unstamped)."""
-        return max(0.0, self.start - self.stamp) if self.stamp > 0 else 0.0
+        return lateness(self.stamp, self.start)
 
     def shifted(self, start: float) -> 'Move':
         """Return the same move starting at ``start``."""
         return replace(self, timeline=self.timeline.shifted(start - self.start))
-
-
-def stamp_time(t: float) -> float:
-    """Return the time a message stamp says for ``t`` s: what the bridge reads back.
-
-    A stamp (``builtin_interfaces/Time``) holds whole nanoseconds; read back as
-    ``sec + nanosec * 1e-9`` (``nodes.conversions.to_time``, ``to_sec``). A planner that
-    decides by a start must decide by this one, the start the door will see: a sim clock at
-    190.70000000000002 s plus 0.05 s is 190.75000000000003, but the stamp says 190.75, and the
-    priority rule tells those apart.
-
-    >>> 190.70000000000002 + 0.05, stamp_time(190.70000000000002 + 0.05)
-    (190.75000000000003, 190.75)
-    """
-    ns = int(round(float(t) * 1e9))
-    return ns // 1_000_000_000 + (ns % 1_000_000_000) * 1e-9
 
 
 def schedule_for_door(me: ArmModel, traj: Trajectory, start: float, other_arm: ArmModel,
@@ -132,27 +123,35 @@ def schedule_for_door(me: ArmModel, traj: Trajectory, start: float, other_arm: A
     return Plan(traj, at, at - start)
 
 
-def start_time(stamp: float, duration: float, now: float, dt: float) -> float:
-    """Return when a trajectory stamped ``stamp`` and ``duration`` long starts, at ``now``.
+def from_here(t: np.ndarray, q: np.ndarray, q_now: Optional[ArrayLike],
+              qd: Optional[np.ndarray] = None, qdd: Optional[np.ndarray] = None,
+              qd_now: Optional[ArrayLike] = None) -> Tuple[np.ndarray, np.ndarray,
+                                                           Optional[np.ndarray],
+                                                           Optional[np.ndarray]]:
+    """Return a trajectory whose first point after ``t = 0`` is reached from where the arm is.
 
-    Stamp 0 is now; a stamp more than one physics step ``dt`` in the past is now (late).
+    As ros2_control's joint trajectory controller: ``(q_now, qd_now)`` becomes the point at
+    ``t = 0`` (at rest if ``qd_now`` is None; no acceleration); a trajectory that begins at
+    ``t = 0``, or an arm whose pose is unknown (``q_now`` None), is returned as it is.
 
-    >>> start_time(0.0, 2.0, now=5.0, dt=0.001), start_time(6.0, 2.0, 5.0, 0.001)
-    (5.0, 6.0)
-    >>> start_time(4.5, 2.0, 5.0, 0.001)   # late: starts now
-    5.0
-
-    :raises Refused: it would have ended before ``now``.
+    :param t: ``(N,)`` s from the start; :param q, qd, qdd: ``(N, 3)`` (``qd``, ``qdd`` or None).
+    :return: ``(t, q, qd, qdd)``.
     """
-    start = now if stamp == 0.0 else float(stamp)
-    if start + duration < now:
-        raise Refused(f'it ended {now - start - duration:.3f} s ago')
-    return now if start < now - dt else start
+    if t[0] <= 0.0 or q_now is None:
+        return t, q, qd, qdd
+    t = np.concatenate(([0.0], t))
+    q = np.vstack([np.asarray(q_now, dtype=float).reshape(1, 3), q])
+    if qd is not None:
+        qd = np.vstack([np.zeros((1, 3)) if qd_now is None
+                        else np.asarray(qd_now, dtype=float).reshape(1, 3), qd])
+    if qdd is not None:
+        qdd = np.vstack([np.zeros(3), qdd])
+    return t, q, qd, qdd
 
 
 def resolve(move_id: str, stamp: float, t: ArrayLike, q: ArrayLike, now: float, dt: float,
             q_now: Optional[ArrayLike] = None) -> Move:
-    """Return the move a trajectory makes, received at ``now`` (:func:`start_time`).
+    """Return the move a trajectory makes, received at ``now`` (the start rule, :func:`from_here`).
 
     :param t: ``(N,)`` times from the start, s; :param q: ``(N, 3)`` joint positions.
     :param q_now: ``(3,)`` where the arm is: it moves from there to a first point later than
@@ -161,9 +160,7 @@ def resolve(move_id: str, stamp: float, t: ArrayLike, q: ArrayLike, now: float, 
     """
     t, q = np.asarray(t, dtype=float), np.asarray(q, dtype=float).reshape(-1, 3)
     start = start_time(stamp, float(t[-1]), now, dt)
-    if t[0] > 0.0 and q_now is not None:
-        t = np.concatenate(([0.0], t))
-        q = np.vstack([np.asarray(q_now, dtype=float).reshape(1, 3), q])
+    t, q, _, _ = from_here(t, q, q_now)
     return Move(move_id, Timeline(start + t, q), float(stamp))
 
 
@@ -188,6 +185,8 @@ class ArmMotion:
         self.running: Optional[Move] = None
         self.waiting: Optional[Move] = None
         self.rest = np.asarray(q, dtype=float).reshape(3).copy()
+        #: the newest move taken, until it ends, is dropped or held: what statuses are about
+        self.latest: Optional[Move] = None
 
     def take(self, move: Move, now: float) -> Optional[Move]:
         """Commit to ``move``; return the move it replaces at once, if any.
@@ -195,6 +194,7 @@ class ArmMotion:
         A move that starts later waits, replacing a waiting one; one that starts now replaces
         the running one and the waiting one.
         """
+        self.latest = move
         if move.start > now:
             old, self.waiting = self.waiting, move
             return old
@@ -219,7 +219,7 @@ class ArmMotion:
     def hold(self, q: ArrayLike) -> List[Move]:
         """Drop both moves and hold ``q``; return the moves dropped."""
         dropped = [m for m in (self.running, self.waiting) if m is not None]
-        self.running = self.waiting = None
+        self.running = self.waiting = self.latest = None
         self.rest = np.asarray(q, dtype=float).reshape(3).copy()
         return dropped
 
@@ -231,7 +231,7 @@ class ArmMotion:
         """
         t, pos, vel, acc = safety.braking(arm, q, qd, dt)
         move = Move('', Timeline(now + t, pos), 0.0,
-                    None if ref_of is None else ref_of(now + t, pos, vel, acc))
+                    None if ref_of is None else ref_of(now + t, pos, vel, acc), braking=True)
         self.hold(q)
         self.running = move
         return move
@@ -301,6 +301,7 @@ class CellMotion:
         self.margin, self.dt, self.step = float(margin), float(dt), float(step)
         self.start_tolerance = start_tolerance
         self.checking = True  # False: admit without the check (an arm alone)
+        self._dropped: List[Tuple[str, str, Move, str]] = []  # since the last poll
 
     def __getitem__(self, robot: str) -> ArmMotion:
         """Return ``robot``'s commitments."""
@@ -374,13 +375,17 @@ class CellMotion:
     def take(self, robot: str, move: Move, now: float, q: Dict[str, np.ndarray]) -> Optional[Move]:
         """Admit ``move`` (:meth:`judge`) and commit ``robot`` to it (:meth:`ArmMotion.take`).
 
-        :return: the move it replaces at once, if any.
+        :return: the move it preempts: the arm's latest (:attr:`ArmMotion.latest`), if that is
+            another move (a move sent again under its own id preempts nothing).
         :raises Refused: with the reason, if it would break the margin; nothing changes.
         """
         check = self.judge(robot, move, now, q)
         if not check.ok:
             raise Refused(check.reason)
-        return self.arms[robot].take(move, now)
+        arm = self.arms[robot]
+        old = arm.latest
+        arm.take(move, now)
+        return old if old is not None and old.id != move.id else None
 
     def advance(self, now: float, q: Dict[str, np.ndarray]) -> List[Tuple[str, str, Move, str]]:
         """Move every arm on to ``now``, judging each waiting move again as it takes over.
@@ -401,49 +406,34 @@ class CellMotion:
                 if reason:
                     arm.waiting = None
                     out.append((robot, 'dropped', w, f'judged again at its start: {reason}'))
+                    self._dropped.append(out[-1])
             out.extend((robot, ev, m, '') for ev, m in arm.advance(now))
         return out
 
+    def poll(self, now: float) -> List[Tuple[str, str, Move, str]]:
+        """Return what happened to the arms' latest moves by ``now``, in the order to report it.
 
-class Lateness:
-    """How late things have come lately: the largest of the last ``window`` samples, s.
+        First the moves dropped at their start since the last poll (:meth:`advance`), then
+        every latest move whose end has come (``finished``, within :data:`END_SLACK`); neither
+        is the arm's latest any more.
 
-    A node that must act ahead of time (a planner's lead before a move's start, the monitor's
-    latency before a stop takes hold) adds what it measures instead of assuming lockstep's
-    timing; on-time samples (0) let it fall back as the late ones leave the window.
+        :return: ``(robot, event, move, reason)``, event ``dropped`` or ``finished``.
+        """
+        out, self._dropped = self._dropped, []
+        for robot, _, move, _ in out:
+            if self.arms[robot].latest is not None and self.arms[robot].latest.id == move.id:
+                self.arms[robot].latest = None
+        for robot, arm in self.arms.items():
+            if arm.latest is not None and now >= arm.latest.end - END_SLACK:
+                out.append((robot, 'finished', arm.latest, ''))
+                arm.latest = None
+        return out
 
-    >>> late = Lateness(window=3)
-    >>> for s in (0.0, 0.25, 0.0, 0.0):
-    ...     late.add(s)
-    >>> late.worst, late.typical, (late.add(0.0), late.worst)[1]
-    (0.25, 0.0, 0.0)
-
-    :param window: samples kept; :param cap: s, the most it ever says (a stall is not latency).
-    """
-
-    def __init__(self, window: int = 20, cap: float = 1.0):
-        """Nothing measured yet: 0 s."""
-        self.window, self.cap = int(window), float(cap)
-        self._samples: List[float] = []
-
-    def add(self, seconds: float) -> None:
-        """Take one measured delay, s (negative counts as 0)."""
-        self._samples.append(min(max(float(seconds), 0.0), self.cap))
-        if len(self._samples) > self.window:
-            del self._samples[0]
-
-    @property
-    def worst(self) -> float:
-        """The largest delay in the window, s (to wait for: a timeout)."""
-        return max(self._samples, default=0.0)
-
-    @property
-    def typical(self) -> float:
-        """The median delay in the window, s (to aim with: a one-off spike does not count)."""
-        if not self._samples:
-            return 0.0
-        ordered = sorted(self._samples)
-        return ordered[(len(ordered) - 1) // 2]
+    def release(self, robot: str) -> str:
+        """Forget ``robot``'s latest move (the arm is held); return its id (``''``: none)."""
+        arm = self.arms[robot]
+        move, arm.latest = arm.latest, None
+        return '' if move is None else move.id
 
 
 class Heard:

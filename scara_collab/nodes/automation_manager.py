@@ -194,8 +194,7 @@ class AutomationManager(Node):
         if state == 'preempted' and not proto.planners_move(robot, st.by):
             # someone else's trajectory took the arm over: the move failed, plan again
             state, reason = 'refused', f'taken over by move {st.by or "(no id)"}'
-        self.job.on_execution(robot, request, state, st.start, st.end, reason,
-                              st.late if st.stamp else None)
+        self.job.on_execution(robot, request, state, st.start, st.end, reason, st.stamp)
 
     def _on_trajectory(self, robot: str, msg: JointTrajectory) -> None:
         try:

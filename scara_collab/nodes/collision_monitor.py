@@ -43,7 +43,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from scara_collab.core import collision
 from scara_collab.core.config import load_config, Rule
 from scara_collab.core.model import load_cell
-from scara_collab.core.motion import Lateness
+from scara_collab.core.move_time import Lateness
 from scara_collab.core.stop_rules import BreachForecast, StopChange, StopLatch
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto

@@ -16,10 +16,9 @@ if it no longer keeps the margin, ``refused`` then (the arm keeps what it ran). 
 """
 from typing import Callable, Dict, Optional, Tuple
 
-import numpy as np
 from trajectory_msgs.msg import JointTrajectory
 
-from scara_collab.core import motion
+from scara_collab.core import motion, move_time
 from scara_collab.core.model import CellModel
 from scara_collab.nodes import conversions as conv
 from scara_collab.sim.cell_sim import CellSim
@@ -31,7 +30,11 @@ Report = Callable[..., None]
 
 
 class Execution:
-    """The arms' running trajectories in ``sim`` (see the module docstring).
+    """The arms' trajectories in ``sim``, reported (see the module docstring).
+
+    What each arm runs, waits to run and was last given is the cell's committed-motion model
+    (``sim.motion``, :class:`~scara_collab.core.motion.CellMotion`); this class turns a
+    trajectory message into a move the model takes and the model's events into statuses.
 
     :param cell: the cell model; :param sim: the simulator that executes.
     :param report: publishes a status (:data:`Report`).
@@ -45,7 +48,6 @@ class Execution:
         """Nothing runs yet."""
         self.cell, self.sim, self.report, self.warn = cell, sim, report, warn
         self.blocked = blocked
-        self.running: Dict[str, Tuple[str, float]] = {}  # robot -> (move id, end)
         self.reason = ''  # why the last refused trajectory was refused
 
     def run(self, robot: str, msg: JointTrajectory) -> Optional[Tuple[float, float]]:
@@ -63,27 +65,22 @@ class Execution:
             return self._refuse(robot, move, f'{exc}; {KEEPS}')
         now = self.sim.time
         try:
-            start = motion.start_time(stamp, float(t[-1]), now, self.sim.dt)
-        except motion.Refused as exc:
+            start = move_time.start_time(stamp, float(t[-1]), now, self.sim.dt)
+        except move_time.Refused as exc:
             return self._refuse(robot, move, f'{exc}; {KEEPS}')
         if stamp > 0.0 and start > stamp:
             self.warn(f'{robot}: move {move or "(no id)"} start {stamp:.3f} s is '
                       f'{now - stamp:.3f} s late; starting now if it keeps the margin')
         if t[0] > 0.0:  # like ros2_control: move from the current state to the first point
             q_now, qd_now = self.sim.arm_state(robot)
-            t = np.concatenate(([0.0], t))
-            q = np.vstack([q_now, q])
-            qd = None if qd is None else np.vstack([qd_now, qd])
-            qdd = None if qdd is None else np.vstack([np.zeros(3), qdd])
+            t, q, qd, qdd = motion.from_here(t, q, q_now, qd, qdd, qd_now)
         try:
-            self.sim.execute(robot, start + t, q, qd, qdd, move, stamp)
+            old = self.sim.execute(robot, start + t, q, qd, qdd, move, stamp)
         except ValueError as exc:
             return self._refuse(robot, move, f'{exc}; {KEEPS}')
-        old = self.running.get(robot)
-        if old is not None and old[0] != move:
-            self.report(robot, 'preempted', old[0], f'replaced by move {move or "(no id)"}',
+        if old is not None:
+            self.report(robot, 'preempted', old.id, f'replaced by move {move or "(no id)"}',
                         by=move)
-        self.running[robot] = (move, start + t[-1])
         self.report(robot, 'accepted', move, start=start, end=start + t[-1],
                     stamp=stamp if stamp > 0 else None)
         return start, start + t[-1]
@@ -92,25 +89,24 @@ class Execution:
         self.reason = reason
         self.report(robot, 'refused', move, reason)
 
+    def current(self, robot: str) -> str:
+        """Return the id of the move ``robot`` was last given and still has (``''``: none)."""
+        latest = self.sim.motion[robot].latest
+        return '' if latest is None else latest.id
+
     def poll(self) -> None:
-        """Report every move whose end has passed as ``finished``, and those dropped at start."""
-        for robot, move, reason in self.sim.pop_dropped():
-            if self.running.get(robot, ('',))[0] == move:
-                del self.running[robot]
-            self._refuse(robot, move, f'{reason}; {KEEPS}')
-        for robot, (move, end) in list(self.running.items()):
-            if self.sim.time >= end - 1e-9:
-                del self.running[robot]
-                self.report(robot, 'finished', move)
+        """Report the moves dropped at their start (``refused``) and those ended (``finished``)."""
+        for robot, event, move, reason in self.sim.motion.poll(self.sim.time):
+            if event == 'dropped':
+                self._refuse(robot, move.id, f'{reason}; {KEEPS}')
+            else:
+                self.report(robot, 'finished', move.id)
 
     def hold(self, robot: str, reason: str) -> None:
         """Brake ``robot`` at its acceleration limits and hold; its move is reported ``held``."""
+        move = self.sim.motion.release(robot)
         self.sim.brake(robot)
-        self.report(robot, 'held', self.running.pop(robot, ('', 0.0))[0], reason)
-
-    def drop(self, robot: str, reason: str) -> None:
-        """Forget ``robot``'s move (the simulator already holds the arm): ``held``."""
-        self.report(robot, 'held', self.running.pop(robot, ('', 0.0))[0], reason)
+        self.report(robot, 'held', move, reason)
 
 
 class Holds:
@@ -139,11 +135,13 @@ class Holds:
         on = any(self.stops.values())
         if on == self.sim.estop:
             return
+        held = {a.name: self.sim.motion.release(a.name) for a in self.cell.arms} if on else {}
         self.sim.set_estop(on)
         standing = ' and '.join(k for k, v in self.stops.items() if v)
         for arm in self.cell.arms:
             if on:
-                self.execution.drop(arm.name, f'{standing} stop: holding')
+                self.execution.report(arm.name, 'held', held[arm.name],
+                                      f'{standing} stop: holding')
             else:
                 self.execution.report(arm.name, 'cleared', '', f'{kind} stop released')
 

@@ -105,8 +105,7 @@ class Planner(Node):
     def _on_own_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
         if (request := proto.request_of(self.arm.name, st.move)) is not None:  # not a hold
-            self._send(self.planner.on_own_execution(st.state, request, st.start,
-                                                     bool(st.stamp), st.late))
+            self._send(self.planner.on_own_execution(st.state, request, st.start, st.stamp))
 
 
 def main_left(args=None) -> None:

@@ -184,7 +184,7 @@ class TrajectoryActions:
             q, qd = self.sim.arm_state(robot)
             ref_q, ref_qd, _ = self.sim.reference(robot)
             error = ref_q - q
-            running = self.execution.running.get(robot, ('', 0.0))[0] == goal.move
+            running = self.execution.current(robot) == goal.move
             finish = None
             if goal.handle.is_cancel_requested:
                 if running:

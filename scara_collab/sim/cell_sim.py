@@ -326,7 +326,8 @@ class CellSim:
         :param t: ``(N,)`` absolute sim times, s; :param q: ``(N, 3)`` joint positions;
         :param qd, qdd: ``(N, 3)`` or ``None``.
         :param move_id: the move's name; :param stamp: the start it asked for (0: now).
-        :return: the :class:`~scara_collab.core.motion.Move` it replaced at once, if any.
+        :return: the :class:`~scara_collab.core.motion.Move` it preempts, if any
+            (:meth:`scara_collab.core.motion.CellMotion.take`).
         :raises TrajectoryError: (a ``ValueError``) with the reason (:meth:`Servo.execute`);
             :class:`~scara_collab.core.motion.Refused` if it would bring the arms within
             :attr:`admission_margin`. The arm keeps doing what it did.
@@ -338,16 +339,6 @@ class CellSim:
     def motion(self):
         """The arms' commitments (:class:`~scara_collab.core.motion.CellMotion`)."""
         return self.servo.motion
-
-    def pop_dropped(self) -> List[Tuple[str, str, str]]:
-        """Return ``(robot, move id, reason)`` of moves dropped at their start since the last call.
-
-        A move waiting for its start is judged again when it takes over
-        (:meth:`scara_collab.core.motion.CellMotion.advance`); one that no longer keeps the
-        margin is dropped and the arm keeps what it ran.
-        """
-        out, self.servo.dropped = self.servo.dropped, []
-        return out
 
     def hold(self, robot: str) -> None:
         """Drop the running trajectory and hold the arm where it is now."""

@@ -16,7 +16,7 @@ The emergency stop is the servo's too (:meth:`Servo.set_estop`): every arm brake
 acceleration limits (:func:`scara_collab.core.safety.braking`) and holds, and while it is set
 a new trajectory is run only if it parts the arms (:meth:`Servo.check_recovery`).
 """
-from typing import List, Optional, Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -71,9 +71,6 @@ class Servo:
         self.names = tuple(a.name for a in arms)
         self.motion = CellMotion(arms, q, margin, physics_dt, start_tolerance=start_tolerance)
         self.motion.checking = margin > 0
-        #: ``(robot, move id, reason)`` of waiting moves dropped as they took over (the bridge
-        #: reports and empties it)
-        self.dropped: List[Tuple[str, str, str]] = []
         self.tau = np.zeros((len(arms), 3))
         self.ref_q = np.array(q, dtype=float)
         self.ref_qd = np.zeros_like(self.ref_q)
@@ -86,10 +83,8 @@ class Servo:
         """
         poses = dict(zip(self.names, q))
         ended = {}
-        for robot, event, move, reason in self.motion.advance(now, poses):
-            if event == 'dropped':
-                self.dropped.append((robot, move.id, reason))
-            elif event == 'finished':
+        for robot, event, move, _ in self.motion.advance(now, poses):
+            if event == 'finished':
                 ended[robot] = move  # sampled once more: its last point, at rest
         for a, robot in enumerate(self.names):
             move = self.motion[robot].running or ended.get(robot)
@@ -121,7 +116,7 @@ class Servo:
         :param q: ``(N, 3)`` joint positions; :param qd, qdd: ``(N, 3)`` or ``None``.
         :param q_now, qd_now: ``(arms, 3)`` the measured joints now; :param now: sim time, s.
         :param move_id: the move's name; :param stamp: the start it asked for (0: now).
-        :return: the move it replaced at once, if any.
+        :return: the move it preempts (:meth:`scara_collab.core.motion.CellMotion.take`).
         :raises TrajectoryError: (a ``ValueError``) with the reason: emergency stop active and
             the move not separating, bad shape, non-finite value, non-increasing times, a
             position outside the joint limits, a velocity above the limits (also between
