@@ -97,9 +97,9 @@ def test_a_lost_planner_answer_is_asked_again_with_the_same_request(cell):
     for _ in range(s.answer_retries):
         t += s.answer_timeout + 0.01
         job.tick(t)
-    assert job.give_ups == 1 and 'no answer' in job.last_give_up
+    assert job.decisions.give_ups == 1 and 'no answer' in job.decisions.last_give_up
     assert job.phases()[pick.robot] == 'to_park'  # it parks clear of the belt
-    assert job.retries == s.answer_retries
+    assert job.protocol.retries == s.answer_retries
 
 
 def test_duplicated_and_stale_answers_change_nothing(cell):
@@ -113,7 +113,7 @@ def test_duplicated_and_stale_answers_change_nothing(cell):
     job.on_grip(999, False, 'a token nobody asked for')
     assert job.phases()[pick.robot] == 'to_item'
     assert not moves(job.tick(pick.start + 0.5))  # waiting for the end, nothing re-sent
-    assert job.give_ups == 0
+    assert job.decisions.give_ups == 0
 
 
 def test_every_waiting_phase_has_a_deadline(cell):
@@ -123,18 +123,18 @@ def test_every_waiting_phase_has_a_deadline(cell):
     pick = first_pick(cell, job)
     job.on_planner(pick.robot, pick.request, 'planned', pick.start, pick.start + 1.0)
     job.tick(pick.start + 1.0 + job.settings.arrive_timeout * 0.5)
-    assert job.give_ups == 0
+    assert job.decisions.give_ups == 0
     job.tick(pick.start + 1.0 + job.settings.arrive_timeout + 0.01)
-    assert job.give_ups == 1 and 'did not arrive' in job.last_give_up
+    assert job.decisions.give_ups == 1 and 'did not arrive' in job.decisions.last_give_up
 
     # queued / waiting in the planner for longer than move_timeout
     job = make_job(cell)
     pick = first_pick(cell, job)
     job.on_planner(pick.robot, pick.request, 'waiting', None, None, 'blocked')
     job.tick(job.settings.move_timeout - 0.1)
-    assert job.give_ups == 0
+    assert job.decisions.give_ups == 0
     job.tick(job.settings.move_timeout + 0.1)
-    assert job.give_ups == 1 and 'no plan' in job.last_give_up
+    assert job.decisions.give_ups == 1 and 'no plan' in job.decisions.last_give_up
 
 
 def test_lost_gripper_answers_are_asked_again_then_fail(cell):
@@ -184,7 +184,7 @@ def test_a_slow_gripper_answer_counts_and_the_timeout_grows_with_what_is_measure
     job2.protocol.grips.lag.add(slow)
     pick2 = first_pick(cell, job2)
     # (the meeting time moves a little too: a move to another point takes another time)
-    lead = job2.protocol.grasp_lead
+    lead = job2.protocol.grips.lead
     assert lead == pytest.approx(min(slow, GRASP_LEAD))  # a typical answer time, bounded
     assert pick2.target[0] - pick.target[0] == pytest.approx(cell.belt.speed * lead, abs=0.015)
     t2 = pick2.start + 1.0
@@ -292,7 +292,7 @@ def test_mirrored_moves_are_one_request_for_both_arms(cell):
     job.on_items([item_on_belt(cell, 1, y=-0.2), item_on_belt(cell, 2, y=0.2)])
     pick = moves(job.tick(0.0))[0]
     assert pick.mirrored and pick.robot == lead
-    assert job.claimed == {1: lead, 2: foll}
+    assert job.board.claimed == {1: lead, 2: foll}
     # one hop more to both planners (the replication manager): asked a pair lead further ahead
     assert pick.start >= job.settings.leads.decision + job.settings.leads.pair - 1e-9
     assert first_pick(cell, make_job(cell)).start < \
@@ -356,7 +356,7 @@ def test_an_arm_in_the_way_parks_and_a_deadlock_is_broken_by_the_follower(cell):
     job.on_planner(foll, out[0].request, 'waiting', None, None, 'the other arm blocks it')
     job.tick(job.settings.unblock_after + 0.1)
     assert job.phases() == {lead: 'to_item', foll: 'to_park'}
-    assert 'scara_right gives way' in job.last_give_up
+    assert 'scara_right gives way' in job.decisions.last_give_up
 
 
 def test_two_arms_holding_items_and_blocking_each_other_untangle(cell):
@@ -366,7 +366,7 @@ def test_two_arms_holding_items_and_blocking_each_other_untangle(cell):
     stood. Neither may put its item down, so the follower backs out on its own side first,
     then goes to its bin.
     """
-    from scara_collab.core.job import MoveTrack
+    from scara_collab.core.lanes import MoveTrack
     lead, foll = cell.leader.name, cell.follower.name
     job = make_job(cell)
     job.on_items([])
@@ -381,7 +381,7 @@ def test_two_arms_holding_items_and_blocking_each_other_untangle(cell):
     assert [m.robot for m in out] == [foll] and out[0].purpose == 'via'
     assert out[0].target[1] >= cell.belt.centre_y + 0.6  # out on the right arm's side
     assert job.phases() == {lead: 'to_bin', foll: 'via'}
-    assert job.give_ups == 0  # nothing given up, nothing put down
+    assert job.decisions.give_ups == 0  # nothing given up, nothing put down
     lane = next(la for la in job.lanes if la.robot == foll)
     assert lane.holding and [p for p, _ in lane.route] == ['to_bin']
     # at the waypoint it goes on to its bin with the item
@@ -399,7 +399,7 @@ def test_a_retreat_that_did_not_clear_the_way_is_followed_by_one_further_out(cel
     out to y = 0.60 m, was still in the way of the leader's bin move, and "backed out" to
     y = 0.60 again every second while both arms waited.
     """
-    from scara_collab.core.job import MoveTrack
+    from scara_collab.core.lanes import MoveTrack
     lead, foll = cell.leader.name, cell.follower.name
     job = make_job(cell)
     job.on_items([])
@@ -434,7 +434,7 @@ def test_an_arm_waiting_for_the_other_arms_work_re_aims_instead_of_giving_up(cel
     after ``move_timeout`` (3 s), 60 ms before the way was clear. Now it asks again for the
     item where the belt has carried it, and gives up only when the item has got away.
     """
-    from scara_collab.core.job import MoveTrack
+    from scara_collab.core.lanes import MoveTrack
     lead, foll = cell.leader.name, cell.follower.name
     job = make_job(cell)
     item = item_on_belt(cell, 97, x=1.12, y=0.01, stamp=0.0)
@@ -444,7 +444,7 @@ def test_an_arm_waiting_for_the_other_arms_work_re_aims_instead_of_giving_up(cel
     busy.phase, busy.item, busy.request = 'to_item', item_on_belt(cell, 98, 1.07, 0.27), 5
     busy.target = busy.item.position
     busy.moves = {lead: MoveTrack(state='accepted', start=0.0, end=3.0)}
-    job.claimed[97] = foll
+    job.board.claimed[97] = foll
     assert job.chase(foll, item, 0.0)
     first = lane.request
     job.on_planner(foll, first, 'waiting', None, None, f'{lead} blocks it')
@@ -455,20 +455,20 @@ def test_an_arm_waiting_for_the_other_arms_work_re_aims_instead_of_giving_up(cel
     assert [(m.robot, m.purpose) for m in again] == [(foll, 'to_item')]
     assert again[0].request != first
     assert again[0].target[0] > item.position[0] + cell.belt.speed * t - 1e-9  # downstream
-    assert job.give_ups == 0 and job.claimed[97] == foll
+    assert job.decisions.give_ups == 0 and job.board.claimed[97] == foll
     assert any('re-aims at item 97' in text for _, text in job.logs)
     # the leader stays in the way: the follower re-aims every unblock_after while its
     # planner waits, and gives up once the item has got away (never on move_timeout)
     busy.moves[lead].end = 60.0
     sent = [again[0]]
-    while job.give_ups == 0 and t < 30.0:
+    while job.decisions.give_ups == 0 and t < 30.0:
         job.on_planner(foll, sent[-1].request, 'waiting', None, None, f'{lead} blocks it')
         t += 0.1
         job.on_items([SeenItem(97, item.cls, item.position + [cell.belt.speed * t, 0, 0], t)])
         sent += [m for m in moves(job.tick(t)) if m.purpose == 'to_item']
-    assert job.give_ups == 1 and 'got away' in job.last_give_up, job.logs
+    assert job.decisions.give_ups == 1 and 'got away' in job.decisions.last_give_up, job.logs
     assert len(sent) > 3 and all(b.target[0] > a.target[0] for a, b in zip(sent, sent[1:]))
-    assert 97 not in job.claimed
+    assert 97 not in job.board.claimed
 
 
 def test_an_arm_takes_no_item_the_other_arms_booked_move_would_make_it_wait_for(cell):
@@ -487,14 +487,13 @@ def test_an_arm_takes_no_item_the_other_arms_booked_move_would_make_it_wait_for(
     def follower_chase(booked: bool):
         job = make_job(cell)
         job.on_items([near, ours])
-        busy = job.lane(lead.name)
         cmd = job.chase(lead.name, near, 0.0)[-1]
-        track = busy.moves[lead.name]
+        track = job.belt.heard[lead.name]  # the leader's commitments, its booking among them
         if booked:  # the leader's planner timed it: the job now knows the motion
             job.on_planner(lead.name, cmd.request, 'planned', cmd.start, cmd.start + 2.0)
         else:  # blind: as if the job had not planned the leader's intercept itself
-            track.timeline = None
-        assert (track.timeline is not None) == booked
+            track.booked = None
+        assert (track.booked is not None) == booked
         took = job.chase(foll.name, ours, 0.0)
         return job, track, job.lane(foll.name), took
 
@@ -503,7 +502,7 @@ def test_an_arm_takes_no_item_the_other_arms_booked_move_would_make_it_wait_for(
     plan = job.plan(foll.name, job.q[foll.name], lane.target)
     first = took[-1]
     job, track, lane, took = follower_chase(booked=True)
-    leader_motion = track.timeline
+    leader_motion = track.booked.timeline
     # ... into a move the planners would hold back for the leader (the follower yields)
     held = planning.schedule(foll, plan, first.start, lead, leader_motion,
                              job.settings.pair_margin, leader=False)
@@ -543,7 +542,7 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
     for published_first in (True, False):
         job = make_job(cell, plan=counted)
         job.on_items([item_on_belt(cell, 98, x=1.07, y=0.27)])
-        cmd = job.chase(lead.name, job.items[98], 0.0)[-1]
+        cmd = job.chase(lead.name, job.board.items[98], 0.0)[-1]
         intended = job.belt.committed(lead.name, 0.0, job.q)  # asked, not answered: the job's
         assert intended.start == pytest.approx(cmd.start) and intended.end > cmd.start
         traj = job.plan(lead.name, job.q[lead.name], cmd.target)
@@ -570,23 +569,22 @@ def test_the_booking_is_the_trajectory_the_planner_published(cell):
     raw.on_trajectory(lead.name, 'by hand', None, 0.0, traj.t, traj.q)  # not asked for
     assert raw.belt.committed(lead.name, 0.0, raw.q).end == pytest.approx(traj.duration)
     lost = make_job(cell, plan=counted)  # a park move: booked as the job plans it when it asks
-    busy = lost.lane(lead.name)
     cmd = lost.park(lead.name, 0.0)[-1]
     assert cmd.purpose == 'to_park' and lost.belt.committed(lead.name, 0.0, lost.q).end > cmd.start
     refuse.append(True)
     lost.plan.forget()
     cmd = lost.park(lead.name, 1.0)[-1]  # the job cannot plan it: not booked until timed ...
-    assert busy.moves[lead.name].timeline is None
+    assert lost.belt.heard[lead.name].booked.timeline is None
     assert lost.belt.committed(lead.name, 1.0, lost.q).end == 1.0  # asked, unplanned: it holds
     refuse.clear()
     lost.plan.forget()
     lost.on_planner(lead.name, cmd.request, 'planned', cmd.start, cmd.start + 2.0)
-    assert isinstance(busy.moves[lead.name].timeline, planning.Timeline)  # ... then planned
+    assert isinstance(lost.belt.heard[lead.name].booked.timeline, planning.Timeline)  # planned
     single = make_job(cell, mode='single')
     single.on_items([item_on_belt(cell, 98, x=1.07, y=0.27)])
-    cmd = single.chase(lead.name, single.items[98], 0.0)[-1]
+    cmd = single.chase(lead.name, single.board.items[98], 0.0)[-1]
     single.on_trajectory(lead.name, f'{lead.name}/{cmd.request}', cmd.request, *published)
-    assert single.lane(lead.name).moves[lead.name].timeline is None  # one arm: nothing to book
+    assert not hasattr(single.belt, 'heard')  # one arm: nothing to book
 
 
 def test_a_chase_asked_in_the_same_tick_is_respected_before_its_answer(cell):
@@ -614,7 +612,7 @@ def test_a_chase_asked_in_the_same_tick_is_respected_before_its_answer(cell):
                                   leader=False)
         assert timed is not None and timed.delay <= tolerance
     else:
-        assert lane.phase == 'idle' and 97 not in job.claimed
+        assert lane.phase == 'idle' and 97 not in job.board.claimed
 
 
 def test_the_followers_move_goes_out_after_the_leaders_planner_has_answered(cell):
@@ -665,8 +663,8 @@ def test_an_item_about_to_leave_reach_is_chased_even_if_the_arm_must_wait(cell):
     job.on_items([near, ours])
     busy = job.lane(lead.name)
     first = job.chase(lead.name, near, 0.0)[-1]
-    booked = busy.moves[lead.name]
     job.on_planner(lead.name, busy.request, 'planned', first.start, 3.0)
+    booked = job.belt.heard[lead.name].booked
     assert booked.timeline is not None
     lane = job.lane(foll.name)
     took = job.chase(foll.name, ours, 0.0)  # urgent: taken at once, the leader in the way
@@ -700,7 +698,7 @@ def test_an_urgent_chase_is_timed_around_the_other_arms_booked_move(cell):
     by then, the leader does not claim it (the other arm may still save it).
     """
     from scara_collab.core import planning
-    from scara_collab.core.job import MoveTrack
+    from scara_collab.core.lanes import MoveTrack
     from scara_collab.core.sharing import URGENT_SLACK
     from scara_collab.core.sorting import intercept, time_in_reach
     lead, foll = cell.leader, cell.follower
@@ -718,8 +716,8 @@ def test_an_urgent_chase_is_timed_around_the_other_arms_booked_move(cell):
                                    np.array([stay, stay, away]))
         busy = next(la for la in job.lanes if la.robot == foll.name)
         busy.phase, busy.request = 'to_item', 5
-        busy.moves = {foll.name: MoveTrack('planned', start=0.0, end=motion.end,
-                                           timeline=motion)}
+        busy.moves = {foll.name: MoveTrack('planned', start=0.0, end=motion.end)}
+        job.belt.heard[foll.name].book(5, motion)  # booked as asked, its planner's word
         job.on_arm_state(foll.name, stay)
         assert time_in_reach(cell, lead, item.position, job.settings.pick_z) < URGENT_SLACK
         took = job.chase(lead.name, item, 0.0)
@@ -736,7 +734,7 @@ def test_an_urgent_chase_is_timed_around_the_other_arms_booked_move(cell):
                              leader=False)
     assert held is not None and held.delay <= tolerance  # no further wait: it meets the item
     job, blind, motion, lane, took = chase(leaves_at=3.5)
-    assert not took and lane.phase == 'idle' and 97 not in job.claimed  # gone by then
+    assert not took and lane.phase == 'idle' and 97 not in job.board.claimed  # gone by then
 
 
 def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
@@ -748,7 +746,7 @@ def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
     item about to leave reach stays in front of both. With more urgent items than the arm can
     save (the feed is faster than the arm), every candidate goes by its cycle.
     """
-    from scara_collab.core import job as job_module, sharing, sorting
+    from scara_collab.core import job_decisions, sharing, sorting
     job = make_job(cell)
     lane = job.lanes[0]
     arm = cell.arm(lane.robot)
@@ -767,7 +765,7 @@ def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
         return ([it.id for _, it in urgency],
                 [it.id for _, it in sorting.rank_by_cycle(
                     cell, arm, job.q[lane.robot], urgency, start, z, job.settings.drop_clearance,
-                    sharing.URGENT_SLACK, job_module.SAVABLE)])
+                    sharing.URGENT_SLACK, job_decisions.SAVABLE)])
 
     red = item_on_belt(cell, 1, x=0.7, y=-0.2, cls='red')
     blue = item_on_belt(cell, 2, x=0.9, y=-0.2, cls='blue')
@@ -780,7 +778,7 @@ def test_items_are_taken_shortest_cycle_first_unless_urgent_and_savable(cell):
              for k, (x, c) in enumerate(((3.3, 'red'), (3.1, 'blue'), (2.9, 'red'),
                                          (2.7, 'blue')))]
     assert all(spare(it) < sharing.URGENT_SLACK for it in crowd)
-    assert len(crowd) > job_module.SAVABLE
+    assert len(crowd) > job_decisions.SAVABLE
     urgency, order = ranked(crowd + [red])
     assert urgency == [10, 11, 12, 13, 1]
     by_cost = sorted(crowd + [red], key=cost)
@@ -795,7 +793,7 @@ def test_every_item_in_reach_is_ranked_not_only_the_most_urgent(cell):
     ranked only the six most urgent, which left it out: 6 % fewer items a minute for the
     single arm, 12 % for the pair at saturation, README *The sorting job*).
     """
-    from scara_collab.core import job as job_module, sharing, sorting
+    from scara_collab.core import job_decisions, sharing, sorting
     job = make_job(cell)
     lane = job.lanes[0]
     arm = cell.arm(lane.robot)
@@ -810,7 +808,7 @@ def test_every_item_in_reach_is_ranked_not_only_the_most_urgent(cell):
     assert [it.id for _, it in urgency][-1] == red.id  # the least urgent
     order = sorting.rank_by_cycle(cell, arm, job.q[lane.robot], urgency, start, z,
                                   job.settings.drop_clearance, sharing.URGENT_SLACK,
-                                  job_module.SAVABLE)
+                                  job_decisions.SAVABLE)
     assert order[0][1].id == red.id
     assert sorted(it.id for _, it in order) == sorted(it.id for it in items)
 

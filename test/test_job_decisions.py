@@ -8,17 +8,16 @@ def test_an_arm_with_nothing_to_take_looks_again_later(cell):
     """An idle lane that finds no item waits ``LOOK_AGAIN`` before it plans again."""
     job = make_job(cell)
     lane = job.lane(cell.leader.name)
-    job.decisions.pick_next(lane, 3.0)
+    assert job.decisions.pick(lane, job.lanes, job.board, 3.0) == []
     assert lane.phase == 'idle' and lane.next_look == 3.0 + LOOK_AGAIN
-    assert job.moves.out == []
 
 
 def test_a_pick_claims_the_item_and_notes_why(cell):
     """The arm that chases an item claims it; the note says so."""
     job = make_job(cell)
     pick = first_pick(cell, job)
-    assert job.claimed == {1: pick.robot}
-    assert job.notes.close(1).startswith(f'{pick.robot} chased it at t=0.00 s')
+    assert job.board.claimed == {1: pick.robot}
+    assert job.decisions.notes.close(1).startswith(f'{pick.robot} chased it at t=0.00 s')
 
 
 def test_giving_up_an_item_frees_it_and_parks_the_arm(cell):
@@ -26,11 +25,12 @@ def test_giving_up_an_item_frees_it_and_parks_the_arm(cell):
     job = make_job(cell)
     pick = first_pick(cell, job)
     lane = job.lane(pick.robot)
-    job.moves.out = []
-    job.decisions.give_up(lane, 2.0, 'test')
-    assert job.give_ups == 1 and job.last_give_up.startswith(f't=2.00 s {pick.robot} to_item')
-    assert job.claimed == {} and lane.failures == {1: 1}
-    assert lane.phase == 'to_park' and [m.purpose for m in moves(job.moves.out)] == ['to_park']
+    out = job.decisions.give_up(lane, job.board, 2.0, 'test')
+    decisions = job.decisions
+    assert decisions.give_ups == 1
+    assert decisions.last_give_up.startswith(f't=2.00 s {pick.robot} to_item')
+    assert job.board.claimed == {} and lane.failures == {1: 1}
+    assert lane.phase == 'to_park' and [m.purpose for m in moves(out)] == ['to_park']
     assert ('warn', f'{pick.robot}: test') in job.logs
 
 
@@ -40,10 +40,9 @@ def test_giving_up_while_holding_carries_the_item_to_its_bin_again(cell):
     pick = first_pick(cell, job)
     lane = job.lane(pick.robot)
     lane.holding, lane.phase = True, 'to_bin'
-    job.moves.out = []
-    job.decisions.give_up(lane, 2.0, 'bin move lost')
-    assert lane.bin_tries == 1 and [m.purpose for m in moves(job.moves.out)] == ['to_bin']
-    assert job.claimed == {1: pick.robot}  # still its item
+    out = job.decisions.give_up(lane, job.board, 2.0, 'bin move lost')
+    assert lane.bin_tries == 1 and [m.purpose for m in moves(out)] == ['to_bin']
+    assert job.board.claimed == {1: pick.robot}  # still its item
 
 
 def test_each_mode_picks_its_own_way():

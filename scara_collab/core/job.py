@@ -5,31 +5,9 @@ messages into the ``on_*`` observations, calls :meth:`SortingJob.tick` on a time
 the returned :class:`MoveCommand` / :class:`GripCommand` into messages and service calls.
 
 A *lane* is one arm's work (``single``: the leader; ``collaborative``: one lane per arm;
-``mirrored``: one lane that moves both arms, the follower to the mirror image). Its phases:
-
-=============  =================================================  ===========================
-phase          leaves when                                        deadline (then)
-=============  =================================================  ===========================
-``idle``       an item can be met: a pick move is asked           none
-``to_item``    every arm's move has arrived (bridge ``finished``  no planner answer:
-               or the end time passed with the tool at the        ``answer_timeout``, re-sent
-               target): grasp if the item is under the tool,      ``answer_retries`` times;
-               else chase it or give up                           not planned by
-                                                                  ``move_timeout``; not
-                                                                  arrived ``arrive_timeout``
-                                                                  after its end (give up,
-                                                                  park)
-``grasping``   every gripper answered (or the bridge's            ``grip_timeout``, asked
-               ``grasped`` event confirmed it)                    again ``grip_retries`` times
-                                                                  (give up)
-``lift``       as ``to_item``; only when ``carry_height`` lifts   as ``to_item``
-               the item above those on the belt
-``to_bin``     as ``to_item``                                     as ``to_item`` with
-                                                                  ``carry_timeout``; a given
-                                                                  up bin move is asked again
-``releasing``  every gripper answered (or ``released`` seen)      as ``grasping``
-``to_park``    as ``to_item``                                     as ``to_item`` (then idle)
-=============  =================================================  ===========================
+``mirrored``: one lane that moves both arms, the follower to the mirror image). Its phases
+(:class:`~scara_collab.core.lanes.Phase`, from which this table is made):
+{phases}
 
 Every observation names what it is about (a move by its request, a grip by its token), so a
 late, duplicated or unknown one is ignored, and every waiting phase has a deadline, so a lost
@@ -38,48 +16,45 @@ of a request it already has; a grasp while holding and a release while empty suc
 re-sent request is always safe. Each move goes out with the job's plan of it (the one it
 was chosen by), which the planner schedules without planning it again.
 
-The job owns three plain objects and decides on what they report:
+The job owns its lanes and what it knows of the belt's items (an
+:class:`~scara_collab.core.job_decisions.ItemBoard`), and hands both to its parts, each a plain
+object tested alone:
 
-- its lanes (:class:`scara_collab.core.lanes.Lane`, one per arm that moves on its own);
-- its request protocol (:class:`scara_collab.core.lanes.LaneProtocol`): it asks the moves and
-  grips the job decides on, tracks their answers and deadlines, and reports each lane's
+- its request protocol (:class:`scara_collab.core.lanes.LaneProtocol`): it opens the moves
+  and grips the job decides on, tracks their answers and deadlines, and reports each lane's
   outcome as a :class:`scara_collab.core.lanes.LaneEvent` (arrived, gripped, failed);
 - its belt sharing (:class:`scara_collab.core.sharing.SharedBelt` in ``collaborative`` mode,
-  :class:`scara_collab.core.sharing.SoloBelt` otherwise, chosen once): what each arm has
-  booked, a chase timed around the other arm, how to unblock two arms that wait for each
-  other, the follower's moves held for the leader's answer.
-
-Two more parts do the job's own work:
-
+  :class:`scara_collab.core.sharing.SoloBelt` otherwise, chosen once): what each arm is
+  committed to (the committed-motion model, with the moves the job asked booked in it), a
+  chase timed around the other arm, how to unblock two arms that wait for each other, the
+  follower's moves held for the leader's answer;
 - its decisions (:class:`scara_collab.core.job_decisions.LaneDecisions`): which item an idle
   arm takes and when (ranked by :func:`scara_collab.core.sorting.rank_by_cycle`), what follows
-  each event, how an arm that waits for the other is unblocked;
-- its moves (:class:`scara_collab.core.job_moves.JobMoves`): each asked of the protocol and
-  booked on the belt, the intercept of an item, a mirrored pair kept apart
+  each event, how an arm that waits for the other is unblocked; each returns its commands;
+- its moves (:class:`scara_collab.core.job_moves.JobMoves`), which the decisions make: each
+  opened and booked, the intercept of an item, a mirrored pair kept apart
   (:mod:`scara_collab.core.pairing`).
 
-:class:`SortingJob` itself takes the observations, keeps what the job knows of the items (seen,
-claimed, noted, counted) and runs the clock (:meth:`SortingJob.tick`).
+One tick (:meth:`SortingJob.tick`) goes through them in one direction: the protocol follows
+every waiting lane to ``now`` (what is sent again, what ended each wait), the decisions
+decide on all of it, the belt sharing sends the result in turn.
 """
 from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
 from scara_collab.core import line, sorting
-from scara_collab.core.job_decisions import (ItemNotes, LaneDecisions, LOOK_AGAIN, PICKING,
-                                             Picking, SAVABLE)
+from scara_collab.core.job_decisions import ItemBoard, LaneDecisions
 from scara_collab.core.job_moves import JobMoves
-from scara_collab.core.job_settings import JobSettings, MODES
-from scara_collab.core.lanes import (Command, FAILED_MOVE, GripCommand, GripTrack, Lane,
-                                     LaneProtocol, MOVE_STATES, MoveCommand,
-                                     MoveTrack, MOVING, PHASES, PlanFn, PlanMemo)
+from scara_collab.core.job_settings import JobSettings
+from scara_collab.core.lanes import (Command, GripCommand, Lane, LaneEvent, LaneProtocol,
+                                     MoveCommand, open_track, Phase, phase_table, PlanFn,
+                                     PlanMemo)
 from scara_collab.core.model import CellModel
 from scara_collab.core.sharing import SharedBelt, SoloBelt
 
-__all__ = ['Command', 'FAILED_MOVE', 'GripCommand', 'GripTrack', 'ItemNotes',
-           'items_per_minute', 'JobSettings', 'Lane', 'LOOK_AGAIN', 'MODES', 'MOVE_STATES',
-           'MoveCommand', 'MoveTrack', 'MOVING', 'PHASES', 'Picking', 'PICKING', 'SAVABLE',
-           'SortingJob']
+__doc__ = __doc__.format(phases=phase_table())
+__all__ = ['GripCommand', 'items_per_minute', 'JobSettings', 'MoveCommand', 'SortingJob']
 
 
 def items_per_minute(sorted_count: int, seconds: float) -> float:
@@ -115,52 +90,36 @@ class SortingJob:
                  'mirrored': [(lead.name, (lead.name, foll.name))]}[settings.mode]
         #: the job's plans, each planned once per tick (every part of the job plans with it)
         self.plan = PlanMemo(plan)
+        #: the job's lanes: its own, handed to its parts at each call
         self.lanes: List[Lane] = [Lane(r, rs) for r, rs in specs]
-        self.protocol = LaneProtocol(cell, settings, self.lanes, self.plan, log)
+        #: the belt's items and their claims, as the job knows them
+        self.board = ItemBoard()
+        self.protocol = LaneProtocol(cell, settings, self.plan, log)
         self.belt = (SharedBelt if settings.mode == 'collaborative' else SoloBelt)(
-            cell, settings, self.lanes, self.plan)
+            cell, settings, self.plan)
+        self.moves = JobMoves(cell, settings, self.protocol, self.belt, self.plan)
+        #: in a line of cells, the items this cell leaves for the ones downstream
+        self.share = (line.Share(settings.line_cell, settings.line_cells, settings.line_capacity)
+                      if settings.line_cells > 1 else None)
+        self.decisions = LaneDecisions(cell, settings, self.protocol, self.moves, self.share, log)
         used = {r for lane in self.lanes for r in lane.robots}
         self._unused = [a.name for a in cell.arms if a.name not in used]
         self._parked_unused = False
         self.running = False
         self.estop = False
         self.start_time: Optional[float] = None
-        self.items: Dict[int, sorting.SeenItem] = {}
-        self.claimed: Dict[int, str] = {}
-        #: in a line of cells, the items this cell leaves for the ones downstream
-        self.share = (line.Share(settings.line_cell, settings.line_cells, settings.line_capacity)
-                      if settings.line_cells > 1 else None)
         self.counts: Dict[str, int] = {}
         self.sorted_by: Dict[str, int] = {a.name: 0 for a in cell.arms}
-        self.notes = ItemNotes()
-        self.moves = JobMoves(cell, settings, self.protocol, self.belt, self.plan)
-        self.decisions = LaneDecisions(cell, settings, self.lanes, self.protocol, self.moves,
-                                       self.items, self.claimed, self.notes, self.share, log)
 
-    # --- what the protocol knows ------------------------------------------------------------
+    # --- what it knows --------------------------------------------------------------------
     @property
     def q(self) -> Dict[str, np.ndarray]:
-        """The arms' measured joints ``(3,)`` by name."""
+        """The arms' measured joints ``(3,)`` by name (the protocol's, which arrival checks)."""
         return self.protocol.q
-
-    @property
-    def retries(self) -> int:
-        """Requests and gripper calls sent again so far."""
-        return self.protocol.retries
-
-    @property
-    def give_ups(self) -> int:
-        """Attempts given up so far."""
-        return self.decisions.give_ups
-
-    @property
-    def last_give_up(self) -> str:
-        """The last give-up: when, which arm, in which phase, why (``''``: none yet)."""
-        return self.decisions.last_give_up
 
     def phases(self) -> Dict[str, str]:
         """Each lane's phase, by its robot."""
-        return self.protocol.phases()
+        return {lane.robot: str(lane.phase) for lane in self.lanes}
 
     def lane(self, robot: str) -> Lane:
         """Return the lane that decides for ``robot``.
@@ -186,10 +145,9 @@ class SortingJob:
 
     def on_items(self, items: Sequence[sorting.SeenItem]) -> None:
         """Take the items resting on the belt now (not held, not falling, not in a bin)."""
-        self.items.clear()  # in place: the decisions see the same dict
-        self.items.update((it.id, it) for it in items)
-        if self.share is not None and self.items:
-            self.share.see(self.items, max(it.stamp for it in items))
+        self.board.items = {it.id: it for it in items}
+        if self.share is not None and self.board.items:
+            self.share.see(self.board.items, max(it.stamp for it in items))
 
     def on_estop(self, on: bool) -> None:
         """Take the emergency stop: while set, nothing new is commanded."""
@@ -202,9 +160,9 @@ class SortingJob:
     def on_planner(self, robot: str, request: int, state: str, start: Optional[float],
                    end: Optional[float], reason: str = '') -> None:
         """Take a planner status about ``robot``'s move for ``request`` (others are ignored)."""
-        timed = self.protocol.on_planner(robot, request, state, start, end, reason)
-        if timed is not None:
-            self.belt.timed(robot, request, timed, self.q)
+        track = self.protocol.on_planner(self.lanes, robot, request, state, start, end, reason)
+        if track is not None:
+            self.belt.answered(robot, track, self._target(robot, request), self.q)
 
     def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
                      end: Optional[float], reason: str = '',
@@ -213,9 +171,14 @@ class SortingJob:
 
         :param stamp: the start an ``accepted`` move asked for (None or 0: none).
         """
-        timed = self.protocol.on_execution(robot, request, state, start, end, reason, stamp)
-        if timed is not None:
-            self.belt.timed(robot, request, timed, self.q)
+        track = self.protocol.on_execution(self.lanes, robot, request, state, start, end,
+                                           reason, stamp)
+        if track is not None:
+            self.belt.answered(robot, track, self._target(robot, request), self.q)
+
+    def _target(self, robot: str, request: int) -> np.ndarray:
+        """Return the target of the lane whose current request of ``robot`` is ``request``."""
+        return next(la.target for la in self.lanes if la.request == request and robot in la.moves)
 
     def on_trajectory(self, robot: str, move_id: str, request: Optional[int], stamp: float,
                       t: np.ndarray, q: np.ndarray) -> None:
@@ -228,8 +191,9 @@ class SortingJob:
             raw command, a hold); :param stamp: its start, s (0: now); :param t: ``(N,)`` s
             from its start; :param q: ``(N, 3)`` joint positions.
         """
-        track = None if request is None else self.protocol.open_track(robot, request)
-        self.belt.on_trajectory(robot, move_id, track, stamp, t, q, self.protocol.now, self.q)
+        if request is not None and open_track(self.lanes, robot, request) is None:
+            request = None  # not an open move of the job's (an old one)
+        self.belt.on_trajectory(robot, move_id, request, stamp, t, q, self.protocol.now, self.q)
 
     def on_arm_status(self, robot: str, state: str, move_id: str,
                       start: Optional[float] = None) -> None:
@@ -238,7 +202,7 @@ class SortingJob:
 
     def on_grip(self, token: int, ok: bool, message: str = '') -> None:
         """Take a gripper response for request ``token``: any attempt of a grip still open."""
-        self.protocol.on_grip(token, ok, message)
+        self.protocol.grips.on_response(self.lanes, token, ok, message, self.protocol.now)
 
     def on_item_event(self, kind: str, item: int, robot: str) -> None:
         """Count a bridge item event; it also confirms grasps and releases."""
@@ -246,41 +210,38 @@ class SortingJob:
         if kind == 'sorted' and robot in self.sorted_by:
             self.sorted_by[robot] += 1
         if kind in sorting.GONE:
-            self.claimed.pop(item, None)
-            last = self.notes.close(item)
+            self.board.claimed.pop(item, None)
+            last = self.decisions.notes.close(item)
             if kind == 'missed':
                 self.log('warn', f'item {item} missed; last: {last}')
-        self.protocol.confirm_grip(kind, robot)
+        self.protocol.grips.confirm(self.lanes, kind, robot)
 
     # --- the clock ------------------------------------------------------------------------
     def tick(self, now: float) -> List[Command]:
         """Advance every lane to ``now`` (sim s); return the commands to send, in order.
 
-        Each lane in turn: an idle one picks its next item; a waiting one is advanced by the
-        protocol, and the event that ends its wait (:class:`~scara_collab.core.lanes.LaneEvent`)
-        is decided on here. Then the belt sharing may unblock an arm that waits for the other,
-        and holds the follower's moves until the leader's planner has answered.
+        The protocol follows every lane that waits (a move, a grip) to ``now``: what it sends
+        again, and the event that ends each wait. The decisions then decide for every lane
+        (an idle one picks its next item, one whose wait ended takes its next step) and clear
+        the way for an arm that waits for the other. The belt sharing sends the follower's
+        moves only once the leader's planner has answered.
         """
-        self.moves.out = []
         self.protocol.now = now
         self.plan.forget()
         if self.estop or not self.protocol.knows_every_arm():
             self.belt.drop_held()  # nothing new is commanded; a lane re-sends after answer_timeout
             return []
-        if self.running and not self._parked_unused:
-            self._parked_unused = True  # once
-            self.moves.park_unused(self._unused, now)
-        for lane in self.lanes:
-            if lane.phase == 'idle':
-                if self.running and now >= lane.next_look:
-                    self.decisions.pick_next(lane, now)
-                continue
-            sent, event = self.protocol.tick(lane, now)
-            self.moves.out += sent
-            if event is not None:
-                self.decisions.decide(event, now)
-        self.decisions.unblock(self.belt.unblock(now, self.q), now)
-        return self.belt.in_turn(self.moves.out, now)
+        out: List[Command] = []
+        events: Dict[int, Optional[LaneEvent]] = {}
+        for k, lane in enumerate(self.lanes):
+            if lane.phase != Phase.IDLE:
+                sent, events[k] = self.protocol.advance(lane, now)
+                out += sent
+        unused = self._unused if self.running and not self._parked_unused else ()
+        self._parked_unused = self._parked_unused or self.running
+        out += self.decisions.next_steps(self.lanes, events, self.board, now, self.running,
+                                         unused)
+        return self.belt.in_turn(out, self.lanes, now)
 
     def chase(self, robot: str, item: sorting.SeenItem, now: float) -> List[MoveCommand]:
         """Send ``robot``'s lane after ``item`` now, as a pick would (the item is not claimed).
@@ -288,14 +249,11 @@ class SortingJob:
         :return: the moves asked, in order (the caller sends them); ``[]`` if the arm cannot
             meet the item (or not without waiting for the other arm's booked move).
         """
-        self.moves.out = []
-        return list(self.moves.out) if self.moves.chase(self.lane(robot), item, now) else []
+        return self.moves.meet(self.lane(robot), item, now)
 
     def park(self, robot: str, now: float) -> List[MoveCommand]:
         """Send ``robot``'s lane to wait clear of the shared zone; return the moves asked."""
-        self.moves.out = []
-        self.moves.park(self.lane(robot), now)
-        return list(self.moves.out)
+        return self.moves.to_park(self.lane(robot), now)
 
     # --- figures --------------------------------------------------------------------------
     def minutes(self, now: float) -> float:

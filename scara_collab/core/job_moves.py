@@ -1,12 +1,13 @@
 """The moves the sorting job asks for: to an item, to a bin, to park, round a mirrored pair.
 
-:class:`JobMoves` turns the job's decisions into requests: it asks each move of the request
-protocol (:class:`scara_collab.core.lanes.LaneProtocol`) and books it on the belt sharing
-(:mod:`scara_collab.core.sharing`), so the other lane decides around it; it times the move
-that meets an item (:func:`scara_collab.core.sorting.intercept`, then around the other arm's
-booked moves), and sends a mirrored pair round a waypoint when its arms would come within the
-planners' margin (:mod:`scara_collab.core.pairing`). The commands collect in :attr:`out`, in
-the order they are to be sent. No ROS here.
+:class:`JobMoves` turns the job's decisions into commands and returns them: it opens each
+move's request (:meth:`scara_collab.core.lanes.LaneProtocol.open`) and books it on the belt
+sharing (:mod:`scara_collab.core.sharing`), so the other lane decides around it; it calls the
+grippers (:class:`scara_collab.core.lanes.Grips`) and withdraws the booking of a lane that
+leaves its move; it times the move that meets an item
+(:func:`scara_collab.core.sorting.intercept`, then around the other arm's booked moves), and
+sends a mirrored pair round a waypoint when its arms would come within the planners' margin
+(:mod:`scara_collab.core.pairing`). No ROS here.
 """
 from typing import Dict, List, Optional
 
@@ -14,7 +15,8 @@ import numpy as np
 
 from scara_collab.core import pairing, sorting
 from scara_collab.core.job_settings import JobSettings
-from scara_collab.core.lanes import Command, Lane, LaneProtocol, PlanMemo
+from scara_collab.core.lanes import (GripCommand, Lane, LaneProtocol, MoveCommand, Phase,
+                                     PlanMemo)
 from scara_collab.core.model import CellModel
 from scara_collab.core.trajectory import Trajectory
 
@@ -31,51 +33,52 @@ class JobMoves:
         """Nothing asked yet."""
         self.cell, self.settings, self.protocol, self.belt, self.plan = (
             cell, settings, protocol, belt, plan)
-        self.out: List[Command] = []  # the commands asked since the caller last took them
 
-    def move(self, lane: Lane, phase: str, target, start: float, now: float,
-             traj: Optional[Trajectory] = None) -> None:
-        """Ask the protocol for ``lane``'s move and book it on the belt."""
-        self.out.append(self.protocol.move(lane, phase, target, start, now, traj))
-        self.belt.asked(lane)
+    def go(self, lane: Lane, phase: Phase, target, start: float, now: float,
+           traj: Optional[Trajectory] = None) -> MoveCommand:
+        """Return ``lane``'s move to ``target`` from ``start``, opened and booked on the belt."""
+        cmd = self.protocol.open(lane, phase, target, start, now, traj)
+        self.belt.book(lane)
+        return cmd
 
-    def grip(self, lane: Lane, grasp: bool, now: float) -> None:
-        """Ask ``lane``'s grippers to grasp (True) or release."""
-        self.out += self.protocol.grip(lane, grasp, now)
+    def call_grippers(self, lane: Lane, grasp: bool, now: float) -> List[GripCommand]:
+        """Return the calls of ``lane``'s grippers to grasp (True) or release; its move is over."""
+        self.belt.settle(lane)
+        return self.protocol.grips.ask(lane, grasp, now)
 
-    def asap_start(self, lane: Lane, now: float) -> float:
-        """Return the earliest start of ``lane``'s next move asked now, s."""
-        return self.protocol.asap_start(lane, now)
+    def free(self, lane: Lane) -> None:
+        """Make ``lane`` idle: its item, move and grips forgotten, its booking withdrawn."""
+        self.belt.settle(lane)
+        lane.idle()
 
-    def chase(self, lane: Lane, item: sorting.SeenItem, now: float) -> bool:
-        """Ask for the move that meets ``item``; return False if the arm cannot."""
+    def meet(self, lane: Lane, item: sorting.SeenItem, now: float) -> List[MoveCommand]:
+        """Return the move that meets ``item`` (``[]``: the arm cannot, or not yet)."""
         s = self.settings
         # a mirrored pair's move takes one hop more (the replication manager) to both planners
         start = self.protocol.time.decided(now, lane.mirrored)
         arm = self.cell.arm(lane.robot)
         q = self.protocol.q
         aim = pairing.pair_aim(self.cell, item, s.pair_offset) if lane.mirrored else item
-        lead = self.protocol.grasp_lead
+        lead = self.protocol.grips.lead
         hit = sorting.intercept(self.cell, arm, q[lane.robot], aim, start, s.pick_z,
                                 lambda q0, p: self.plan(lane.robot, q0, p), lead=lead)
         if hit is not None:
             hit = self.belt.unhindered(lane, aim, hit, now, q, lead)
         if hit is None:
-            return False
+            return []
         lane.item = item
         if lane.mirrored and not pairing.pair_clear(self.cell, lane.robot, hit.traj,
                                                     s.pair_margin):
             route = pairing.detour(self.cell, self.plan, lane.robot, q[lane.robot],
                                    hit.target, s.carry_z, s.pair_margin)
             if route:  # go round first, then meet the item from there
-                self.move(lane, 'via', route[0], start, now)
-                lane.route = [('via', p) for p in route[1:]]
-                return True
-        self.move(lane, 'to_item', hit.target, hit.start, now, hit.traj)
-        return True
+                cmd = self.go(lane, Phase.VIA, route[0], start, now)
+                lane.route = [(Phase.VIA, p) for p in route[1:]]
+                return [cmd]
+        return [self.go(lane, Phase.TO_ITEM, hit.target, hit.start, now, hit.traj)]
 
-    def to_bin(self, lane: Lane, now: float) -> None:
-        """Carry the item ``lane`` holds to the bin of its class.
+    def to_bin(self, lane: Lane, now: float) -> List[MoveCommand]:
+        """Return the move that carries the item ``lane`` holds to the bin of its class.
 
         Lifted clear of the items on the belt, it stays at least that high all the way: a line
         from the lift down to the drop point would bring the held item back down to the tops
@@ -83,26 +86,31 @@ class JobMoves:
         """
         drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls,
                                   self.settings.drop_clearance)
-        if lane.phase == 'lift':
+        if lane.phase == Phase.LIFT:
             drop[2] = max(drop[2], self.settings.carry_z)
-        self.move_safely(lane, 'to_bin', drop, self.asap_start(lane, now), now)
+        return self.go_round(lane, Phase.TO_BIN, drop,
+                             self.protocol.time.asap(now, lane.mirrored), now)
 
-    def park(self, lane: Lane, now: float) -> None:
-        """Wait clear of the shared zone, above the first bin, so the other arm is free."""
+    def to_park(self, lane: Lane, now: float) -> List[MoveCommand]:
+        """Return the move to wait clear of the shared zone, above the first bin."""
         park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
                                   self.settings.drop_clearance)
-        self.move_safely(lane, 'to_park', park, self.asap_start(lane, now), now)
+        return self.go_round(lane, Phase.TO_PARK, park,
+                             self.protocol.time.asap(now, lane.mirrored), now)
 
-    def park_unused(self, robots: List[str], now: float) -> None:
-        """Send arms no lane uses to wait above their first bin, off the belt."""
+    def park_unused(self, robots: List[str], now: float) -> List[MoveCommand]:
+        """Return the moves of the arms no lane uses to wait above their first bin."""
+        out = []
         for robot in robots:
             park = sorting.drop_point(self.cell, robot, self.cell.item_classes[0],
                                       self.settings.drop_clearance)
-            self.out.append(self.protocol.move_once(
-                robot, park, self.protocol.time.decided(now), 'park'))
+            out.append(self.protocol.open_once(robot, park, self.protocol.time.decided(now),
+                                               'park'))
+        return out
 
-    def move_safely(self, lane: Lane, phase: str, target, start: float, now: float) -> None:
-        """Ask for a move like :meth:`move`; a mirrored pair may go round by a waypoint.
+    def go_round(self, lane: Lane, phase: Phase, target, start: float,
+                 now: float) -> List[MoveCommand]:
+        """Return the move like :meth:`go`; a mirrored pair may go round by a waypoint first.
 
         A pair that would come within the planners' margin goes round, so the follower need
         not yield and both arms start together.
@@ -118,10 +126,10 @@ class JobMoves:
             route = [] if clear else pairing.detour(self.cell, self.plan, lane.robot, q0,
                                                     target, self.settings.carry_z, margin)
             if route:
-                lane.route = [('via', p) for p in route[1:]] + [(phase, np.asarray(target))]
-                self.move(lane, 'via', route[0], start, now)
-                return
-        self.move(lane, phase, target, start, now)
+                cmd = self.go(lane, Phase.VIA, route[0], start, now)
+                lane.route = [(Phase.VIA, p) for p in route[1:]] + [(phase, np.asarray(target))]
+                return [cmd]
+        return [self.go(lane, phase, target, start, now)]
 
     def would_sweep(self, lane: Lane, items: Dict[int, sorting.SeenItem], now: float) -> bool:
         """Return True if the item just grasped would touch one of ``items`` on its way.
@@ -143,5 +151,5 @@ class JobMoves:
         others = [it for it in items.values() if it.id != lane.item.id]
         spare = s.carry_z - s.pick_z - self.cell.item_size  # = carry_clearance
         return bool(others) and sorting.carry_sweeps(
-            self.cell, traj.p, self.asap_start(lane, now) + traj.t, others, s.pick_z, spare,
-            mirrored=lane.mirrored, late=self.protocol.time.late.worst)
+            self.cell, traj.p, self.protocol.time.asap(now, lane.mirrored) + traj.t, others,
+            s.pick_z, spare, mirrored=lane.mirrored, late=self.protocol.time.late.worst)

@@ -1,14 +1,15 @@
-"""The job's request protocol, without ROS: moves and grips asked, answered, retried, timed out.
+"""The job's lanes and their request protocol, without ROS: asked, answered, retried, timed out.
 
 A *lane* is one arm's work (both arms' in mirrored mode): a :class:`Lane` holds what it is
-doing now. :class:`LaneProtocol` keeps what is known of each lane's current move (per arm: the
-planner's and the bridge's answers, its start and end, whether it arrived) and grip (per arm:
-its token, attempts, outcome), turns the observations into that state, and enforces every
-deadline of the table in :mod:`scara_collab.core.job`. It decides nothing about items: asked
-for a move or a grip it returns the command to send; ticked, it returns the commands it sends
-again and the :class:`LaneEvent` that ends the lane's wait (``arrived``, ``gripped`` or
-``failed``), which the job decides on. The grips are a part of their own (:class:`Grips`:
-their tokens, retries and measured answer times), which the protocol asks and ticks.
+doing now, in one of the :class:`Phase` phases. :class:`LaneProtocol` keeps what is known of
+each lane's current move (per arm: the planner's and the bridge's answers, its start and end,
+whether it arrived), opens the job's move requests and enforces every move deadline;
+:class:`Grips` does the same for the grippers (tokens, retries, measured answer times). Both
+decide nothing about items: asked for a move or a grip they return the command to send;
+advanced to ``now`` they return the commands sent again and the :class:`LaneEvent` that ends
+the lane's wait (``arrived``, ``gripped`` or ``failed``), which the job decides on.
+
+Neither keeps the lanes: the job owns them and passes those an answer may be about.
 
 Every observation names what it is about (a move by its request, a grip by its token), so a
 late, duplicated or unknown one is ignored. Move requests are identified by their requested
@@ -16,11 +17,13 @@ start in integer nanoseconds (:mod:`scara_collab.nodes.protocol` carries that id
 planner and bridge); they are unique per arm.
 """
 from dataclasses import dataclass, field
+from enum import Enum
+import textwrap
 from typing import Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from scara_collab.core import planning, sorting
+from scara_collab.core import sorting
 from scara_collab.core.job_settings import JobSettings
 from scara_collab.core.kinematics import fk
 from scara_collab.core.mirror import mirror_point
@@ -28,8 +31,77 @@ from scara_collab.core.model import CellModel
 from scara_collab.core.move_time import Lateness, MoveTime
 from scara_collab.core.trajectory import Trajectory
 
-PHASES = ('idle', 'to_item', 'grasping', 'lift', 'via', 'to_bin', 'releasing', 'to_park')
-MOVING = ('to_item', 'lift', 'via', 'to_bin', 'to_park')
+
+class Phase(str, Enum):
+    """A lane's phase: what it waits for, and the deadline of that wait.
+
+    Each member's value is its name in statuses and logs (``'to_item'``); :attr:`leaves` and
+    :attr:`deadline` are the job's table of phases (:func:`phase_table`), so the table and the
+    phases cannot part.
+    """
+
+    IDLE = ('idle', 'an item can be met: a pick move is asked', 'none')
+    TO_ITEM = ('to_item', "every arm's move has arrived (the bridge's ``finished``, the end "
+               'of the move it accepted, or the end time passed with the tool at the target): '
+               'grasp if the item is under the tool, else chase it or give up',
+               'no planner answer in ``answer_timeout``: asked again ``answer_retries`` '
+               'times; not planned by ``move_timeout``; not arrived ``arrive_timeout`` after '
+               'its end (give up, park)')
+    GRASPING = ('grasping', "every gripper answered (or the bridge's ``grasped`` event "
+                'confirmed it)', '``grip_timeout``: called again ``grip_retries`` times '
+                '(give up)')
+    LIFT = ('lift', 'as ``to_item``; only when the item, carried straight to its bin, would '
+            'touch one still on the belt (``lift_after_grasp``)', 'as ``to_item``')
+    VIA = ('via', 'as ``to_item``: a waypoint of a detour (a mirrored pair kept apart, an '
+           "arm backing out of the other's way), then the next leg", 'as ``to_item``')
+    TO_BIN = ('to_bin', 'as ``to_item``', 'as ``to_item`` with ``carry_timeout``; a given up '
+              'bin move is asked again')
+    RELEASING = ('releasing', 'every gripper answered (or ``released`` seen)', 'as '
+                 '``grasping``')
+    TO_PARK = ('to_park', 'as ``to_item``', 'as ``to_item`` (then idle)')
+
+    def __new__(cls, value: str, leaves: str = '', deadline: str = ''):
+        """Make the member ``value`` with its table row."""
+        member = str.__new__(cls, value)
+        member._value_ = value
+        member.leaves, member.deadline = leaves, deadline
+        return member
+
+    def __str__(self) -> str:
+        """Return the phase's name (``'to_item'``)."""
+        return self.value
+
+    def __format__(self, spec: str) -> str:
+        """Format as the phase's name."""
+        return format(self.value, spec)
+
+
+#: the phases that wait for a move
+MOVING = frozenset({Phase.TO_ITEM, Phase.LIFT, Phase.VIA, Phase.TO_BIN, Phase.TO_PARK})
+
+
+def phase_table(width: int = 92) -> str:
+    """Return the phases as a reStructuredText table: phase, leaves when, deadline (then).
+
+    >>> phase_table().splitlines()[2].split()[:2]
+    ['phase', 'leaves']
+    """
+    cols = (14, (width - 14) // 2, width - 14 - (width - 14) // 2)
+    rows = [('phase', 'leaves when', 'deadline (then)')] + [
+        (f'``{p.value}``', p.leaves, p.deadline) for p in Phase]
+    rule = '  '.join('=' * (c - 1) for c in cols)
+    out = ['', rule]
+    for k, row in enumerate(rows):
+        cells = [textwrap.wrap(text, c - 1) or [''] for text, c in zip(row, cols)]
+        for line in range(max(len(c) for c in cells)):
+            out.append('  '.join((c[line] if line < len(c) else '').ljust(w - 1)
+                                 for c, w in zip(cells, cols)).rstrip())
+        if k == 0:
+            out.append(rule)
+    out.append(rule)
+    return '\n'.join(out)
+
+
 #: planner / bridge answers about a move, in the order a move goes through them
 MOVE_STATES = ('asked', 'queued', 'waiting', 'planned', 'accepted', 'finished')
 #: s: an accepted move's end as a status carries it (rounded) may be this far off the bridge's
@@ -99,10 +171,6 @@ class MoveTrack:
     end: Optional[float] = None
     reason: str = ''
     arrived: bool = False
-    #: the motion it commits to (the job's own plan of it, from its start), until heard
-    timeline: Optional[planning.Timeline] = None
-    #: its trajectory was heard: the committed-motion model books it from then on
-    heard: bool = False
 
 
 @dataclass
@@ -130,7 +198,7 @@ class Lane:
 
     robot: str
     robots: Tuple[str, ...]
-    phase: str = 'idle'
+    phase: Phase = Phase.IDLE
     item: Optional[sorting.SeenItem] = None
     target: Optional[np.ndarray] = None
     request: int = 0
@@ -144,7 +212,7 @@ class Lane:
     bin_tries: int = 0
     reaims: int = 0
     holding: bool = False
-    route: List[Tuple[str, np.ndarray]] = field(default_factory=list)
+    route: List[Tuple[Phase, np.ndarray]] = field(default_factory=list)
     failures: Dict[int, int] = field(default_factory=dict)
     next_look: float = 0.0  # idle with nothing to take: look again from then
 
@@ -155,7 +223,7 @@ class Lane:
 
     def idle(self) -> None:
         """Forget the current item, move and grips: the lane is free for the next item."""
-        self.phase, self.item, self.moves, self.grips = 'idle', None, {}, {}
+        self.phase, self.item, self.moves, self.grips = Phase.IDLE, None, {}, {}
         self.holding, self.route, self.reaims = False, [], 0
 
 
@@ -165,12 +233,14 @@ class LaneEvent:
 
     ``arrived``: every arm of ``lane`` completed its move; ``gripped``: every gripper of it
     answered (or was given up: its :class:`GripTrack` says ``ok`` False); ``failed``: a move
-    was refused or ran out of time.
+    was refused or ran out of time. ``waited``: for a move never planned, the state it waited
+    in (the reason then also names what the other lanes were doing when it was decided).
     """
 
     kind: str
     lane: Lane
     why: str = ''
+    waited: str = ''
 
 
 class PlanMemo:
@@ -213,22 +283,20 @@ class PlanMemo:
 
 
 class LaneProtocol:
-    """Moves and grips of the lanes, asked and tracked to an outcome (see the module docstring).
+    """The lanes' move requests, asked and tracked to an outcome (see the module docstring).
 
     :param cell: the cell model.
-    :param settings: the timeouts and retries.
-    :param lanes: the job's lanes (the protocol keeps their request state in them).
+    :param settings: the timeouts, retries and the start rule's leads.
     :param plan: ``plan(robot, q_start, target) -> Trajectory`` with the planners' settings
         (raises ``ValueError`` if refused): the plan a move is offered with.
     :param log: ``log(level, text)`` for events worth a log line (``'info'``, ``'warn'``).
     """
 
-    def __init__(self, cell: CellModel, settings: JobSettings, lanes: Sequence[Lane],
-                 plan: PlanFn, log: Callable[[str, str], None] = lambda level, text: None):
-        """Take the lanes; nothing is asked yet."""
+    def __init__(self, cell: CellModel, settings: JobSettings, plan: PlanFn,
+                 log: Callable[[str, str], None] = lambda level, text: None):
+        """Nothing is asked yet."""
         self.cell, self.settings, self.log = cell, settings, log
         self.plan = plan
-        self.lanes = list(lanes)
         #: the arms' measured joints ``(3,)`` by name
         self.q: Dict[str, np.ndarray] = {}
         #: move requests sent again so far
@@ -240,14 +308,9 @@ class LaneProtocol:
         # (real time, a busy machine) is waited for as it measures, not as lockstep would be
         self.answer_lag = Lateness()
         #: the lanes' gripper calls
-        self.grips = Grips(settings, self.lanes, log)
+        self.grips = Grips(settings, log)
         #: the start rule, with how late the bridge started the job's moves (sim s)
         self.time = MoveTime(settings.leads)
-
-    @property
-    def grasp_lead(self) -> float:
-        """Return how long after the tool's arrival a grasp takes hold, s (:attr:`Grips.lead`)."""
-        return self.grips.lead
 
     @property
     def retries(self) -> int:
@@ -263,44 +326,47 @@ class LaneProtocol:
         """Take the measured joints of ``robot`` ``(3,)`` (finite, checked by the caller)."""
         self.q[robot] = np.asarray(q, dtype=float)
 
-    def on_planner(self, robot: str, request: int, state: str, start: Optional[float],
-                   end: Optional[float], reason: str = '') -> Optional[MoveTrack]:
+    def on_planner(self, lanes: Sequence[Lane], robot: str, request: int, state: str,
+                   start: Optional[float], end: Optional[float],
+                   reason: str = '') -> Optional[MoveTrack]:
         """Take a planner status about ``robot``'s move for ``request`` (others are ignored).
 
-        :return: the move's track if this status timed it (``planned``: its start and end
-            are known now), else None.
+        :param lanes: the job's lanes (the status is about one of their moves, or none).
+        :return: the move's track if the status changed it, else None.
         """
-        for lane in self.lanes:  # the first answer to a request: how long answers take
+        for lane in lanes:  # the first answer to a request: how long answers take
             track = lane.moves.get(robot) if lane.request == request else None
             if track is not None and track.state == 'asked' and lane.phase in MOVING:
                 self.answer_lag.add(self.now - lane.sent)
-        return self._on_status(robot, request, PLANNER_STATUS.get(state), start, end, reason)
+        return self._on_status(lanes, robot, request, PLANNER_STATUS.get(state), start, end,
+                               reason)
 
-    def on_execution(self, robot: str, request: int, state: str, start: Optional[float],
-                     end: Optional[float], reason: str = '',
+    def on_execution(self, lanes: Sequence[Lane], robot: str, request: int, state: str,
+                     start: Optional[float], end: Optional[float], reason: str = '',
                      stamp: Optional[float] = None) -> Optional[MoveTrack]:
         """Take a bridge execution status about ``robot``'s move for ``request``.
 
         :param stamp: the start it asked for (``accepted``; None or 0: none): how late it
             started is measured into the start rule (:attr:`time`).
-        :return: the move's track if this status timed it (``accepted``), else None.
+        :return: the move's track if the status changed it, else None.
         """
-        if state == 'accepted' and stamp and self.open_track(robot, request) is not None:
+        if state == 'accepted' and stamp and open_track(lanes, robot, request) is not None:
             self.time.started(stamp, start)
-        return self._on_status(robot, request, BRIDGE_STATUS.get(state), start, end, reason)
+        return self._on_status(lanes, robot, request, BRIDGE_STATUS.get(state), start, end,
+                               reason)
 
-    def _on_status(self, robot: str, request: int, new: Optional[str], start: Optional[float],
-                   end: Optional[float], reason: str) -> Optional[MoveTrack]:
+    def _on_status(self, lanes: Sequence[Lane], robot: str, request: int, new: Optional[str],
+                   start: Optional[float], end: Optional[float],
+                   reason: str) -> Optional[MoveTrack]:
         """Move the track of ``robot``'s move ``request`` to the state ``new``."""
-        track = self.open_track(robot, request)
+        track = open_track(lanes, robot, request)
         if track is None or new is None:
             return None
         if new in ('planned', 'accepted'):
             if new == 'planned' and track.state == 'accepted' and abs(start - track.start) < 1e-6:
                 return None  # the bridge already runs it (its start is the one that counts)
             track.state, track.start, track.end = new, start, end
-            return track
-        if new in ('queued', 'waiting'):  # not (or no longer) committed
+        elif new in ('queued', 'waiting'):  # not (or no longer) committed
             if track.state != new:
                 track.since = self.now
             track.state, track.start, track.end = new, None, None
@@ -308,31 +374,7 @@ class LaneProtocol:
             track.state = new
         else:
             track.state, track.reason = new, reason or new
-        return None
-
-    def grip(self, lane: Lane, grasp: bool, now: float) -> List[GripCommand]:
-        """Call every gripper of ``lane`` (:meth:`Grips.ask`); return the calls to make."""
-        return self.grips.ask(lane, grasp, now)
-
-    def on_grip(self, token: int, ok: bool, message: str = '') -> None:
-        """Take a gripper response for request ``token`` (:meth:`Grips.on_response`)."""
-        self.grips.on_response(token, ok, message, self.now)
-
-    def confirm_grip(self, kind: str, robot: str) -> None:
-        """Take a bridge item event that confirms a grip (:meth:`Grips.confirm`)."""
-        self.grips.confirm(kind, robot)
-
-    def open_track(self, robot: str, request: int) -> Optional[MoveTrack]:
-        """Return the track of ``robot``'s current move ``request``, None if unknown or over."""
-        for lane in self.lanes:
-            if lane.phase in MOVING and lane.request == request and robot in lane.moves:
-                track = lane.moves[robot]
-                return None if track.state in ('finished',) + FAILED_MOVE else track
-        return None
-
-    def phases(self) -> Dict[str, str]:
-        """Each lane's phase, by its robot."""
-        return {lane.robot: lane.phase for lane in self.lanes}
+        return track
 
     # --- moves --------------------------------------------------------------------------------
     def _request(self, robots: Sequence[str], start: float) -> int:
@@ -341,16 +383,17 @@ class LaneProtocol:
             self._last_request[r] = req
         return req
 
-    def move(self, lane: Lane, phase: str, target, start: float, now: float,
+    def open(self, lane: Lane, phase: Phase, target, start: float, now: float,
              traj: Optional[Trajectory] = None) -> MoveCommand:
-        """Ask for ``lane``'s move to ``target`` from ``start``; return the command to send.
+        """Open ``lane``'s request of a move to ``target`` from ``start``; return its command.
 
-        The lane enters ``phase`` with a new request. The move goes with the job's plan of it
-        (``traj``, else planned here from the arm's state; a mirrored pair's: the lane's arm),
-        which the planner takes instead of planning it again.
+        The lane enters ``phase`` with a new request (its start by the start rule,
+        :meth:`~scara_collab.core.move_time.MoveTime.requested`). The move goes with the job's
+        plan of it (``traj``, else planned here from the arm's state; a mirrored pair's: the
+        lane's arm), which the planner takes instead of planning it again.
         """
-        lane.phase, lane.target = phase, np.asarray(target, dtype=float)
-        lane.request = self._request(lane.robots, max(start, now + 1e-3))
+        lane.phase, lane.target = Phase(phase), np.asarray(target, dtype=float)
+        lane.request = self._request(lane.robots, self.time.requested(start, now))
         lane.moves = {r: MoveTrack() for r in lane.robots}
         lane.since = lane.sent = now
         lane.sends = 1
@@ -362,28 +405,14 @@ class LaneProtocol:
                 pass  # the planner will refuse it with the reason
         return self._command(lane)
 
-    def move_once(self, robot: str, target, start: float, purpose: str) -> MoveCommand:
+    def open_once(self, robot: str, target, start: float, purpose: str) -> MoveCommand:
         """Return a move of ``robot`` that no lane follows up (an unused arm's park)."""
         return MoveCommand(robot, np.asarray(target, dtype=float),
                            self._request([robot], start), False, purpose)
 
-    def asap_start(self, lane: Lane, now: float) -> float:
-        """Return the start to ask for a move that should start as soon as possible.
-
-        One arm: the planners' planning lead ahead (``move_lead``): the time the request, the
-        planning and the trajectory's way to the bridge may take. Asked for that start, a
-        planner keeps it while it can still send the move in time, so the time the job took
-        to decide counts into the lead instead of coming on top of it (real time; in lockstep
-        deciding takes no sim time). A mirrored pair: ``pair_lead`` ahead, so both planners
-        get a start that is still in the future and plan the same. Either way the typical
-        lateness measured on the bridge's starts comes on top (0 in lockstep), so the start
-        the job plans with is the one the move gets.
-        """
-        return self.time.asap(now, lane.mirrored)
-
     def _command(self, lane: Lane) -> MoveCommand:
-        return MoveCommand(lane.robot, lane.target, lane.request, lane.mirrored, lane.phase,
-                           lane.plan)
+        return MoveCommand(lane.robot, lane.target, lane.request, lane.mirrored,
+                           str(lane.phase), lane.plan)
 
     def target_of(self, lane: Lane, robot: str) -> np.ndarray:
         """Return where ``lane``'s current move takes ``robot``'s tool (world)."""
@@ -400,19 +429,19 @@ class LaneProtocol:
             self.settings.arrive_tolerance
 
     # --- the clock ----------------------------------------------------------------------------
-    def tick(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
-        """Advance ``lane``'s move or grip to ``now`` (sim s).
+    def advance(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
+        """Follow ``lane``'s move or grip to ``now`` (sim s).
 
         :return: the commands sent again (a lost answer), in order, and the event that ends
             the lane's wait, or None while it waits (always None for an idle lane).
         """
         if lane.phase in MOVING:
-            return self._tick_move(lane, now)
-        if lane.phase in ('grasping', 'releasing'):
-            return self.grips.tick(lane, now)
+            return self._follow_move(lane, now)
+        if lane.phase in (Phase.GRASPING, Phase.RELEASING):
+            return self.grips.follow(lane, now)
         return [], None
 
-    def _tick_move(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
+    def _follow_move(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
         s = self.settings
         out: List[Command] = []
         limit = s.carry_timeout if lane.holding else s.move_timeout
@@ -443,11 +472,8 @@ class LaneProtocol:
                 continue
             if track.end is None:  # asked, queued or waiting
                 if now - lane.since > limit:
-                    others = ', '.join(f'{o.robot} {o.phase}' + (' holding' if o.holding else '')
-                                       for o in self.lanes if o is not lane)
                     return out, LaneEvent('failed', lane, f'no plan from the {robot} planner in '
-                                          f'{limit:g} s ({track.state}'
-                                          + (f'; {others})' if others else ')'))
+                                          f'{limit:g} s', waited=track.state)
                 continue
             if now >= track.end and self._at_target(lane, robot):
                 track.arrived = True
@@ -459,16 +485,21 @@ class LaneProtocol:
         return out, None
 
 
+def open_track(lanes: Sequence[Lane], robot: str, request: int) -> Optional[MoveTrack]:
+    """Return the track of ``robot``'s current move ``request``, None if unknown or over."""
+    for lane in lanes:
+        if lane.phase in MOVING and lane.request == request and robot in lane.moves:
+            track = lane.moves[robot]
+            return None if track.state in ('finished',) + FAILED_MOVE else track
+    return None
+
+
 class Grips:
-    """The lanes' gripper calls: asked, answered (by a response or a bridge event), retried.
+    """The lanes' gripper calls: asked, answered (by a response or a bridge event), retried."""
 
-    :param lanes: the job's lanes (their :class:`GripTrack` per arm is kept in them).
-    """
-
-    def __init__(self, settings: JobSettings, lanes: Sequence[Lane],
-                 log: Callable[[str, str], None]):
+    def __init__(self, settings: JobSettings, log: Callable[[str, str], None]):
         """No call made yet."""
-        self.settings, self.lanes, self.log = settings, lanes, log
+        self.settings, self.log = settings, log
         #: how long gripper answers have lately taken, sim s (added to the timeout)
         self.lag = Lateness()
         #: gripper calls made again so far
@@ -486,7 +517,7 @@ class Grips:
 
     def ask(self, lane: Lane, grasp: bool, now: float) -> List[GripCommand]:
         """Call every gripper of ``lane`` (``grasp`` or release); return the calls to make."""
-        lane.phase = 'grasping' if grasp else 'releasing'
+        lane.phase = Phase.GRASPING if grasp else Phase.RELEASING
         lane.since = now
         lane.grips = {}
         out = []
@@ -496,27 +527,28 @@ class Grips:
             out.append(GripCommand(robot, grasp, self._token))
         return out
 
-    def on_response(self, token: int, ok: bool, message: str, now: float) -> None:
+    def on_response(self, lanes: Sequence[Lane], token: int, ok: bool, message: str,
+                    now: float) -> None:
         """Take a gripper response for request ``token``: any attempt of a grip still open."""
-        for lane in self.lanes:
+        for lane in lanes:
             for track in lane.grips.values():
                 if track.ok is None and (token == track.token or token in track.calls):
                     track.ok, track.message = bool(ok), message
                     self.lag.add(now - track.calls.get(token, track.sent))
 
-    def confirm(self, kind: str, robot: str) -> None:
+    def confirm(self, lanes: Sequence[Lane], kind: str, robot: str) -> None:
         """Take a bridge item event: ``grasped`` or ``released`` answers a lost response."""
-        phase = {'grasped': 'grasping', 'released': 'releasing'}.get(kind)
-        for lane in self.lanes:
+        phase = {'grasped': Phase.GRASPING, 'released': Phase.RELEASING}.get(kind)
+        for lane in lanes:
             track = lane.grips.get(robot)
             if lane.phase == phase and track is not None and track.ok is None:
                 track.ok, track.message = True, f'{kind} event'
 
-    def tick(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
+    def follow(self, lane: Lane, now: float) -> Tuple[List[Command], Optional[LaneEvent]]:
         """Call again the grippers of ``lane`` that did not answer in time; see the event."""
         s = self.settings
         out: List[Command] = []
-        grasp = lane.phase == 'grasping'
+        grasp = lane.phase == Phase.GRASPING
         for robot, track in lane.grips.items():
             if track.ok is None and now - track.sent > s.grip_timeout + self.lag.worst:
                 if track.attempts > s.grip_retries:

@@ -436,13 +436,33 @@ class CellMotion:
         return '' if move is None else move.id
 
 
+@dataclass
+class Booking:
+    """A move asked for and not heard yet, as its asker planned it (:meth:`Heard.book`).
+
+    :ivar request: the request it answers.
+    :ivar timeline: the asker's plan of it from its start; None until it can be planned.
+    :ivar counts: its planner has it in hand (asked, planned or accepted; not queued, waiting,
+        refused or ended): the arm is committed to it.
+    :ivar heard: its trajectory came: what was heard is the commitment from then on.
+    """
+
+    request: int
+    timeline: Optional[Timeline] = None
+    counts: bool = True
+    heard: bool = False
+
+
 class Heard:
     """One arm's commitments as a node hears them: its trajectories, then the bridge's word.
 
     A trajectory is taken as the bridge will take it (:func:`resolve`, :meth:`ArmMotion.take`)
     as soon as it is heard; the bridge's status corrects it: ``accepted`` moves it to the
     start the bridge gives (heard before the trajectory too: kept until it comes),
-    ``refused`` undoes it, ``held`` holds the arm, ``finished`` ends it.
+    ``refused`` undoes it, ``held`` holds the arm, ``finished`` ends it. A node that asks for
+    moves itself (the sorting job) books each one as it asked it (:meth:`book`), so that in
+    the time before its trajectory is heard the arm is not taken to stand still
+    (:meth:`committed`).
 
     :param name: the arm; :param q: ``(3,)`` where it is; :param dt: the physics step, s.
     """
@@ -453,10 +473,25 @@ class Heard:
         self.dt = float(dt)
         self._undo: Dict[str, Tuple[Optional[Move], Optional[Move]]] = {}
         self._early: Dict[str, float] = {}  # move id -> its start, accepted before heard
+        #: the move asked for and not heard yet (:meth:`book`), or None
+        self.booked: Optional[Booking] = None
+
+    def book(self, request: int, timeline: Optional[Timeline]) -> None:
+        """Book the move just asked for ``request``, as planned (``timeline``; None: unknown).
+
+        It replaces any earlier booking, and stands until its trajectory is heard
+        (:meth:`trajectory` with its request), the asker withdraws it (:attr:`booked` None)
+        or says it does not count (:attr:`Booking.counts`).
+        """
+        self.booked = Booking(int(request), timeline)
 
     def trajectory(self, move_id: str, stamp: float, t: ArrayLike, q: ArrayLike, now: float,
-                   q_now: Optional[ArrayLike] = None) -> Optional[Move]:
-        """Take a trajectory heard at ``now``; return its move (None: the bridge refuses it)."""
+                   q_now: Optional[ArrayLike] = None,
+                   request: Optional[int] = None) -> Optional[Move]:
+        """Take a trajectory heard at ``now``; return its move (None: the bridge refuses it).
+
+        :param request: the booked request it answers (:meth:`book`), if any.
+        """
         try:
             move = resolve(move_id, stamp, t, q, now, self.dt, q_now)
         except Refused:
@@ -466,7 +501,21 @@ class Heard:
             move = move.shifted(early)
         self._undo = {move_id: (self.arm.running, self.arm.waiting)}
         self.arm.take(move, now)
+        if request is not None and self.booked is not None and self.booked.request == request:
+            self.booked.heard = True
         return move
+
+    def committed(self, now: float, q: Optional[ArrayLike] = None) -> Timeline:
+        """Return what the arm is committed to from ``now``: a booking that counts, else heard.
+
+        A booked move that counts, is not heard yet and has not ended is the arm's commitment
+        as its asker planned it; otherwise :meth:`motion`.
+        """
+        b = self.booked
+        if (b is not None and b.counts and not b.heard and b.timeline is not None
+                and b.timeline.end > now):
+            return b.timeline
+        return self.motion(now, q)
 
     def status(self, state: str, move_id: str, now: float, start: Optional[float] = None,
                q: Optional[ArrayLike] = None) -> bool:

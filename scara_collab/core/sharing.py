@@ -8,16 +8,16 @@ The job holds one of two objects with the same methods:
   What each arm is committed to is the committed-motion model's
   (:class:`scara_collab.core.motion.Heard`: every trajectory the arm was sent, a raw one too,
   and the bridge's word on it; :meth:`SharedBelt.on_trajectory`, :meth:`SharedBelt.on_status`).
-  Before a move of the job's is heard, it is booked as the job planned it when it asked
-  (:meth:`SharedBelt.asked`), or, timed by a status while its trajectory was lost, as the job
-  plans it then (:meth:`SharedBelt.timed`); :meth:`SharedBelt.committed` reads it back. From
-  that it times a chase around the other arm's booked motion (:meth:`SharedBelt.unhindered`),
-  tells the job how to unblock an arm that waits for the other (:meth:`SharedBelt.unblock`:
-  park, re-aim, give way or back out), and holds the follower's moves until the leader's
-  planner has answered (:meth:`SharedBelt.in_turn`).
+  A move of the job's is booked in that model as the job planned it when it asked
+  (:meth:`SharedBelt.book`), kept in step with its planner's and the bridge's answers
+  (:meth:`SharedBelt.answered`: timed, or not counting while queued or waiting) and withdrawn
+  when the lane leaves it (:meth:`SharedBelt.settle`); :meth:`SharedBelt.committed` reads it
+  back. From that it times a chase around the other arm's booked motion
+  (:meth:`SharedBelt.unhindered`), tells the job how to unblock an arm that waits for the
+  other (:meth:`SharedBelt.blocked`: park, re-aim, give way or back out), and holds the
+  follower's moves until the leader's planner has answered (:meth:`SharedBelt.in_turn`).
 
-Both read the job's lanes (the same :class:`scara_collab.core.lanes.Lane` objects the job and
-its request protocol use) and the arms' joints the job passes in; the geometry is
+Neither keeps the lanes: the job passes them in; the geometry is
 :mod:`scara_collab.core.pairing`'s.
 """
 from dataclasses import dataclass
@@ -28,7 +28,8 @@ import numpy as np
 from scara_collab.core import pairing, planning, sorting
 from scara_collab.core.config import load_config
 from scara_collab.core.job_settings import JobSettings
-from scara_collab.core.lanes import Command, Lane, MoveCommand, MoveTrack, MOVING, PlanFn
+from scara_collab.core.lanes import (Command, Lane, MoveCommand, MoveTrack, MOVING, Phase,
+                                     PlanFn)
 from scara_collab.core.model import CellModel
 from scara_collab.core.motion import Heard
 
@@ -37,8 +38,10 @@ from scara_collab.core.motion import Heard
 #: even when the other arm's booked move will hold the arm up (else the arm may take another
 #: first and come back too late, or both arms may defer it until it is missed)
 URGENT_SLACK = 8.0
-#: what :meth:`SharedBelt.unblock` may ask of the job
+#: what :meth:`SharedBelt.blocked` may ask of the job
 UNBLOCK_ACTIONS = ('park', 'reaim', 'give_way', 'back_out')
+#: the states of a move of the job's in which its planner has it in hand (its booking counts)
+IN_HAND = ('asked', 'planned', 'accepted')
 
 Joints = Dict[str, np.ndarray]
 
@@ -70,17 +73,19 @@ class SoloBelt:
     The parameters are :class:`SharedBelt`'s, so the job builds either the same way.
     """
 
-    def __init__(self, cell: CellModel, settings: JobSettings, lanes: Sequence[Lane],
-                 plan: PlanFn):
+    def __init__(self, cell: CellModel, settings: JobSettings, plan: PlanFn):
         """Nothing to keep."""
 
-    def asked(self, lane: Lane) -> None:
+    def book(self, lane: Lane) -> None:
         """Book nothing."""
 
-    def timed(self, robot: str, request: int, track: MoveTrack, q: Joints) -> None:
+    def answered(self, robot: str, track: MoveTrack, target: np.ndarray, q: Joints) -> None:
         """Book nothing."""
 
-    def on_trajectory(self, robot: str, move_id: str, track: Optional[MoveTrack], stamp: float,
+    def settle(self, lane: Lane) -> None:
+        """Book nothing."""
+
+    def on_trajectory(self, robot: str, move_id: str, request: Optional[int], stamp: float,
                       t: np.ndarray, q_traj: np.ndarray, now: float, q: Joints) -> None:
         """Book nothing."""
 
@@ -93,11 +98,11 @@ class SoloBelt:
         """Return ``hit``: no other arm to wait for."""
         return hit
 
-    def unblock(self, now: float, q: Joints) -> Optional[Unblock]:
+    def blocked(self, lanes: Sequence[Lane], now: float, q: Joints) -> Optional[Unblock]:
         """Return None: no arm waits for another."""
         return None
 
-    def in_turn(self, out: List[Command], now: float) -> List[Command]:
+    def in_turn(self, out: List[Command], lanes: Sequence[Lane], now: float) -> List[Command]:
         """Return ``out``: nothing is held."""
         return out
 
@@ -110,31 +115,28 @@ class SharedBelt:
 
     :param cell: the cell model.
     :param settings: the job's settings.
-    :param lanes: the job's lanes, one per arm.
     :param plan: ``plan(robot, q_start, target) -> Trajectory`` with the planners' settings
         (raises ``ValueError`` if refused).
     """
 
-    def __init__(self, cell: CellModel, settings: JobSettings, lanes: Sequence[Lane],
-                 plan: PlanFn):
-        """Take the lanes; nothing booked or held yet."""
+    def __init__(self, cell: CellModel, settings: JobSettings, plan: PlanFn):
+        """Nothing booked or held yet."""
         self.cell, self.settings, self.plan = cell, settings, plan
-        self.lanes = list(lanes)
         self._held: List[MoveCommand] = []  # the follower's moves, held for the leader's answer
         self._held_since = 0.0
         dt = 1.0 / float(load_config('simulation')['physics_rate'])
-        #: what each arm is committed to, as heard (the bridge's rules)
+        #: what each arm is committed to, as heard (the bridge's rules) and as the job asked
         self.heard = {a.name: Heard(a.name, dt=dt) for a in cell.arms}
 
     # --- in turn: the leader's move first ----------------------------------------------------
-    def in_turn(self, out: List[Command], now: float) -> List[Command]:
+    def in_turn(self, out: List[Command], lanes: Sequence[Lane], now: float) -> List[Command]:
         """Return ``out`` with the follower's moves held while the leader's awaits its planner.
 
         The follower's planner schedules its move against the leader's trajectories (the
         priority rule). Sent in the same tick, the follower's offer can reach its planner
         before or after the leader's new trajectory, depending on how the processes are
         scheduled: the follower then plans at once or answers "waiting", and the run differs
-        (seen with two CPU hogs on two cores). Held until the leader's planner has answered
+        by how the processes were scheduled. Held until the leader's planner has answered
         (its trajectory goes out before its status), the follower's offer always comes after
         it. A leader's answer that does not come releases them after ``answer_timeout`` (the
         leader's move is then sent again).
@@ -148,7 +150,7 @@ class SharedBelt:
                 self._held_since = now
             self._held += follower
         out = keep
-        leader = next(lane for lane in self.lanes if lane.robot == lead)
+        leader = next(lane for lane in lanes if lane.robot == lead)
         asking = leader.phase in MOVING and any(t.state == 'asked'
                                                 for t in leader.moves.values())
         if self._held and (not asking
@@ -160,44 +162,60 @@ class SharedBelt:
         """Forget the held moves (nothing new is commanded: each lane asks again in time)."""
         self._held = []
 
-    # --- what each arm has booked ------------------------------------------------------------
-    def on_trajectory(self, robot: str, move_id: str, track: Optional[MoveTrack], stamp: float,
+    # --- what each arm is committed to ---------------------------------------------------------
+    def on_trajectory(self, robot: str, move_id: str, request: Optional[int], stamp: float,
                       t: np.ndarray, q_traj: np.ndarray, now: float, q: Joints) -> None:
         """Take a trajectory ``robot`` was sent, the job's or not: the arm is committed to it.
 
-        :param move_id: its name; :param track: the open track of the job's move it is (None:
-            not one, e.g. a raw command or a hold); :param stamp: its start, s (0: now);
+        :param move_id: its name; :param request: the job's request it answers (None: not
+            one, e.g. a raw command or a hold); :param stamp: its start, s (0: now);
         :param t: ``(N,)`` s from its start; :param q_traj: ``(N, 3)`` joint positions.
         :param now: sim s; :param q: the arms' joints.
         """
-        move = self.heard[robot].trajectory(move_id, stamp, t, q_traj, now, q.get(robot))
-        if track is not None and move is not None:
-            track.heard = True  # from now on, what was heard books it
+        self.heard[robot].trajectory(move_id, stamp, t, q_traj, now, q.get(robot), request)
 
     def on_status(self, robot: str, state: str, move_id: str, start: Optional[float],
                   now: float, q: Joints) -> None:
         """Take the bridge's status of any move of ``robot`` (:meth:`.motion.Heard.status`)."""
         self.heard[robot].status(state, move_id, now, start, q.get(robot))
 
-    def timed(self, robot: str, request: int, track: MoveTrack, q: Joints) -> None:
-        """Book a timed move of the job's whose trajectory has not been heard.
+    def book(self, lane: Lane) -> None:
+        """Book the move ``lane`` just asked for as the job planned it (``lane.plan``).
 
-        Its booking (the job's plan, :meth:`asked`) is shifted to the start the planner's
-        ``planned`` or the bridge's ``accepted`` reports. If the job could not plan it when it
-        asked, it is planned here, as the planner did, from where the arm is now (``q``: the
-        arms' joints; it has not started yet). A heard trajectory books it instead.
+        It stands until the planner's own trajectory comes (:meth:`on_trajectory`); a move
+        the job could not plan is booked once the planner has timed it (:meth:`answered`).
         """
-        if track.start is None or track.heard:
+        timeline = (None if lane.plan is None
+                    else planning.Timeline.of(lane.plan, lane.request * 1e-9))
+        self.heard[lane.robot].book(lane.request, timeline)
+
+    def answered(self, robot: str, track: MoveTrack, target: np.ndarray, q: Joints) -> None:
+        """Keep ``robot``'s booking in step with its move's new state (``track``).
+
+        It counts while the planner has the move in hand (:data:`IN_HAND`). Timed (``planned``
+        or ``accepted``) before its trajectory was heard, it is shifted to the start reported;
+        if the job could not plan it when it asked, it is planned here, as the planner did,
+        from where the arm is now (``q``; it has not started yet) to ``target``.
+        """
+        booked = self.heard[robot].booked
+        if booked is None:
             return
-        if track.timeline is not None:
-            track.timeline = track.timeline.shifted(track.start - track.timeline.start)
+        booked.counts = track.state in IN_HAND
+        if track.state not in ('planned', 'accepted') or track.start is None or booked.heard:
             return
-        lane = next(la for la in self.lanes if la.request == request and robot in la.moves)
+        if booked.timeline is not None:
+            booked.timeline = booked.timeline.shifted(track.start - booked.timeline.start)
+            return
         try:
-            traj = self.plan(robot, q[robot], lane.target)  # one arm per lane
+            traj = self.plan(robot, q[robot], target)  # one arm per lane
         except (ValueError, KeyError):
             return
-        track.timeline = planning.Timeline.of(traj, track.start)
+        booked.timeline = planning.Timeline.of(traj, track.start)
+
+    def settle(self, lane: Lane) -> None:
+        """Withdraw the bookings of ``lane``'s arms: it has left its move (a grip, idle)."""
+        for robot in lane.robots:
+            self.heard[robot].booked = None
 
     def committed(self, robot: str, now: float, q: Joints) -> planning.Timeline:
         """Return ``robot``'s motion from ``now`` as far as it is booked (else it holds at ``q``).
@@ -205,25 +223,10 @@ class SharedBelt:
         A move of the job's not heard yet (asked, or timed while its trajectory was lost) is
         booked as the job planned it: in the ticks before the planner's answer the other lane
         must not decide as if the arm stood still. Otherwise the arm is committed to what was
-        heard (:attr:`heard`: the moves it runs or waits to run, the job's or not).
+        heard (the moves it runs or waits to run, the job's or not):
+        :meth:`scara_collab.core.motion.Heard.committed`.
         """
-        for lane in self.lanes:
-            track = lane.moves.get(robot) if lane.phase in MOVING else None
-            if (track is not None and not track.heard and track.timeline is not None
-                    and track.state in ('asked', 'planned', 'accepted')
-                    and track.timeline.end > now):
-                return track.timeline
-        return self.heard[robot].motion(now, q[robot])
-
-    def asked(self, lane: Lane) -> None:
-        """Book a move just asked for as the job planned it (``lane.plan``).
-
-        It stands until the planner's own trajectory comes (:meth:`on_trajectory`); a move
-        the job cannot plan is booked once the planner has timed it (:meth:`timed`).
-        """
-        if lane.plan is not None:
-            lane.moves[lane.robot].timeline = planning.Timeline.of(lane.plan,
-                                                                   lane.request * 1e-9)
+        return self.heard[robot].committed(now, q[robot])
 
     # --- out of the way ------------------------------------------------------------------------
     def _blocked(self, lane: Lane, now: float) -> bool:
@@ -232,7 +235,7 @@ class SharedBelt:
             t.state == 'waiting' and now - t.since > self.settings.unblock_after
             for t in lane.moves.values())
 
-    def unblock(self, now: float, q: Joints) -> Optional[Unblock]:
+    def blocked(self, lanes: Sequence[Lane], now: float, q: Joints) -> Optional[Unblock]:
         """Return how to clear the way for an arm that waits for the other one, or None.
 
         An idle arm in the way parks; when both wait for each other, the follower's lane
@@ -242,14 +245,14 @@ class SharedBelt:
         goes to its bin. An arm on its way to an item that waits for the other arm's work (it
         will leave when done) re-aims at the item as the belt carries it on.
         """
-        for lane in self.lanes:
+        for lane in lanes:
             if not self._blocked(lane, now):
                 continue
-            other = next(o for o in self.lanes if o is not lane)
-            if other.phase == 'idle':
+            other = next(o for o in lanes if o is not lane)
+            if other.phase == Phase.IDLE:
                 return Unblock('park', other, other=lane)
             if not self._blocked(other, now):
-                if lane.phase == 'to_item' and not lane.holding:
+                if lane.phase == Phase.TO_ITEM and not lane.holding:
                     return Unblock('reaim', lane, other=other)
                 return None
             # the one not holding an item gives way; if neither holds one, the follower
@@ -260,7 +263,7 @@ class SharedBelt:
                                f'{yielder.robot} gives way')
             # both carry items: one backs out of the way, follower first
             for o in sorted((lane, other), key=lambda o: o.robot == self.cell.leader.name):
-                via = self._retreat_via(o, q) if o.phase != 'via' else None
+                via = self._retreat_via(o, q) if o.phase != Phase.VIA else None
                 if via is not None:
                     return Unblock('back_out', o, via=via)
             return None

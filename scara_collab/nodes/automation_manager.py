@@ -315,8 +315,8 @@ class AutomationManager(Node):
             mode=self.mode, running=job.running, time=round(now, 3), start_time=job.start_time,
             counts={k: job.counts.get(k, 0) for k in proto.COUNTED},
             sorted_by=dict(job.sorted_by), items_per_minute=round(job.rate(now), 3),
-            give_ups=job.give_ups, retries=job.retries, phases=job.phases(),
-            last_give_up=job.last_give_up)
+            give_ups=job.decisions.give_ups, retries=job.protocol.retries, phases=job.phases(),
+            last_give_up=job.decisions.last_give_up)
 
     def _publish_stats(self) -> None:
         self.diagnostics.publish(self.stats().to_msg())
