@@ -209,7 +209,7 @@ class HoldArm:
     q: np.ndarray
 
 
-Command = Union[Status, SendMove, HoldArm]
+PlannerCommand = Union[Status, SendMove, HoldArm]
 
 
 class Answers:
@@ -251,10 +251,10 @@ class Answers:
         return self._last.get(request)
 
 
-class Outbox:
+class PlannerOutput:
     """What a planner decided, in order, and the last status of each request (:class:`Answers`).
 
-    >>> out = Outbox()
+    >>> out = PlannerOutput()
     >>> out.report('queued', 7); out.repeat(7), out.repeat(8)
     (True, False)
     >>> [(c.state, c.repeated) for c in out.take()], out.take()
@@ -264,9 +264,9 @@ class Outbox:
     def __init__(self, history: int = HISTORY):
         """Nothing decided yet."""
         self.answers = Answers(history)
-        self._commands: List[Command] = []
+        self._commands: List[PlannerCommand] = []
 
-    def send(self, command: Command) -> None:
+    def send(self, command: PlannerCommand) -> None:
         """Add ``command`` to what is to be sent."""
         self._commands.append(command)
 
@@ -286,7 +286,7 @@ class Outbox:
             self._commands.append(replace(last, repeated=True))
         return last is not None
 
-    def take(self) -> List[Command]:
+    def take(self) -> List[PlannerCommand]:
         """Return the commands decided since the last call, in order, and forget them."""
         out, self._commands = self._commands, []
         return out
@@ -319,7 +319,7 @@ class ArmPlanner:
         self.queued: Optional[MoveRequest] = None       # to plan when the committed one ends
         self.blocked: Optional[MoveRequest] = None      # waiting for the other arm to move
         self.other_motion = Heard(other_arm.name, dt=dt)  # the other arm's commitments
-        self.out = Outbox()  # the commands decided, and the last answer to each request
+        self.out = PlannerOutput()  # the commands decided, and the last answer to each request
 
     @property
     def settings(self) -> PlannerSettings:
@@ -333,7 +333,7 @@ class ArmPlanner:
 
     # --- observations -------------------------------------------------------------------------
     def on_joint_state(self, joints: ArrayLike, other_joints: ArrayLike,
-                       stamp: float) -> List[Command]:
+                       stamp: float) -> List[PlannerCommand]:
         """Take both arms' joints measured at ``stamp``; plan a queued move whose turn came."""
         self.joints = np.asarray(joints, dtype=float)
         self.other_joints = np.asarray(other_joints, dtype=float)
@@ -345,7 +345,7 @@ class ArmPlanner:
         return self.out.take()
 
     def on_target(self, stamp_ns: int, stamp: float, target: ArrayLike, frame: str,
-                  frame_error: str = '') -> List[Command]:
+                  frame_error: str = '') -> List[PlannerCommand]:
         """Take a request to move the tool to ``target``.
 
         :param stamp_ns: the request's stamp, ns (0: start as soon as possible).
@@ -362,7 +362,7 @@ class ArmPlanner:
 
     def on_offer(self, stamp_ns: int, stamp: float, t: Optional[ArrayLike] = None,
                  q: Optional[ArrayLike] = None, qd: Optional[ArrayLike] = None,
-                 qdd: Optional[ArrayLike] = None, error: str = '') -> List[Command]:
+                 qdd: Optional[ArrayLike] = None, error: str = '') -> List[PlannerCommand]:
         """Take a request offered as a plan: ``(N,)`` times from its start, ``(N, 3)`` arrays.
 
         The target is its last point (world). A plan that is not one (no velocities, outside
@@ -383,7 +383,7 @@ class ArmPlanner:
         return self.out.take()
 
     def on_other_trajectory(self, move_id: str, stamp: float, t: ArrayLike,
-                            q: ArrayLike) -> List[Command]:
+                            q: ArrayLike) -> List[PlannerCommand]:
         """Take a trajectory the other arm was sent; retry a blocked move, or re-time ours.
 
         :param move_id: its id; :param stamp: its stamp, s (0: now); :param t: ``(N,)`` s
@@ -401,13 +401,13 @@ class ArmPlanner:
         return self.out.take()
 
     def on_other_execution(self, state: str, move_id: str,
-                           start: Optional[float] = None) -> List[Command]:
+                           start: Optional[float] = None) -> List[PlannerCommand]:
         """Take the bridge's status of the other arm's move (:meth:`.motion.Heard.status`)."""
         self.other_motion.status(state, move_id, self.clock(), start, self.other_joints)
         return self.out.take()
 
     def on_own_execution(self, state: str, request: int, start: Optional[float] = None,
-                         stamp: Optional[float] = None) -> List[Command]:
+                         stamp: Optional[float] = None) -> List[PlannerCommand]:
         """Take the bridge's status of this arm's move for ``request``.
 
         :param start: the start it reports, s; :param stamp: the start the move asked for, s

@@ -13,7 +13,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from scara_collab.core.arm_planner import (ArmPlanner, Command, planner_parameters,
+from scara_collab.core.arm_planner import (ArmPlanner, planner_parameters, PlannerCommand,
                                            PlannerSettings, SendMove, Status, TIMES)
 from scara_collab.core.config import load_config
 from scara_collab.core.model import load_cell
@@ -66,7 +66,7 @@ class Planner(Node):
         self.get_logger().info(f'{r} planner ready ({params["mode"]} moves, ' + (
             'leader)' if self.arm is self.cell.leader else f'follower, yields to {o})'))
 
-    def _send(self, commands: List[Command]) -> None:
+    def _send(self, commands: List[PlannerCommand]) -> None:
         """Publish what the planner decided, in its order."""
         for cmd in commands:
             if isinstance(cmd, Status):
