@@ -26,7 +26,7 @@ def protocol(cell, mirrored=False, **overrides):
                          lambda level, text: logs.append((level, text)))
     proto.logs = logs
     for arm, q in zip(cell.arms, (HOME, mirror_joints(HOME))):
-        proto.on_arm_state(arm.name, q)
+        proto.measured(arm.name, q)
     return proto, lane
 
 
@@ -82,7 +82,7 @@ def test_a_move_at_its_end_with_the_tool_there_has_arrived_without_the_bridges_w
     cmd = proto.open(lane, 'to_park', target(cell), 0.1, 0.0)
     proto.on_planner([lane], lane.robot, cmd.request, 'planned', 0.1, 1.0)
     assert proto.advance(lane, 1.0) == ([], None)  # the tool is not there yet
-    proto.on_arm_state(lane.robot, ik(cell.leader, cmd.target, q_current=HOME).q)
+    proto.measured(lane.robot, ik(cell.leader, cmd.target, q_current=HOME).q)
     assert proto.advance(lane, 1.01)[1].kind == 'arrived'
     # not there within arrive_timeout of the end: failed
     cmd = proto.open(lane, 'to_park', [1.5, -1.0, 0.4], 1.1, 1.05)

@@ -27,7 +27,7 @@ def shared(cell, solo=False):
     proto = LaneProtocol(cell, settings, plan)
     proto.lanes = lanes
     for arm, q in zip(cell.arms, (HOME, mirror_joints(HOME))):
-        proto.on_arm_state(arm.name, q)
+        proto.measured(arm.name, q)
     belt = (SoloBelt if solo else SharedBelt)(cell, settings, plan)
     return belt, proto, lanes[0], lanes[1]
 
@@ -172,7 +172,7 @@ def test_two_arms_holding_items_are_untangled_by_the_follower_backing_out(cell):
     """Both hold items and wait for each other: the follower backs out on its own side."""
     belt, proto, lead, foll = shared(cell)
     for robot, tool in ((lead.robot, [1.34, -0.26, 0.34]), (foll.robot, [0.83, 0.05, 0.34])):
-        proto.on_arm_state(robot, ik(cell.arm(robot), tool).unwrap())
+        proto.measured(robot, ik(cell.arm(robot), tool).unwrap())
     waiting(lead, holding=True)
     waiting(foll, holding=True)
     how = belt.blocked(proto.lanes, 1.0, proto.q)

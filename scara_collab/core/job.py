@@ -155,7 +155,7 @@ class SortingJob:
 
     def on_arm_state(self, robot: str, q: np.ndarray) -> None:
         """Take the measured joints of ``robot`` ``(3,)`` (finite, checked by the caller)."""
-        self.protocol.on_arm_state(robot, q)
+        self.protocol.measured(robot, q)
 
     def on_planner(self, robot: str, request: int, state: str, start: Optional[float],
                    end: Optional[float], reason: str = '') -> None:

@@ -322,7 +322,7 @@ class LaneProtocol:
         return len(self.q) >= len(self.cell.arms)
 
     # --- observations -----------------------------------------------------------------------
-    def on_arm_state(self, robot: str, q: np.ndarray) -> None:
+    def measured(self, robot: str, q: np.ndarray) -> None:
         """Take the measured joints of ``robot`` ``(3,)`` (finite, checked by the caller)."""
         self.q[robot] = np.asarray(q, dtype=float)
 
