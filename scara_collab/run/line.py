@@ -32,6 +32,7 @@ from scara_collab.core.line import Section
 from scara_collab.core.model import load_cell
 from scara_collab.records import line_report as lr
 from scara_collab.records.report import write_summary
+from scara_collab.run.environment import node_environment
 from scara_collab.run.options import LaunchOptions
 
 #: the line launcher's own options, not passed on to the cells, and how many values follow
@@ -99,7 +100,7 @@ def run_line(opts: LaunchOptions, argv: List[str]) -> int:
         cmd = [sys.executable, '-m', 'scara_collab.run.launcher'] + cell_argv(
             argv, k, cells, output, stall)
         procs[k] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
-                                    env=dict(os.environ), start_new_session=True)
+                                    env=node_environment(os.environ), start_new_session=True)
         say(f'[line] cell {k} under /cell_{k}: pid {procs[k].pid}, log {folder}/console.log')
     signals: List[int] = []
 
