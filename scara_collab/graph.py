@@ -190,6 +190,8 @@ class Readiness:
             return f'node {node} subscribed to {name}'
         if self.kind == 'service':
             return f'service {name}'
+        if self.kind == 'published':
+            return f'node {node} publishes {name}'
         return (f'node {node} subscribed to {name}, live 3D view on '
                 f'http://localhost:{params.get("port", "?")}')
 

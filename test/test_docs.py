@@ -119,7 +119,7 @@ def test_every_hand_written_doc_is_linked_from_the_readme():
 
 def script_options():
     """Return every ``--option`` the scripts and the launcher define."""
-    sources = [ROOT / 'scara_collab' / 'run' / 'launcher.py', *sorted(
+    sources = [ROOT / 'scara_collab' / 'run' / 'options.py', *sorted(
         (ROOT / 'scripts').glob('*.py')), *sorted((ROOT / 'scripts').iterdir())]
     found = set()
     for path in sources:

@@ -39,6 +39,8 @@ def test_readiness_and_lockstep_names_are_relative():
     bridge = graph.node('pybullet_bridge')
     assert bridge.ready.describe('pybullet_bridge', {}) == 'service /sim/resume'
     assert bridge.ready.describe('pybullet_bridge', {}, '/cell_2') == 'service /cell_2/sim/resume'
+    assert graph.node('state_publisher').ready.describe('state_publisher', {}) == (
+        'node state_publisher publishes /robot_description')
     assert all(not n.startswith('/') for n in graph.lockstep_expect(graph.job_nodes()))
 
 

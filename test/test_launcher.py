@@ -4,6 +4,7 @@ The launcher is run as a subprocess with the session's ROS_DOMAIN_ID (conftest.p
 collaborative job itself (items sorted, throughput) is tested with the automation manager.
 """
 import csv
+import dataclasses
 import importlib
 import importlib.util
 import json
@@ -226,10 +227,11 @@ def test_the_container_reads_one_entry_and_its_arguments_per_node():
         assert callable(getattr(importlib.import_module(module), func)), spec.entry
         module, cls = spec.component.split(':')
         assert isinstance(getattr(importlib.import_module(module), cls), type), spec.component
-    from scara_collab.run import launcher, stages as plan
-    args = launcher.parse_args(['--one-process'])
-    assert args.one_process
-    stages = plan.stages(args, True)
+    from scara_collab.run import stages as plan
+    from scara_collab.run.options import parse_options
+    opts = parse_options(['--one-process'])
+    assert opts.one_process
+    stages = plan.stages(opts, True)
     assert [s.name for s in stages] == [n.name for n in graph.job_nodes()]
     cmd = plan.command(plan.one_process(stages), Path('/cfg'))
     assert container.parse(cmd[3:])[0] == (stages[0].entry, plan.node_args(stages[0],
@@ -425,20 +427,20 @@ def test_a_wall_clock_stamped_state_neither_ends_nor_enters_the_run(launch, tmp_
 
 def test_the_lockstep_flag_sets_the_bridges_window():
     """``--lockstep on`` (default) keeps the bridge's window; ``off`` sets it to 0 (real time)."""
-    from scara_collab.run import launcher
+    from scara_collab.run.options import parse_options
     from scara_collab.run.stages import stages
 
     def bridge(argv):
-        return next(s for s in stages(launcher.parse_args(argv), True)
+        return next(s for s in stages(parse_options(argv), True)
                     if s.name == 'pybullet_bridge').params
-    assert launcher.parse_args([]).lockstep == 'on'
+    assert parse_options([]).lockstep is True
     assert 'lockstep_window' not in bridge([]) and 'lockstep_window' not in bridge(
         ['--lockstep', 'on'])
-    assert launcher.parse_args(['--lockstep', 'off']).lockstep == 'off'
+    assert parse_options(['--lockstep', 'off']).lockstep is False
     assert bridge(['--lockstep', 'off'])['lockstep_window'] == '0.0'
     assert bridge(['--lockstep', 'off'])['lockstep_expect']  # the guards are still expected
     with pytest.raises(SystemExit) as exc:
-        launcher.parse_args(['--lockstep', 'maybe'])
+        parse_options(['--lockstep', 'maybe'])
     assert exc.value.code == 2
 
 
@@ -470,33 +472,33 @@ def test_a_real_time_run_with_late_joint_states_ends_cleanly(launch, tmp_path):
 def test_viewer_flag_adds_the_viewer_stage_last(monkeypatch):
     """``--viewer`` adds the viewer stage last; a busy or zero port is refused."""
     import socket
-    from scara_collab.run import launcher
+    from scara_collab.run import options
     from scara_collab.run.stages import stages
-    names = [s.name for s in stages(launcher.parse_args([]), True)]
+    names = [s.name for s in stages(options.parse_options([]), True)]
     assert 'cell_viewer' not in names
     with socket.socket() as probe:
         probe.bind(('', 0))
         port = probe.getsockname()[1]  # free once closed
-    last = stages(launcher.parse_args(['--viewer', str(port)]), True)[-1]
+    last = stages(options.parse_options(['--viewer', str(port)]), True)[-1]
     assert last.name == 'cell_viewer' and last.params['port'] == str(port)
     assert f'http://localhost:{port}' in last.ready
-    monkeypatch.setattr(launcher, 'port_free', lambda port: True)
-    assert launcher.parse_args(['--viewer']).viewer == launcher.VIEWER_PORT == 8080
+    monkeypatch.setattr(options, 'port_free', lambda port: True)
+    assert options.parse_options(['--viewer']).viewer == options.VIEWER_PORT == 8080
     monkeypatch.undo()
     with socket.socket() as busy:  # a port in use is refused before anything starts
         busy.bind(('', 0))
         busy.listen()
         with pytest.raises(SystemExit) as exc:
-            launcher.parse_args(['--viewer', str(busy.getsockname()[1])])
+            options.parse_options(['--viewer', str(busy.getsockname()[1])])
     assert exc.value.code == 2
     with pytest.raises(SystemExit):
-        launcher.parse_args(['--viewer', '0'])
+        options.parse_options(['--viewer', '0'])
 
 
 def test_the_lockstep_watch_names_only_a_node_that_leaves_a_clock_unanswered():
     """The lockstep watch names only a node that left a newer clock unanswered too long."""
     from scara_collab.nodes.lockstep_watch import LockstepWatch
-    from scara_collab.run import launcher
+    from scara_collab.run.options import parse_options
     watch = LockstepWatch(['/a', '/b'], limit=10.0)
     for name in ('/a', '/b', '/not_launched'):
         watch.answer(name, 1.0, 0.0)
@@ -517,7 +519,7 @@ def test_the_lockstep_watch_names_only_a_node_that_leaves_a_clock_unanswered():
     never.answer('/a', 0.04, 111.0)
     assert never.silent(0.04, 111.0) == ('/stopped_at_start', 11.0, 0.0)
     with pytest.raises(SystemExit):
-        launcher.parse_args(['--silent-timeout', '0'])
+        parse_options(['--silent-timeout', '0'])
 
 
 def test_the_lockstep_watch_is_off_in_one_process():
@@ -550,9 +552,10 @@ def test_the_job_start_is_asked_again_while_the_manager_is_not_connected(tmp_pat
     CPU hogs descheduled it, and ended a run with an empty error.
     """
     from scara_collab.run import launcher as la
-    args = la.parse_args(['--output', str(tmp_path), '--quiet'])
+    from scara_collab.run.options import parse_options
+    opts = parse_options(['--output', str(tmp_path), '--quiet'])
     console = la.Console(tmp_path / 'launch.log', True)
-    run = la.Launcher(args, tmp_path, console)
+    run = la.Launcher(opts, tmp_path, console)
     try:
         connect_after = [3]  # the third request finds the manager connected
         asked = []
@@ -578,7 +581,7 @@ def test_the_job_start_is_asked_again_while_the_manager_is_not_connected(tmp_pat
                          'again') == 2
         connect_after[0] = 10 ** 6  # never connected: ends with the reason, within the timeout
         asked.clear()
-        run.args.ready_timeout = 1.0
+        run.opts = dataclasses.replace(run.opts, ready_timeout=1.0)
         with pytest.raises(la.RunEnd, match='refused to start for 1 s: not connected yet'):
             run.start_job()
     finally:
@@ -591,12 +594,12 @@ def test_the_namespace_flag_moves_every_stage_into_the_cell():
 
     Without it the commands are the root cell's (no ``-r``); a bad namespace is a usage error.
     """
-    from scara_collab.run import launcher
+    from scara_collab.run.options import parse_options
     from scara_collab.run.stages import command, one_process, stages
     config = Path('/cfg')
-    plain = stages(launcher.parse_args([]), True)
+    plain = stages(parse_options([]), True)
     assert all('-r' not in command(s, config) for s in plain)
-    moved = stages(launcher.parse_args(['--namespace', 'cell_1']), True)
+    moved = stages(parse_options(['--namespace', 'cell_1']), True)
     for stage in moved:
         cmd = command(stage, config)
         assert ['-r', '__ns:=/cell_1', '-r', '/clock:=/cell_1/clock'] == cmd[
@@ -605,4 +608,4 @@ def test_the_namespace_flag_moves_every_stage_into_the_cell():
     container = command(one_process(moved), config)
     assert container.count('__ns:=/cell_1') == len(moved)
     with pytest.raises(SystemExit):
-        launcher.parse_args(['--namespace', 'cell 1'])
+        parse_options(['--namespace', 'cell 1'])

@@ -142,10 +142,9 @@ def test_the_report_names_a_joint_faster_than_its_limit():
 
 
 def test_every_exit_code_is_documented():
-    """The launcher's docstring and the README name every exit code the verdict can give."""
-    from scara_collab.run import launcher
-    doc = ' '.join(launcher.__doc__.split())
-    status = doc[doc.index('Exit status'):]
+    """The verdict's docstring and the README name every exit code the verdict can give."""
+    from scara_collab.records import verdict as module
+    status = ' '.join(module.__doc__.split())
     readme = ' '.join((ROOT / 'README.md').read_text(encoding='utf-8').split())
     readme = readme[readme.index('The exit status tells the truth'):]
     for code in EXIT_CODES:

@@ -69,7 +69,7 @@ from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import EVENTS, LATCHED
 from scara_collab.nodes.runner import run_node
 from scara_collab.nodes.sim_control import SimControl
-from scara_collab.nodes.trajectory_action import FollowJointTrajectory, TrajectoryActions
+from scara_collab.nodes.trajectory_action import trajectory_actions, TrajectoryActions
 from scara_collab.sim.cell_sim import CellSim
 
 #: the bridge's own parameters (the config files' keys come from ``declare_config``)
@@ -242,8 +242,7 @@ class PyBulletBridge(Node):
                                   lambda: busy(self.sim))
         if self.control.paused:  # started paused: /sim/resume starts the stepping timer
             self._timer.cancel()
-        self.actions = (TrajectoryActions(self, self.cell, self.sim, self.execution)
-                        if FollowJointTrajectory is not None else None)
+        self.actions = trajectory_actions(self, self.cell, self.sim, self.execution)
         if self.gate.enabled or self.line.upstream:  # re-arm now and then (a silent
             # participant times out; a late frontier from upstream is looked at again)
             self.create_timer(0.25, self._look, clock=self._steady)

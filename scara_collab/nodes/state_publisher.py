@@ -2,13 +2,14 @@
 
 Publishes ``/robot_description`` (std_msgs/String, transient local: a late subscriber such as
 RViz or Foxglove gets it) with the cell's URDF from the one model
-(:func:`scara_collab.core.model.load_cell`), and, when ``tf2_msgs`` is importable (it has no
-PyPI wheel: ``scripts/build_interfaces`` builds it into the venv; a ROS install has it),
-``/tf_static`` (transient local, once: the bases, the belt, the bins) and ``/tf`` (the six arm
-joints' transforms for every ``/joint_states``, stamped with it), computed by
-:mod:`scara_collab.core.frames`. Without ``tf2_msgs`` it says so once and publishes the
-description only. Joint states with other names, non-finite values or a stamp off the sim
-clock are refused at the door, like every consumer's.
+(:func:`scara_collab.core.model.load_cell`), and, when ``tf2_msgs`` loads (it has no PyPI
+wheel: ``scripts/build_interfaces`` builds it into the venv; a ROS install has it;
+:mod:`scara_collab.nodes.optional_interfaces`), ``/tf_static`` (transient local, once: the
+bases, the belt, the bins) and ``/tf`` (the six arm joints' transforms for every
+``/joint_states``, stamped with it), computed by :mod:`scara_collab.core.frames`. Without
+``tf2_msgs`` it says so once and publishes the description only. Joint states with other
+names, non-finite values or a stamp off the sim clock are refused at the door, like every
+consumer's.
 """
 from typing import Optional
 
@@ -20,13 +21,13 @@ from scara_collab.core.frames import Tree
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes.guarded import guarded
+from scara_collab.nodes.optional_interfaces import optional_interface
 from scara_collab.nodes.qos import DEFAULT, LATCHED, LATEST
 from scara_collab.nodes.runner import run_node
 
-try:  # no PyPI wheel: built by scripts/build_interfaces, or from a ROS install
-    from tf2_msgs.msg import TFMessage
-except ImportError:  # pragma: no cover - depends on the environment
-    TFMessage = None
+#: no PyPI wheel: built by scripts/build_interfaces, or from a ROS install
+TF_MESSAGE = optional_interface('tf2_msgs.msg', 'TFMessage')
+TFMessage = TF_MESSAGE.type
 
 
 class StatePublisher(Node):
@@ -46,8 +47,7 @@ class StatePublisher(Node):
         self.description_pub.publish(String(data=self.cell.urdf))
         self.tf_pub: Optional[object] = None
         if TFMessage is None:
-            self.get_logger().info('tf2_msgs is not installed: /robot_description only, no '
-                                   '/tf (./scripts/build_interfaces builds it)')
+            TF_MESSAGE.say_absent(self.get_logger(), '/robot_description only, no /tf')
             return
         static = self.create_publisher(TFMessage, 'tf_static', LATCHED)
         static.publish(TFMessage(transforms=[

@@ -1,9 +1,10 @@
 """``/<robot>/follow_joint_trajectory``: ros2_control's trajectory action, served by the bridge.
 
-Where ``control_msgs`` is importable (no PyPI wheel: ``scripts/build_interfaces`` builds it; a
-ROS install has it), each arm serves ``control_msgs/action/FollowJointTrajectory`` with the
-joint trajectory controller's semantics, through the same execution as
-``/<robot>/joint_trajectory`` (:class:`scara_collab.nodes.execution.Execution`):
+Where ``control_msgs`` loads (no PyPI wheel: ``scripts/build_interfaces`` builds it; a ROS
+install has it; :mod:`scara_collab.nodes.optional_interfaces`), each arm serves
+``control_msgs/action/FollowJointTrajectory`` with the joint trajectory controller's
+semantics, through the same execution as ``/<robot>/joint_trajectory``
+(:class:`scara_collab.nodes.execution.Execution`):
 
 - a goal the trajectory controller would reject is rejected at the goal response, with a
   warning that says why, and nothing runs or stops: no points, joint names that are not
@@ -40,12 +41,12 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from scara_collab.core.model import CellModel
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes.execution import Execution
+from scara_collab.nodes.optional_interfaces import optional_interface
 from scara_collab.sim.cell_sim import CellSim
 
-try:  # no PyPI wheel: built by scripts/build_interfaces, or from a ROS install
-    from control_msgs.action import FollowJointTrajectory
-except ImportError:  # pragma: no cover - depends on the environment
-    FollowJointTrajectory = None
+#: no PyPI wheel: built by scripts/build_interfaces, or from a ROS install
+FOLLOW_JOINT_TRAJECTORY = optional_interface('control_msgs.action', 'FollowJointTrajectory')
+FollowJointTrajectory = FOLLOW_JOINT_TRAJECTORY.type
 
 #: s of sim time between feedback messages
 FEEDBACK_PERIOD = 0.1
@@ -85,6 +86,16 @@ def _tolerances(names: List[str], given, default: float) -> np.ndarray:
         elif tol.position < 0:
             out[names.index(tol.name)] = np.inf
     return out
+
+
+def trajectory_actions(node: Node, cell: CellModel, sim: CellSim,
+                       execution: Execution) -> Optional['TrajectoryActions']:
+    """Return the action servers of every arm, or ``None`` (said on the log) without the type."""
+    if FollowJointTrajectory is None:
+        FOLLOW_JOINT_TRAJECTORY.say_absent(node.get_logger(), 'no follow_joint_trajectory '
+                                           'action (the joint_trajectory topic still works)')
+        return None
+    return TrajectoryActions(node, cell, sim, execution)
 
 
 class TrajectoryActions:

@@ -1,7 +1,8 @@
 """Running the cell: the launcher and the run's processes.
 
 - :mod:`scara_collab.run.launcher`: ``scripts/launch_cell.py``, the whole graph in order, the
-  run (:mod:`~scara_collab.run.stages`, :mod:`~scara_collab.run.supervisor` for the child
+  run (:mod:`~scara_collab.run.options` for its command line,
+  :mod:`~scara_collab.run.stages`, :mod:`~scara_collab.run.supervisor` for the child
   processes, :mod:`~scara_collab.run.liveness` for their lockstep answers,
   :mod:`~scara_collab.run.graph_client` for waits, calls and readiness,
   :mod:`~scara_collab.run.console`);

@@ -18,7 +18,6 @@ SIGINT or SIGTERM is passed on to every cell, which stops and reports as on its 
 line's exit code is the first non-zero code of its cells, else 7 if an item was lost or
 duplicated between cells, else 0.
 """
-import argparse
 import datetime
 import json
 import os
@@ -33,6 +32,8 @@ from scara_collab.core.line import Section
 from scara_collab.core.model import load_cell
 from scara_collab.records import line_report as lr
 from scara_collab.records.report import write_summary
+from scara_collab.run.environment import node_environment
+from scara_collab.run.options import LaunchOptions
 
 #: the line launcher's own options, not passed on to the cells, and how many values follow
 #: (-1: an optional number)
@@ -78,17 +79,17 @@ def _progress(output: Path, cells: int) -> str:
     return ' | '.join(parts)
 
 
-def run_line(args: argparse.Namespace, argv: List[str]) -> int:
-    """Run a line of ``args.cells`` cells; return its exit code (module docstring)."""
-    cells = args.cells
+def run_line(opts: LaunchOptions, argv: List[str]) -> int:
+    """Run a line of ``opts.cells`` cells (``argv``: its command line); return its exit code."""
+    cells = opts.cells
     stamp = datetime.datetime.now().strftime('%Y%m%d_%H%M%S')
-    output = (args.output or Path('runs') / f'{stamp}_line{cells}_{args.mode}').resolve()
+    output = (opts.output or Path('runs') / f'{stamp}_line{cells}_{opts.mode}').resolve()
     output.mkdir(parents=True, exist_ok=True)
-    section = Section(load_cell(args.profile))
-    stall = max(LINE_STALL, getattr(args, 'stall_timeout', 30.0))
-    say = (lambda text: None) if args.quiet else (lambda text: print(text, flush=True))
+    section = Section(load_cell(opts.profile))
+    stall = max(LINE_STALL, opts.stall_timeout)
+    say = (lambda text: None) if opts.quiet else (lambda text: print(text, flush=True))
     say(f'[line] {cells} cells at a pitch of {section.pitch:.2f} m (transit '
-        f'{section.transit:.2f} s between sections), {args.duration:g} sim s, output {output}')
+        f'{section.transit:.2f} s between sections), {opts.duration:g} sim s, output {output}')
     procs: Dict[int, subprocess.Popen] = {}
     logs = []
     for k in range(cells):
@@ -99,7 +100,7 @@ def run_line(args: argparse.Namespace, argv: List[str]) -> int:
         cmd = [sys.executable, '-m', 'scara_collab.run.launcher'] + cell_argv(
             argv, k, cells, output, stall)
         procs[k] = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT,
-                                    env=dict(os.environ), start_new_session=True)
+                                    env=node_environment(os.environ), start_new_session=True)
         say(f'[line] cell {k} under /cell_{k}: pid {procs[k].pid}, log {folder}/console.log')
     signals: List[int] = []
 
@@ -128,7 +129,7 @@ def run_line(args: argparse.Namespace, argv: List[str]) -> int:
             signal.signal(s, handler)
         for log in logs:
             log.close()
-    summary = lr.line_summary(output, cells, section.transit, args.duration, section.pitch,
+    summary = lr.line_summary(output, cells, section.transit, opts.duration, section.pitch,
                               ended=ended)
     if signals:
         summary['exit_code'] = 130 if signals[0] == signal.SIGINT else 143
@@ -137,7 +138,7 @@ def run_line(args: argparse.Namespace, argv: List[str]) -> int:
     write_summary(output, summary)
     text = lr.format_line_report(summary)
     (output / lr.LINE_REPORT).write_text(text + '\n', encoding='utf-8')
-    if not getattr(args, 'no_plots', False):
+    if opts.plots:
         lr.plot_sorted(output, cells)
-    print(text, file=sys.stderr if args.quiet else sys.stdout, flush=True)
+    print(text, file=sys.stderr if opts.quiet else sys.stdout, flush=True)
     return int(summary['exit_code'])

@@ -8,13 +8,13 @@ the cell's namespace with the cell's remaps (:func:`scara_collab.graph.ros_args`
 line of cells (``--line-cell K`` of ``--cells N``) also gets its bridge's line parameters and
 its upstream cell's handoff topic (:func:`scara_collab.graph.line_params`).
 """
-import argparse
 from dataclasses import dataclass, field
 from pathlib import Path
 import sys
 from typing import Dict, List, Sequence, Tuple
 
 from scara_collab import graph
+from scara_collab.run.options import LaunchOptions
 
 CONTAINER = 'cell'  # --one-process: the one process's name (logs/cell.log)
 
@@ -33,46 +33,44 @@ class Stage:
     upstream: Tuple[str, ...] = ()  # in a line: the cells upstream, nearest first
 
 
-def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
-    """Return the graph for ``args``, in launch order (the nodes of :mod:`scara_collab.graph`)."""
-    namespace = graph.namespace_of(getattr(args, 'namespace', None))
-    common = {} if args.profile is None else {'profile': args.profile}
-    by_mode = graph.job_params(args.mode, getattr(args, 'lockstep', 'on') == 'on')
-    port = getattr(args, 'viewer', None)
+def stages(opts: LaunchOptions, with_automation: bool) -> List[Stage]:
+    """Return the graph for ``opts``, in launch order (the nodes of :mod:`scara_collab.graph`)."""
+    common = {} if opts.profile is None else {'profile': opts.profile}
+    by_mode = graph.job_params(opts.mode, opts.lockstep)
+    port = opts.viewer
     specs = graph.job_nodes(automation=with_automation, viewer=port is not None,
-                            transforms=bool(getattr(args, 'tf', False)))
+                            transforms=opts.tf)
     own: Dict[str, Dict[str, str]] = {
         # paused until the job has started (Launcher.start_job), so every run starts at sim
         # time 0 with every node there; the belt feeds from then on
-        'pybullet_bridge': {'real_time_factor': repr(float(args.launch_rtf)),
+        'pybullet_bridge': {'real_time_factor': repr(float(opts.launch_rtf)),
                             'feed_interval': '0.0', 'paused': 'true',
                             # the job window ends at sim t=duration exactly (it starts at 0)
-                            'pause_at': repr(float(args.duration)),
+                            'pause_at': repr(float(opts.duration)),
                             'lockstep_expect': graph.param_value(graph.lockstep_expect(specs))},
         'automation_manager': {'auto_start': 'false'},  # the launcher starts the job
     }
     bridge = own['pybullet_bridge']
-    if args.step_chunk is not None:
-        bridge['step_chunk'] = repr(float(args.step_chunk))
-    if args.gui:
+    if opts.step_chunk is not None:
+        bridge['step_chunk'] = repr(float(opts.step_chunk))
+    if opts.gui:
         bridge['gui'] = 'true'
-    if args.seed is not None:
-        bridge['item_seed'] = str(args.seed)
+    if opts.seed is not None:
+        bridge['item_seed'] = str(opts.seed)
     if port is not None:
         own['cell_viewer'] = {'port': str(port)}
-    k, cells = getattr(args, 'line_cell', None) or 0, getattr(args, 'cells', 1)
-    for name, values in graph.line_params(k, cells).items():
+    for name, values in graph.line_params(opts.cell, opts.cells).items():
         own.setdefault(name, {}).update(values)
-    upstream = tuple(graph.line_upstream(k, cells))
-    faults = getattr(args, 'fault', [])
+    upstream = tuple(graph.line_upstream(opts.cell, opts.cells))
+    faults = opts.faults
     out = []
     for spec in specs:
         params = dict(common, **by_mode[spec.name], **own.get(spec.name, {}))
         if faults:  # every node applies the entries naming its own publishers and clients
             params['faults'] = graph.param_value(faults)
         out.append(Stage(spec.name, spec.entry, spec.configs,
-                         spec.ready.describe(spec.name, params, namespace), params,
-                         namespace=namespace, upstream=upstream))
+                         spec.ready.describe(spec.name, params, opts.namespace), params,
+                         namespace=opts.namespace, upstream=upstream))
     return out
 
 

@@ -18,6 +18,7 @@ from typing import Dict, IO, List, Optional
 
 from scara_collab.records.telemetry import process_cpu_seconds
 from scara_collab.run.console import Console
+from scara_collab.run.environment import node_environment
 from scara_collab.run.stages import command, Stage
 
 EXIT_FAILED = 1
@@ -83,8 +84,12 @@ class Supervisor:
         self.children: List[Child] = []
 
     def env(self) -> Dict[str, str]:
-        """Return the nodes' environment: unbuffered, uncoloured, with the launcher's pid."""
-        env = dict(os.environ)
+        """Return the nodes' environment: the launcher's own ROS, unbuffered, uncoloured, its pid.
+
+        The library path and the ROS wheels' start-up are the launcher's Python environment's
+        (:func:`~scara_collab.run.environment.node_environment`), whatever started it.
+        """
+        env = node_environment(os.environ)
         env.update(PYTHONUNBUFFERED='1', RCUTILS_COLORIZED_OUTPUT='0',
                    SCARA_LAUNCHER_PID=str(os.getpid()))
         return env
