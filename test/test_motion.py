@@ -422,3 +422,35 @@ def test_random_raw_commands_never_bring_the_arms_within_the_margin(cell):
     print(f'admitted {admitted}, refused {refused}, closest {worst:.4f} m')
     assert admitted >= 40 and refused >= 20
     assert worst >= cell.safety_margin
+
+
+def test_an_arm_behind_on_its_own_clock_runs_its_moves_that_much_later_in_sim_time(cell, poses):
+    """A lag of 0.5 s: a move stamped 1.0 starts at sim 1.5, and the other arm sees it so."""
+    cm = _cell_motion(cell, poses)
+    lead = cm[LEFT]
+    lead.lag = 0.5
+    cm.take(LEFT, _move('L', 1.0, poses['left_out'], poses['left_in'], 1.0), 0.0, _q(cm))
+    assert lead.waiting is not None and lead.waiting_start == 1.5
+    assert not lead.advance(1.2) and lead.advance(1.5)[0][0] == 'started'
+    seen = lead.current(2.0)  # half way through it in trajectory time: sim 2.0 -> 1.5
+    np.testing.assert_allclose(seen.t[[0, -1]], [2.0, 2.5])
+    np.testing.assert_allclose(seen.q[0], lead.running.timeline.at(1.5))
+    # the follower is judged against the leader where the leader will really be: late
+    for lag, admitted in ((0.0, True), (0.5, False)):
+        cm = CellMotion(cell.arms, [poses['left_in'], poses['right_out']], cell.safety_margin,
+                        DT)
+        cm[LEFT].lag = lag  # the leader leaves the belt in trajectory time 0.0 .. 1.0
+        cm.take(LEFT, _move('L', 0.0, poses['left_in'], poses['left_out'], 1.0), 0.0,
+                {LEFT: poses['left_in'], RIGHT: poses['right_out']})
+        enter = _move('R', 0.4, poses['right_out'], _pose(cell, RIGHT, [2.0, 0.25, 0.4]), 0.15)
+        try:
+            cm.take(RIGHT, enter, 0.0, {LEFT: poses['left_in'], RIGHT: poses['right_out']})
+            assert admitted
+        except Refused as exc:
+            assert not admitted and 'within' in str(exc)
+    # an observer hears the clock too: the trajectory time it reports, the sim time it means
+    heard = Heard(LEFT, poses['left_out'], dt=DT)
+    heard.on_clock(0.5)
+    move = heard.trajectory('L', 1.0, [0.0, 1.0], [poses['left_out'], poses['left_in']], 0.0)
+    assert move.start == 1.0 and heard.waiting_start == 1.5
+    assert heard.motion(1.2).end == pytest.approx(2.5)

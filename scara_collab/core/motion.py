@@ -176,17 +176,33 @@ def splice(before: Timeline, after: Timeline) -> Timeline:
 class ArmMotion:
     """One arm's commitments: the move it runs and the one waiting for its start.
 
+    Its moves run on the arm's own trajectory clock (:attr:`lag`): their times (a move's
+    start, end and timeline, a trajectory's stamp) are trajectory time, which runs behind sim
+    time by the lag that speed scaling has built up (0 when nothing has been slowed). Every
+    method takes sim time (``now``) and returns timelines in sim time, the arm's motion as it
+    will be if its clock runs at full speed from ``now`` on.
+
     :param name: the arm; :param q: ``(3,)`` the pose it holds.
     """
 
     def __init__(self, name: str, q: ArrayLike):
-        """Start with nothing committed: the arm holds ``q``."""
+        """Start with nothing committed: the arm holds ``q``; its clock on sim time."""
         self.name = name
         self.running: Optional[Move] = None
         self.waiting: Optional[Move] = None
         self.rest = np.asarray(q, dtype=float).reshape(3).copy()
         #: the newest move taken, until it ends, is dropped or held: what statuses are about
         self.latest: Optional[Move] = None
+        #: s: sim time minus the arm's trajectory time (what speed scaling has cost it)
+        self.lag = 0.0
+
+    def clock(self, now: float) -> float:
+        """Return the arm's trajectory time at sim time ``now``."""
+        return now - self.lag
+
+    def in_sim(self, timeline: Timeline) -> Timeline:
+        """Return ``timeline`` (trajectory time) in sim time, at full speed from now on."""
+        return timeline.shifted(self.lag) if self.lag else timeline
 
     def take(self, move: Move, now: float) -> Optional[Move]:
         """Commit to ``move``; return the move it replaces at once, if any.
@@ -195,7 +211,7 @@ class ArmMotion:
         the running one and the waiting one.
         """
         self.latest = move
-        if move.start > now:
+        if move.start > self.clock(now):
             old, self.waiting = self.waiting, move
             return old
         old = self.waiting or self.running
@@ -203,8 +219,9 @@ class ArmMotion:
         return old
 
     def advance(self, now: float) -> List[Tuple[str, Move]]:
-        """Move on to ``now``: ``('started', move)`` and ``('finished', move)`` events."""
+        """Move on to sim time ``now``: ``('started', move)`` and ``('finished', move)`` events."""
         out = []
+        now = self.clock(now)
         if self.waiting is not None and now >= self.waiting.start:
             if self.running is not None:
                 self.rest = self.running.timeline.at(now)
@@ -227,26 +244,30 @@ class ArmMotion:
               dt: float = 0.01, ref_of=None) -> Move:
         """Stop from ``(q, qd)`` at the acceleration limits, at once; return the brake move.
 
+        The stop runs on the arm's clock from ``now`` at full speed: a stop is never slowed.
+
         :param ref_of: makes the executor's form of the stop from ``(t, q, qd, qdd)``.
         """
         t, pos, vel, acc = safety.braking(arm, q, qd, dt)
-        move = Move('', Timeline(now + t, pos), 0.0,
-                    None if ref_of is None else ref_of(now + t, pos, vel, acc), braking=True)
+        t = self.clock(now) + t
+        move = Move('', Timeline(t, pos), 0.0,
+                    None if ref_of is None else ref_of(t, pos, vel, acc), braking=True)
         self.hold(q)
         self.running = move
         return move
 
     def active(self, now: float) -> bool:
         """Return True while the arm has a move to run (also one waiting for its start)."""
-        return self.waiting is not None or (self.running is not None and now < self.running.end)
+        return self.waiting is not None or (self.running is not None
+                                            and self.clock(now) < self.running.end)
 
     def current(self, now: float, q: Optional[ArrayLike] = None) -> Timeline:
-        """Return what the arm does from ``now`` without its waiting move.
+        """Return what the arm does from ``now`` without its waiting move (sim time).
 
         :param q: ``(3,)`` the measured pose, for an arm that holds (default its last pose).
         """
-        if self.running is not None and self.running.end > now:
-            return self.running.timeline.since(now)
+        if self.running is not None and self.running.end > self.clock(now):
+            return self.in_sim(self.running.timeline).since(now)
         return Timeline.hold(now, self.rest if q is None else q)
 
     def motion(self, now: float, q: Optional[ArrayLike] = None,
@@ -261,9 +282,14 @@ class ArmMotion:
         """
         now_on = self.current(now, q)
         w = self.waiting
-        if w is None or (before is not None and not binds_leader(w.start, before)):
+        if w is None or (before is not None and not binds_leader(w.start + self.lag, before)):
             return now_on
-        return splice(now_on, w.timeline.since(now))
+        return splice(now_on, self.in_sim(w.timeline).since(now))
+
+    @property
+    def waiting_start(self) -> Optional[float]:
+        """Return the sim time the move waiting for its start starts at (None: none)."""
+        return None if self.waiting is None else self.waiting.start + self.lag
 
 
 @dataclass(frozen=True)
@@ -321,11 +347,12 @@ class CellMotion:
         """
         if self.start_tolerance is None:
             return ''
-        at = max(now, move.start)
-        if at <= now:
+        arm = self.arms[robot]
+        at = max(arm.clock(now), move.start)  # trajectory time
+        if at <= arm.clock(now):
             there, where = np.asarray(q[robot], dtype=float), 'the measured position'
         else:
-            there = self.arms[robot].current(now, q.get(robot)).at(at)
+            there = arm.current(now, q.get(robot)).at(at + arm.lag)
             where = f'where its running move puts the arm at its start (t={at:.3f} s)'
         gap = np.abs(move.timeline.at(at) - there)
         j = int(np.argmax(gap))
@@ -347,11 +374,12 @@ class CellMotion:
         """
         if not self.checking:
             return Check(True)
-        me = self.models[robot]
-        mine = splice(self.arms[robot].current(now, q.get(robot)), move.timeline.since(now))
+        me, arm = self.models[robot], self.arms[robot]
+        mine = splice(arm.current(now, q.get(robot)), arm.in_sim(move.timeline).since(now))
+        start = move.start + arm.lag  # sim time
         for other in self.others(robot):
             view = self.arms[other].motion(now, q.get(other),
-                                           before=move.start if robot == self.leader else None)
+                                           before=start if robot == self.leader else None)
             d_now = float(collision.arm_distance(me, mine.at(now), self.models[other],
                                                  view.at(now)))
             if d_now < self.margin:
@@ -401,7 +429,7 @@ class CellMotion:
         out = []
         for robot, arm in self.arms.items():
             w = arm.waiting
-            if w is not None and now >= w.start:
+            if w is not None and arm.clock(now) >= w.start:
                 reason = self.start_gap(robot, w, now, q) or self.judge(robot, w, now, q).reason
                 if reason:
                     arm.waiting = None
@@ -424,7 +452,7 @@ class CellMotion:
             if self.arms[robot].latest is not None and self.arms[robot].latest.id == move.id:
                 self.arms[robot].latest = None
         for robot, arm in self.arms.items():
-            if arm.latest is not None and now >= arm.latest.end - END_SLACK:
+            if arm.latest is not None and arm.clock(now) >= arm.latest.end - END_SLACK:
                 out.append((robot, 'finished', arm.latest, ''))
                 arm.latest = None
         return out
@@ -493,7 +521,7 @@ class Heard:
         :param request: the booked request it answers (:meth:`book`), if any.
         """
         try:
-            move = resolve(move_id, stamp, t, q, now, self.dt, q_now)
+            move = resolve(move_id, stamp, t, q, self.arm.clock(now), self.dt, q_now)
         except Refused:
             return None
         early = self._early.pop(move_id, None)
@@ -513,9 +541,13 @@ class Heard:
         """
         b = self.booked
         if (b is not None and b.counts and not b.heard and b.timeline is not None
-                and b.timeline.end > now):
-            return b.timeline
+                and b.timeline.end > self.arm.clock(now)):
+            return self.arm.in_sim(b.timeline)
         return self.motion(now, q)
+
+    def on_clock(self, lag: float) -> None:
+        """Take the arm's trajectory clock as the bridge reports it: ``lag`` s behind sim time."""
+        self.arm.lag = float(lag)
 
     def status(self, state: str, move_id: str, now: float, start: Optional[float] = None,
                q: Optional[ArrayLike] = None) -> bool:
@@ -535,7 +567,7 @@ class Heard:
             moved = m.shifted(start)
             if arm.running is m:
                 arm.running = moved
-            elif moved.start > now:
+            elif moved.start > arm.clock(now):
                 arm.waiting = moved
             else:
                 arm.running, arm.waiting = moved, None
@@ -547,14 +579,14 @@ class Heard:
             arm.hold(arm.rest if q is None else q)
             return True
         if state == 'finished' and arm.running is not None and arm.running.id == move_id:
-            arm.advance(max(now, arm.running.end))
+            arm.advance(max(now, arm.running.end + arm.lag))
             return True
         return False
 
     @property
     def waiting_start(self) -> Optional[float]:
-        """Return the start of the arm's move waiting for its start, as heard; None: none."""
-        return None if self.arm.waiting is None else self.arm.waiting.start
+        """Return the sim time the arm's move waiting for its start starts at; None: none."""
+        return self.arm.waiting_start
 
     def motion(self, now: float, q: Optional[ArrayLike] = None,
                before: Optional[float] = None) -> Timeline:
