@@ -5,38 +5,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
 from numpy.testing import assert_allclose
+from synthetic_scans import legs, scan_circles
 
 from scara_collab.core import scan_tracking as st_
 from scara_collab.core.config import load_config
 
 GEOMETRY = st_.ScanGeometry('scanner_a', -6.0, -7.0, math.pi / 4, -3 * math.pi / 4,
                             1.5 * math.pi / 540, 541, 0.05, 20.0, 0.3)
-
-
-def scan_circles(geometry, circles, noise=0.0, rng=None):
-    """Return the ranges of ``geometry``'s rays against vertical circles ``[(x, y, r), ...]``.
-
-    The exact ray-circle intersection: the nearest hit along each ray, ``inf`` for none.
-    """
-    d = geometry.directions
-    ranges = np.full(geometry.count, np.inf)
-    for x, y, r in circles:
-        rel = np.array([x, y]) - geometry.origin
-        along = d @ rel
-        perp_sq = rel @ rel - along ** 2
-        hit = (perp_sq <= r * r) & (along > 0)
-        dist = along - np.sqrt(np.maximum(r * r - perp_sq, 0.0))
-        ranges = np.where(hit & (dist < ranges), dist, ranges)
-    if noise:
-        finite = np.isfinite(ranges)
-        ranges[finite] += rng.normal(0.0, noise, finite.sum())
-    return ranges
-
-
-def legs(x, y, heading=0.0, stance=0.1, radius=0.07):
-    """Return a person's two legs as circles, side by side across ``heading``."""
-    lx, ly = -math.sin(heading) * stance, math.cos(heading) * stance
-    return [(x + lx, y + ly, radius), (x - lx, y - ly, radius)]
 
 
 def test_scanners_from_the_config_cover_their_field_of_view():
