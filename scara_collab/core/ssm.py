@@ -65,7 +65,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from scara_collab.core import collision, safety
-from scara_collab.core.kinematics import jacobian
+from scara_collab.core.kinematics import arm_points, jacobian
 from scara_collab.core.model import ArmModel
 
 #: ISO 13855, detection zone parallel to the approach (a horizontal field at height H):
@@ -85,8 +85,8 @@ _FRACTION = np.array(LINK_FRACTIONS * 2 + (0.0, 1.0))
 _POINT_CAPSULE = np.concatenate([np.arange(3), _CAPSULE])
 _POINT_FRACTION = np.concatenate([np.zeros(3), _FRACTION])
 _FIXED = np.arange(len(_POINT_CAPSULE)) >= 3
-#: s: time step of the stop trajectories that give the stopping distance
-STOP_STEP = 0.01
+#: samples of each stop trajectory that gives the stopping distance (its time step is T_s / this)
+STOP_SAMPLES = 8
 
 
 def intrusion_distance(height: float) -> float:
@@ -168,8 +168,8 @@ def allowed_scale(d: ArrayLike, v_h: ArrayLike, v_r: ArrayLike, t_r: ArrayLike,
         >>> round(float(s * v_r), 6) == round(float(max_robot_speed(1.5, 1.6, a, 0.15, 0.3)), 6)
         True
     """
-    d, v_h, v_r, t_r, t_s, s_s, c = np.broadcast_arrays(
-        *(np.asarray(x, dtype=float) for x in (d, v_h, v_r, t_r, t_s, s_s, c)))
+    d, v_h, v_r, t_r, t_s, s_s, c = (np.asarray(x, dtype=float)
+                                     for x in (d, v_h, v_r, t_r, t_s, s_s, c))
     k = d - v_h * t_r - c
     b = v_h * t_s + v_r * t_r
     denom = b + np.sqrt(np.maximum(b * b + 4.0 * s_s * np.maximum(k, 0.0), 0.0))
@@ -284,6 +284,19 @@ _ENDS = np.array([[0, 1], [1, 2], [3, 3]])
 _FIRST, _LAST = _ENDS[_POINT_CAPSULE, 0], _ENDS[_POINT_CAPSULE, 1]
 
 
+def _node_positions(arm: ArmModel, q: ArrayLike) -> np.ndarray:
+    """Return the rows of :func:`node_velocities` as positions up to constant offsets.
+
+    ``(..., 4, 3)``: the shoulder, the elbow, the tool at the shoulder's height and the tool
+    tip (:func:`~scara_collab.core.kinematics.arm_points`). The difference between two states is
+    how far each capsule end moved: the capsules' ends sit at constant offsets from these.
+    """
+    pts = arm_points(arm, q)
+    up = arm.base[:3, 2]
+    planar = pts[..., 2, :] - np.multiply.outer((pts[..., 2, :] - pts[..., 0, :]) @ up, up)
+    return np.concatenate([pts[..., :2, :], planar[..., None, :], pts[..., 2:, :]], axis=-2)
+
+
 def node_velocities(arm: ArmModel, q: ArrayLike, qd: ArrayLike) -> np.ndarray:
     """Return the velocities of the shoulder, the elbow, the quill axis and the tool tip.
 
@@ -309,7 +322,7 @@ def _stops(arm: ArmModel, q: np.ndarray, qd: np.ndarray, t_s: float) -> np.ndarr
     ``q + qd (t - t^2 / (2 t_s))``, in which each joint moves ``qd t_s / 2``, at least its
     braking distance ``qd^2 / (2 a)``.
     """
-    t, braked, _, _ = safety.braking(arm, q, qd, STOP_STEP)
+    t, braked, _, _ = safety.braking(arm, q, qd, max(t_s / STOP_SAMPLES, 1e-3))
     if t_s <= 0.0:
         return braked
     tt = t[:, None]
@@ -347,8 +360,7 @@ def assess_arm(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[Per
         return ArmSeparation(arm.name, math.inf, math.inf, 1.0, 1.0, False, '', t_s)
     bottom, top, v_person, r_person = _columns(persons)
     # the arm's capsules now and while it stops, from the one capsule model: (1 + M, 3, 3)
-    starts, ends, radii = collision.arm_capsules(arm, np.vstack([q, _stops(arm, q, qd, t_s)]))
-    start, end = starts[0], ends[0]
+    start, end, radii = collision.arm_capsules(arm, q)
     # one segment distance for the capsules (their closest points) and the fixed samples
     p0 = np.concatenate([start, start[_CAPSULE] + _FRACTION[:, None] * (end - start)[_CAPSULE]])
     p1 = np.concatenate([end, p0[3:]])
@@ -369,9 +381,9 @@ def assess_arm(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[Per
     v_r = np.where(inside, speed, np.maximum(np.einsum('pkc,pkc->pk', velocity, n), 0.0))
     toward = np.maximum(-np.einsum('pc,pkc->pk', v_person, n[..., :2]), 0.0)
     # the stopping distance: the farthest each point gets along n while the arm stops
-    d_start, d_end = starts[1:] - start, ends[1:] - end  # (M, 3, 3)
-    along = ((1.0 - u) * np.einsum('mkc,pkc->mpk', d_start[:, caps], n)
-             + u * np.einsum('mkc,pkc->mpk', d_end[:, caps], n))
+    moved = _node_positions(arm, _stops(arm, q, qd, t_s)) - _node_positions(arm, q)
+    along = ((1.0 - u) * np.einsum('mkc,pkc->mpk', moved[:, _FIRST], n)
+             + u * np.einsum('mkc,pkc->mpk', moved[:, _LAST], n))
     s_s = np.maximum(along.max(axis=0), 0.0)
     c, t_r = params.constant, params.reaction_time
     reach = np.maximum(params.reach_speed, toward)
