@@ -280,7 +280,8 @@ def _check_people(cfg: dict, where: str) -> None:
 
     scanner = cfg['scanner']
     for name in scanner['names']:
-        pose = scanner.get(name, {}).get('pose') if isinstance(scanner.get(name), dict) else None
+        pose = scanner.get(name)
+        pose = pose.get('pose') if isinstance(pose, dict) else None
         if not (isinstance(pose, list) and len(pose) == 3 and all(_num(x) for x in pose)):
             fail(f'scanner.{name}.pose must be [x, y, yaw], got {pose!r}')
     if not scanner['range_min'] < scanner['range_max']:
