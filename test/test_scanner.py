@@ -11,7 +11,7 @@ from scara_collab.core.config import load_config
 from scara_collab.core.scan_tracking import foreground, scanners_from_config, teach_contour
 from scara_collab.core.separation_monitor import MonitorSettings, SeparationMonitor
 from scara_collab.sim.cell_sim import CellSim
-from scara_collab.sim.person import arm_link_names, BodyModel, PersonSim
+from scara_collab.sim.person import arm_distance, arm_link_names, BodyModel, PersonSim
 from scara_collab.sim.person_scenarios import Motion, PersonPath, scenario, scenario_from_dict
 from scara_collab.sim.scanner import SafetyScanner
 
@@ -156,3 +156,41 @@ def test_a_person_passing_by_costs_nothing(sim, cfg):
     finally:
         person.close()
     assert seen == 1  # it was seen
+
+
+def test_the_monitor_sees_a_person_at_the_belt_and_c_covers_its_reach(sim, cfg):
+    """The middle scenario, scanned and monitored, the arms at home at their top speeds.
+
+    Whatever the person does, its true body is never nearer an arm than the column the
+    monitor sees, less C (what the scan cannot see, C covers); while it works at the belt the
+    left arm, whose links it could reach, is stopped.
+    """
+    scanner = SafetyScanner.from_config(sim.client, cfg)
+    monitor = SeparationMonitor(sim.cell, MonitorSettings.from_config(cfg), scanner.scanners)
+    monitor.teach([np.array(k) for k in zip(*[scanner.scan() for _ in range(10)])])
+    path = PersonPath(scenario('middle', sim.cell, cfg), Motion.from_config(cfg))
+    person = PersonSim(sim.client, BodyModel.from_config(cfg), path, 0,
+                       arm_link_names(sim.client, 0, sim.cell.arms))
+    q = {a.name: sim.arm_state(a.name)[0] for a in sim.cell.arms}
+    planned = {a.name: (q[a.name], a.max_velocity.copy()) for a in sim.cell.arms}
+    c = monitor.settings.ssm.intrusion
+    working = stopped = 0
+    try:
+        t = 0.0
+        while t < path.end + 0.5:
+            t = round(t + scanner.period, 9)
+            person.update(t)
+            monitor.observe(t, scanner.scan(), q)
+            d = monitor.decide(t, planned)
+            caps = person.capsules()
+            if caps is None or not d.persons:
+                continue
+            for a in sim.cell.arms:
+                truth = arm_distance(caps, a, q[a.name])
+                assert truth >= d.arm(a.name).separation - c - 0.05
+            if path.state(t)[4] > 0.5:  # reaching over the belt
+                working += 1
+                stopped += d.arm('scara_left').stop
+    finally:
+        person.close()
+    assert working > 0 and stopped == working
