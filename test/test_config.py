@@ -81,6 +81,31 @@ def test_other_files_are_validated():
         validate('automation', auto)
 
 
+def test_people_file_holds_the_spec_defaults():
+    """people.yaml: scan plane 0.3 m, 25 Hz, v_h 1.6 m/s (2.0 reaching), Z_d 0.1 m."""
+    cfg = load_config('people')
+    assert cfg['person']['scenario'] == 'none'
+    assert cfg['scanner']['height'] == 0.3 and cfg['scanner']['rate'] == 25.0
+    assert cfg['monitor']['walking_speed'] == 1.6 and cfg['monitor']['reach_speed'] == 2.0
+    assert cfg['monitor']['sensor_tolerance'] == 0.1
+
+
+@pytest.mark.parametrize('mutate, message', [
+    (lambda c: c['scanner'].update(height=1.5), 'scanner.height must be <= 1.0 m'),
+    (lambda c: c['scanner']['scanner_b'].update(pose=[1.0, 2.0]), 'scanner.scanner_b.pose'),
+    (lambda c: c['person'].update(walking_speed=1.8), 'must not exceed monitor.walking_speed'),
+    (lambda c: c['person']['random'].update(dwell=[5.0, 1.0]), 'person.random.dwell'),
+    (lambda c: c['monitor'].update(stale_after=0.0), 'monitor.stale_after must be a number > 0'),
+    (lambda c: c['scanner'].update(range_min=30.0), 'range_min must be less than'),
+])
+def test_invalid_people_values_are_refused_with_the_key(mutate, message):
+    """Each invalid people value is refused with an error naming its key."""
+    cfg = copy.deepcopy(load_config('people'))
+    mutate(cfg)
+    with pytest.raises(ConfigError, match=message):
+        validate('people', cfg)
+
+
 def test_unreadable_files_say_what_is_wrong(tmp_path):
     """Missing, malformed, flat and unknown configuration files each say what is wrong."""
     with pytest.raises(ConfigError, match='no such configuration file'):

@@ -20,7 +20,7 @@ import yaml
 
 from scara_collab.core.paths import config_dir
 
-CONFIG_NAMES = ('cell', 'simulation', 'controllers', 'automation')
+CONFIG_NAMES = ('cell', 'simulation', 'controllers', 'automation', 'people')
 
 
 class ConfigError(ValueError):
@@ -55,6 +55,12 @@ _KINDS = {
 }
 
 _GAINS = ('kp', 'ki', 'kd')
+
+
+def _interval(v) -> bool:
+    """Return True for ``[low, high]`` with ``0 <= low <= high`` (finite numbers)."""
+    return len(v) == 2 and all(_num(x) for x in v) and 0 <= v[0] <= v[1]
+
 
 SCHEMAS = {
     'cell': [
@@ -162,6 +168,66 @@ SCHEMAS = {
         Rule('line_cell', 'int', lambda v: v >= 0, 'must be >= 0'),
         Rule('line_capacity', 'positive'),
     ],
+    'people': [
+        Rule('person.scenario', 'str'),
+        Rule('person.seed', 'int'),
+        Rule('person.walking_speed', 'positive'),
+        Rule('person.reach_speed', 'positive'),
+        Rule('person.turn_rate', 'positive'),
+        *[Rule(f'person.body.{k}', 'positive') for k in (
+            'leg_radius', 'hip_height', 'stance', 'step_amplitude', 'step_length',
+            'torso_radius', 'torso_length', 'shoulder_offset', 'head_radius', 'neck',
+            'arm_radius', 'reach')],
+        Rule('person.work.reach_pitch', 'number', lambda v: 0 <= v < math.pi / 2,
+             'must be in [0, pi/2) rad'),
+        Rule('person.work.lean', 'nonneg', lambda v: v < math.pi / 4, 'must be < pi/4 rad'),
+        Rule('person.work.hold', 'nonneg'),
+        Rule('person.work.rest', 'nonneg'),
+        Rule('person.random.mean_interval', 'positive'),
+        Rule('person.random.dwell', 'list', _interval, 'must be [low, high], 0 <= low <= high'),
+        Rule('person.random.speed', 'list', lambda v: _interval(v) and v[0] > 0,
+             'must be [low, high], 0 < low <= high'),
+        Rule('person.random.horizon', 'positive'),
+        Rule('person.floor', 'list', lambda v: len(v) == 4 and all(_num(x) for x in v)
+             and v[0] < v[1] and v[2] < v[3], 'must be [x_min, x_max, y_min, y_max]'),
+        Rule('person.earliest', 'nonneg'),
+        Rule('scanner.height', 'positive', lambda v: v <= 1.0,
+             'must be <= 1.0 m (ISO 13855 horizontal fields)'),
+        Rule('scanner.rate', 'positive'),
+        Rule('scanner.names', 'list', lambda v: all(isinstance(n, str) and n for n in v)
+             and len(set(v)) == len(v), 'must be distinct names'),
+        Rule('scanner.field_of_view', 'positive', lambda v: v <= 2 * math.pi,
+             'must be <= 2 pi rad'),
+        Rule('scanner.rays', 'int', lambda v: v >= 2, 'must be >= 2'),
+        Rule('scanner.range_min', 'nonneg'),
+        Rule('scanner.range_max', 'positive'),
+        Rule('scanner.noise', 'nonneg'),
+        Rule('scanner.ghost_probability', 'nonneg', lambda v: v <= 1.0, 'must be <= 1'),
+        Rule('scanner.seed', 'int'),
+        Rule('monitor.walking_speed', 'positive'),
+        Rule('monitor.reach_speed', 'positive'),
+        Rule('monitor.reach_limit', 'nonneg'),
+        Rule('monitor.reaction.scanner', 'nonneg'),
+        Rule('monitor.reaction.monitor', 'nonneg'),
+        Rule('monitor.reaction.bridge', 'nonneg'),
+        Rule('monitor.sensor_tolerance', 'nonneg'),
+        Rule('monitor.robot_tolerance', 'nonneg'),
+        Rule('monitor.foreground', 'positive'),
+        Rule('monitor.teach_scans', 'int', lambda v: v >= 1, 'must be >= 1'),
+        Rule('monitor.cluster_gap', 'positive'),
+        Rule('monitor.min_points', 'int', lambda v: v >= 1, 'must be >= 1'),
+        Rule('monitor.body_margin', 'nonneg'),
+        Rule('monitor.column_height', 'positive'),
+        Rule('monitor.mute_margin', 'nonneg'),
+        Rule('monitor.self_filter_radius', 'nonneg'),
+        Rule('monitor.stale_after', 'positive'),
+        Rule('monitor.track_gate', 'positive'),
+        Rule('monitor.track_hold', 'nonneg'),
+        Rule('monitor.velocity_window', 'positive'),
+        Rule('monitor.hysteresis', 'nonneg'),
+        Rule('monitor.dwell', 'nonneg'),
+        Rule('monitor.resume_rate', 'positive'),
+    ],
 }
 
 
@@ -205,6 +271,28 @@ def _check_cell(cfg: dict, where: str) -> None:
         fail('belt.x_end must be greater than belt.x_start')
     if len(cfg['bins']['class_x_offsets']) != len(cfg['items']['classes']):
         fail('bins.class_x_offsets needs one entry per item class')
+
+
+def _check_people(cfg: dict, where: str) -> None:
+    """Cross-field checks of the people file."""
+    def fail(msg):
+        raise ConfigError(f'{where}: {msg}')
+
+    scanner = cfg['scanner']
+    for name in scanner['names']:
+        pose = scanner.get(name)
+        pose = pose.get('pose') if isinstance(pose, dict) else None
+        if not (isinstance(pose, list) and len(pose) == 3 and all(_num(x) for x in pose)):
+            fail(f'scanner.{name}.pose must be [x, y, yaw], got {pose!r}')
+    if not scanner['range_min'] < scanner['range_max']:
+        fail('scanner.range_min must be less than scanner.range_max')
+    if cfg['person']['walking_speed'] > cfg['monitor']['walking_speed']:
+        fail('person.walking_speed must not exceed monitor.walking_speed (the speed the '
+             'monitor assumes)')
+    if cfg['person']['reach_speed'] > cfg['monitor']['reach_speed']:
+        fail('person.reach_speed must not exceed monitor.reach_speed')
+    if cfg['person']['random']['speed'][1] > cfg['monitor']['walking_speed']:
+        fail('person.random.speed must not exceed monitor.walking_speed')
 
 
 def check_rules(rules: Iterable[Rule], values: dict, where: str) -> dict:
@@ -252,6 +340,8 @@ def validate(name: str, cfg: Any, where: str = '') -> dict:
     check_rules(SCHEMAS[name], cfg, where)
     if name == 'cell':
         _check_cell(cfg, where)
+    if name == 'people':
+        _check_people(cfg, where)
     return cfg
 
 
@@ -278,7 +368,7 @@ def read_params_file(path: Union[str, Path]) -> dict:
 def load_config(name: str, path: Optional[Union[str, Path]] = None) -> dict:
     """Load and validate one configuration file.
 
-    :param name: ``cell``, ``simulation``, ``controllers`` or ``automation``.
+    :param name: one of :data:`CONFIG_NAMES`.
     :param path: file to read; default ``<config_dir>/<name>.yaml``.
     :return: the validated parameter tree (nested dicts).
     :raises ConfigError: if the file is missing or a value is invalid.

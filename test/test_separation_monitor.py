@@ -1,0 +1,230 @@
+"""The separation monitor's decisions from scans alone: slow, stop, resume, fail closed."""
+import math
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+import numpy as np
+import pytest
+from synthetic_scans import legs, pillars, scan_circles
+
+from scara_collab.core.config import load_config
+from scara_collab.core.kinematics import fk
+from scara_collab.core.scan_tracking import scanners_from_config
+from scara_collab.core.separation_monitor import (
+    MonitorSettings, ScaleGovernor, SeparationMonitor)
+
+PERIOD = 1.0 / 25.0  # the scanners' period
+TICK = 0.01  # the decisions' period (100 Hz)
+
+
+@pytest.fixture(scope='module')
+def cfg():
+    """Return config/people.yaml."""
+    return load_config('people')
+
+
+class Cell:
+    """A monitor fed exact scans of the cell's pillars and of persons given as circles."""
+
+    def __init__(self, cell, cfg, seed=0, ghosts=0.0):
+        """Teach the monitor the empty cell."""
+        self.cell = cell
+        self.scanners = scanners_from_config(cfg)
+        self.monitor = SeparationMonitor(cell, MonitorSettings.from_config(cfg), self.scanners)
+        self.rng = np.random.default_rng(seed)
+        self.ghosts = ghosts
+        self.static = pillars(cell)
+        self.monitor.teach([[self.ranges(g, []) for _ in range(10)] for g in self.scanners])
+        self.q = {a.name: np.array([0.0, 1.2 if a.name.endswith('left') else -1.2, 0.1])
+                  for a in cell.arms}
+        self.qd = {a.name: np.zeros(3) for a in cell.arms}
+        self.time = 0.0
+
+    def ranges(self, geometry, circles):
+        """Return one scanner's noisy ranges of the pillars and ``circles`` (ghosts if asked)."""
+        r = scan_circles(geometry, self.static + circles, 0.01, self.rng)
+        if self.ghosts:
+            ghost = self.rng.random(geometry.count) < self.ghosts
+            r[ghost] = self.rng.uniform(0.5, 10.0, ghost.sum())
+        return r
+
+    def run(self, seconds, circles=lambda t: [], scans=True, on_decision=None):
+        """Scan at 25 Hz and decide at 100 Hz for ``seconds``; return the decisions."""
+        out = []
+        for _ in range(int(round(seconds / TICK))):
+            self.time = round(self.time + TICK, 9)
+            if scans and abs(self.time / PERIOD - round(self.time / PERIOD)) < 1e-6:
+                now = circles(self.time)
+                self.monitor.observe(self.time, [self.ranges(g, now) for g in self.scanners],
+                                     self.q)
+            d = self.monitor.decide(self.time, {r: (self.q[r], self.qd[r]) for r in self.q})
+            out.append(d)
+            if on_decision:
+                on_decision(d)
+        return out
+
+
+def scale(decisions, robot='scara_left'):
+    """Return the factor of ``robot`` over the decisions."""
+    return np.array([d.arm(robot).scale for d in decisions])
+
+
+def test_an_untaught_monitor_stops_every_arm(cell, cfg):
+    """Without the empty cell's contour nothing moves, and the decision says why."""
+    monitor = SeparationMonitor(cell, MonitorSettings.from_config(cfg), scanners_from_config(cfg))
+    d = monitor.decide(0.0, {a.name: (np.zeros(3), np.zeros(3)) for a in cell.arms})
+    assert all(a.scale == 0.0 and a.stop for a in d.arms)
+    assert 'not taught' in d.fault and d.arms[0].cause == d.fault
+
+
+def test_an_empty_cell_runs_at_full_speed(cell, cfg):
+    """The empty cell: no person, the factor rises to 1 after the dwell and stays there."""
+    sim = Cell(cell, cfg)
+    s = scale(sim.run(3.0))
+    dwell, rate = cfg['monitor']['dwell'], cfg['monitor']['resume_rate']
+    first_full = np.argmax(s >= 1.0) * TICK + TICK
+    assert first_full == pytest.approx(dwell + 1.0 / rate, abs=2 * TICK + PERIOD)
+    assert np.all(s[int(first_full / TICK):] == 1.0)
+    assert np.all(np.diff(s) >= 0.0)
+
+
+def test_a_silent_scanner_stops_every_arm_within_two_periods(cell, cfg):
+    """The scans stop: s = 0 with the scanner named within two scan periods; back after."""
+    sim = Cell(cell, cfg)
+    sim.run(2.0)
+    last_scan = sim.time
+    silent = sim.run(0.2, scans=False)
+    zero = next(k for k, d in enumerate(silent) if all(a.scale == 0.0 for a in d.arms))
+    assert (zero + 1) * TICK <= 2 * PERIOD + 1e-9
+    assert all(a.stop for a in silent[zero].arms)
+    assert 'scanner_a: no scan for' in silent[zero].fault
+    assert sim.time - last_scan > 2 * PERIOD
+    back = scale(sim.run(2.0))
+    assert back[-1] == 1.0
+
+
+def test_unmeasurable_ranges_stop_every_arm(cell, cfg):
+    """A scan with NaN ranges (REP 117: invalid) is a protective stop, named; good scans resume."""
+    sim = Cell(cell, cfg)
+    sim.run(2.0)
+    geometry = sim.scanners[1]
+    bad = sim.ranges(geometry, [])
+    bad[100:103] = np.nan
+    sim.monitor.observe(sim.time, [sim.ranges(sim.scanners[0], []), bad], sim.q)
+    d = sim.monitor.decide(sim.time, {r: (sim.q[r], sim.qd[r]) for r in sim.q})
+    assert all(a.scale == 0.0 and a.stop for a in d.arms)
+    assert d.fault == 'scanner_b: 3 rays measured nothing usable'
+    assert scale(sim.run(2.0))[-1] == 1.0
+
+
+def test_an_arm_without_a_finite_joint_state_stops(cell, cfg):
+    """A NaN joint state stops that arm only."""
+    sim = Cell(cell, cfg)
+    sim.run(2.0)
+    sim.q['scara_right'] = np.array([np.nan, 0.0, 0.0])
+    d = sim.run(0.05)[-1]
+    assert d.arm('scara_right').stop and d.arm('scara_right').scale == 0.0
+    assert 'no finite joint state' in d.arm('scara_right').cause
+    assert d.arm('scara_left').scale == 1.0
+
+
+def test_a_person_approaching_slows_then_stops_the_arm_and_leaving_resumes_it(cell, cfg):
+    """A person walks at 1.4 m/s towards the left arm, stands, walks away.
+
+    Coming: the factor falls (never rises) and the arm stops once the person is within the
+    separation at standstill; the cause names the person and the arm. Leaving: full speed
+    again within 1.5 s of the separation allowing it (the dwell and the rise). The right arm,
+    far away, keeps its full speed.
+    """
+    sim = Cell(cell, cfg)
+    sim.qd['scara_left'] = np.array([1.5, -1.0, 0.0])  # planned: swinging
+    sim.run(2.0)
+    start = np.array([3.5, -8.0])
+    stand = np.array([3.5, -3.3])
+    speed = 1.4
+    walk = np.linalg.norm(stand - start) / speed
+    t0 = sim.time
+
+    def where(t):
+        s = t - t0
+        if s < walk:
+            return start + (stand - start) * s / walk
+        if s < walk + 3.0:
+            return stand
+        return stand + (start - stand) * min(1.0, (s - walk - 3.0) / walk)
+
+    def person(t):
+        p = where(t)
+        return legs(p[0], p[1], math.pi / 2)
+
+    decisions = sim.run(2 * walk + 6.0, person)
+    s = scale(decisions)
+    left = [d.arm('scara_left') for d in decisions]
+    coming = s[:int((walk + 3.0) / TICK)]
+    assert np.all(np.diff(coming) <= 1e-12)
+    assert coming[0] == 1.0 and coming[-1] == 0.0
+    stopped = next(a for a in left if a.stop)
+    assert 'protective stop' in stopped.cause and 'scara_left' in stopped.cause
+    # resume: within 1.5 s of the first decision whose separation allows full speed
+    allowed = next(k for k, a in enumerate(left) if k > len(coming) and a.required >= 1.0)
+    full = next(k for k in range(allowed, len(s)) if s[k] >= 1.0)
+    assert (full - allowed) * TICK <= 1.5
+    assert decisions[-1].arm('scara_right').scale == 1.0  # the far arm kept working
+
+
+def test_the_monitor_reads_scans_not_where_the_person_is(cell, cfg):
+    """Two persons are found where the scans put them: tracked columns, not true bodies."""
+    sim = Cell(cell, cfg)
+    sim.run(1.0, lambda t: legs(-2.0, -5.0) + legs(6.0, 5.0))
+    persons = sim.monitor.persons(sim.time)
+    assert len(persons) == 2
+    found = sorted(tuple(np.round(p.position, 1)) for p in persons)
+    assert found[0] == pytest.approx((-2.0, -5.0), abs=0.15)
+    assert found[1] == pytest.approx((6.0, 5.0), abs=0.15)
+
+
+def test_ghost_points_do_not_slow_the_arms(cell, cfg):
+    """Spurious single returns (about one a scan) never change the factor of an empty cell."""
+    sim = Cell(cell, cfg, seed=3, ghosts=0.001)
+    s = scale(sim.run(6.0))
+    assert np.all(s[int(1.3 / TICK):] == 1.0)
+
+
+def test_a_held_item_at_the_quill_is_muted(cell, cfg):
+    """An item under the left quill, in the scan plane off the belt, is the arm, not a person."""
+    sim = Cell(cell, cfg)
+    sim.q['scara_left'] = np.array([-0.4, 1.0, 0.5])
+    tool = fk(cell.leader, sim.q['scara_left'])[:2]
+    assert abs(tool[1]) > 1.0  # off the belt
+    s = scale(sim.run(3.0, lambda t: [(tool[0], tool[1], 0.07)]))
+    assert s[-1] == 1.0 and not sim.monitor.tracker.tracks
+
+
+def test_governor_falls_at_the_braking_rate_and_rises_after_the_dwell():
+    """Falling: at most the braking rate; rising: after the dwell, at the resume rate."""
+    gov = ScaleGovernor(dwell=0.2, resume_rate=1.0)
+    gov.scale = 1.0
+    gov.update(0.0, 1.0, 1.0, 3.0)
+    assert gov.update(0.1, 0.2, 0.2, 3.0) == pytest.approx(0.7)  # 3 /s for 0.1 s
+    assert gov.update(0.2, 0.2, 0.2, 3.0) == pytest.approx(0.4)
+    assert gov.update(0.3, 0.2, 0.2, 3.0) == pytest.approx(0.2)  # not below what is allowed
+    assert gov.update(0.4, 0.0, 0.0, 3.0) == 0.0  # a stop is immediate
+    assert gov.update(0.5, 1.0, 1.0, 3.0) == 0.0  # the dwell starts
+    assert gov.update(0.65, 1.0, 1.0, 3.0) == 0.0
+    assert gov.update(0.8, 1.0, 1.0, 3.0) == pytest.approx(0.1)  # 0.1 s past the dwell
+    assert gov.update(2.0, 1.0, 1.0, 3.0) == 1.0
+
+
+@settings(max_examples=50, deadline=None)
+@given(level=st.floats(0.2, 0.8), wobble=st.floats(0.0, 0.02), seed=st.integers(0, 99))
+def test_governor_does_not_chatter(level, wobble, seed):
+    """A separation wobbling around one level moves the factor one way, not back and forth."""
+    rng = np.random.default_rng(seed)
+    gov = ScaleGovernor(dwell=0.2, resume_rate=1.0)
+    out = []
+    for k in range(300):
+        required = level + rng.uniform(-wobble, wobble)
+        relaxed = required - 0.05  # the hysteresis: 0.1 m is worth about this much
+        out.append(gov.update(k * TICK, required, relaxed, 3.0))
+    turns = np.count_nonzero(np.diff(np.sign(np.diff(out))[np.diff(out) != 0]))
+    assert turns <= 2
