@@ -144,6 +144,10 @@ class ScaledClock:
         """
         return self._planned
 
+    def full_speed(self) -> None:
+        """Run at ``s = 1`` from now, at once (a brake: it is planned from the arm's state)."""
+        self.scale, self.rate, self._fall = 1.0, 0.0, None
+
     def restart(self, time: float) -> None:
         """Set the trajectory time to ``time`` (no lag), keeping ``s``: a new trajectory."""
         self.time = float(time)

@@ -15,8 +15,19 @@ limits; the simulator applies :attr:`Servo.tau` until the next tick.
 The emergency stop is the servo's too (:meth:`Servo.set_estop`): every arm brakes at its
 acceleration limits (:func:`scara_collab.core.safety.braking`) and holds, and while it is set
 a new trajectory is run only if it parts the arms (:meth:`Servo.check_recovery`).
+
+**Speed scaling.** An arm asked to run at a factor ``s < 1`` (:meth:`Servo.scale`) gets a
+trajectory clock of its own (:class:`scara_collab.core.scaled_clock.ScaledClock`): its
+trajectory time advances at ``s`` (changed only as fast as the joints' acceleration limits
+allow), its references are sampled at that time and scaled by the chain rule, and a move
+waiting for its start starts when that clock reaches the start. The committed-motion model
+keeps the lag each clock has built up (:attr:`scara_collab.core.motion.ArmMotion.lag`). A
+brake is never slowed. An arm whose clock could not slow down as fast as braking would have
+(:attr:`scara_collab.core.scaled_clock.ScaledSample.held_back`) is named in
+:attr:`Servo.held_back` for the simulator's owner to brake. An arm never slowed has no clock
+and runs on sim time, as before any scaling.
 """
-from typing import Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -25,6 +36,7 @@ from scara_collab.core import safety
 from scara_collab.core.model import ArmModel
 from scara_collab.core.motion import CellMotion, Move
 from scara_collab.core.planning import Timeline
+from scara_collab.core.scaled_clock import ScaledClock
 from scara_collab.sim.controllers import ComputedTorqueController, joint_gains, PidController
 from scara_collab.sim.reference import HermiteReference, TrajectoryError, validate_trajectory
 
@@ -75,6 +87,16 @@ class Servo:
         self.ref_q = np.array(q, dtype=float)
         self.ref_qd = np.zeros_like(self.ref_q)
         self.ref_qdd = np.zeros_like(self.ref_q)
+        #: each arm's speed factor asked (:meth:`scale`), 1 = full speed
+        self.factors: Dict[str, float] = {name: 1.0 for name in self.names}
+        #: the trajectory clocks of the arms slowed at least once
+        self.clocks: Dict[str, ScaledClock] = {}
+        #: arms whose path-keeping stop fell behind braking at the last tick (their owner brakes)
+        self.held_back: List[str] = []
+
+    def scale(self, robot: str, factor: float) -> None:
+        """Ask ``robot``'s trajectories to run at ``factor`` of their speed, in [0, 1]."""
+        self.factors[robot] = min(max(float(factor), 0.0), 1.0)
 
     def update(self, now: float, q: np.ndarray, qd: np.ndarray, payload: np.ndarray) -> None:
         """Sample the references at ``now`` (s) and set :attr:`tau` for the measured state.
@@ -82,20 +104,58 @@ class Servo:
         :param q, qd: ``(arms, 3)`` measured joints; :param payload: kg held per arm.
         """
         poses = dict(zip(self.names, q))
+        self._run_clocks(now)
         ended = {}
         for robot, event, move, _ in self.motion.advance(now, poses):
             if event == 'finished':
                 ended[robot] = move  # sampled once more: its last point, at rest
         for a, robot in enumerate(self.names):
             move = self.motion[robot].running or ended.get(robot)
-            if move is None or move.ref is None or now < move.start:
+            clock = self.clocks.get(robot)
+            at = now if clock is None else clock.tau
+            if move is None or move.ref is None or at < move.start:
                 continue
-            self.ref_q[a], self.ref_qd[a], self.ref_qdd[a] = move.ref.sample(now)
+            if clock is None:
+                self.ref_q[a], self.ref_qd[a], self.ref_qdd[a] = move.ref.sample(now)
+            else:  # the chain rule: the path at tau, run at s
+                pos, vel, acc = move.ref.sample(at)
+                s, rate = clock.scale, clock.rate
+                self.ref_q[a], self.ref_qd[a], self.ref_qdd[a] = pos, vel * s, acc * s * s + vel * rate
         if self.control_mode == 'pid':
             tau = self._pid(q, qd, self.ref_q, self.ref_qd, self.dt)
         else:
             tau = self._ct(q, qd, self.ref_q, self.ref_qd, self.ref_qdd, payload)
         self.tau = np.minimum(np.maximum(tau, -self.effort), self.effort)
+
+    def _run_clocks(self, now: float) -> None:
+        """Advance every slowed arm's trajectory clock to ``now``; keep its lag in the model.
+
+        An arm gets its clock when it is first asked to run below full speed. Its factor moves
+        towards the one asked as fast as its running trajectory allows (a brake runs at full
+        speed, at once); an arm that holds has nothing to keep, so its factor follows at once.
+        """
+        self.held_back = []
+        for robot in self.names:
+            clock = self.clocks.get(robot)
+            if clock is None:
+                if self.factors[robot] >= 1.0:
+                    continue
+                arm = self.arms[self.names.index(robot)]
+                clock = self.clocks[robot] = ScaledClock(now, arm.max_velocity,
+                                                         arm.max_acceleration)
+            motion = self.motion[robot]
+            running = motion.running
+            if running is not None and running.braking:
+                clock.full_speed()
+                sample = running.ref.sample
+            elif running is not None and running.ref is not None:
+                sample = running.ref.sample
+            else:
+                sample = _holding
+            cmd = clock.tick(now, self.factors[robot], sample)
+            motion.lag = clock.lag
+            if cmd.held_back:
+                self.held_back.append(robot)
 
     def execute(self, a: int, t: ArrayLike, q: ArrayLike, qd: Optional[ArrayLike],
                 qdd: Optional[ArrayLike], q_now: np.ndarray, qd_now: np.ndarray,
@@ -195,3 +255,11 @@ class Servo:
         if not all(safety.separating(self.arms[a], full, self.arms[b], q[b]) for b in others):
             raise TrajectoryError('emergency stop is active: only a move that takes the arm '
                                   'away from the other one is run')
+
+
+_REST = np.zeros(3)
+
+
+def _holding(tau: float) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return an arm at rest: no velocity to keep within its limits, whatever its factor."""
+    return _REST, _REST, _REST
