@@ -94,7 +94,6 @@ from scara_collab import graph
 from scara_collab.core.config import load_config
 from scara_collab.core.paths import config_dir
 from scara_collab.nodes import lockstep
-from scara_collab.nodes.faults import FaultPlan, parse_faults
 from scara_collab.nodes.recorder import RunRecorder
 from scara_collab.nodes.runner import localhost_by_default, make_executor
 from scara_collab.records.report import format_progress, format_report
@@ -103,7 +102,7 @@ from scara_collab.run import discovery
 from scara_collab.run.console import Console
 from scara_collab.run.graph_client import GraphClient
 from scara_collab.run.liveness import Liveness
-from scara_collab.run.stages import one_process, stages
+from scara_collab.run.stages import crashes, one_process, stages
 from scara_collab.run.supervisor import EXIT_FAILED, EXIT_USAGE, RunEnd, Supervisor
 
 RUN_MODES = graph.LAUNCH_MODES
@@ -195,7 +194,8 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
                    help='inject a fault, e.g. drop:/scara_left/gripper:2 (lose the first 2 '
                    'gripper responses), delay:/scara_right/planner_status:3:0.5, '
                    'drop:/automation_manager/start:1, latency:/joint_states:0.02:0.01 (every '
-                   'message 20 +- 10 ms late, in order); repeatable (scara_collab.nodes.faults)')
+                   'message 20 +- 10 ms late, in order), crash:/pybullet_bridge:30 (its '
+                   'process killed at sim t=30 s); repeatable (scara_collab.run.faults)')
     p.add_argument('--quiet', action='store_true',
                    help='no stage or progress lines; errors and the report only')
     p.add_argument('--ready-timeout', type=float, default=60.0, metavar='S',
@@ -222,10 +222,12 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
         p.error('--launch-rtf must be >= 0')
     if args.feed_interval is not None and not args.feed_interval > 0:
         p.error('--feed-interval must be > 0')
-    try:
-        parse_faults(args.fault)
-    except ValueError as exc:
-        p.error(f'--fault: {exc}')
+    if args.fault:
+        from scara_collab.run.faults import parse_faults
+        try:
+            parse_faults(args.fault)
+        except ValueError as exc:
+            p.error(f'--fault: {exc}')
     if args.cells < 1:
         p.error('--cells must be >= 1')
     if args.line_cell is not None and not 0 <= args.line_cell < args.cells:
@@ -310,7 +312,7 @@ class Launcher:
         self.console = console
         self.with_automation = importlib.util.find_spec(AUTOMATION_MODULE) is not None
         self.stages = stages(args, self.with_automation)
-        self.processes = Supervisor(output, config_dir(), console)
+        self.processes = Supervisor(output, config_dir(), console, crashes(args))
         self.signals: List[str] = []
         self.job_started = False
         self.rtf_released = False
@@ -322,15 +324,18 @@ class Launcher:
         with discovery.super_client() as self.super_client:
             rclpy.init(args=[], context=self.context,
                        signal_handler_options=SignalHandlerOptions.NO)
-            self.recorder = RunRecorder(output, args.mode, profile=args.profile,
-                                        context=self.context, namespace=self.namespace)
+            recorder = RunRecorder
+            if getattr(args, 'fault', []):  # its service calls too (drop:/.../start:1)
+                from scara_collab.run.faults import hook
+                recorder = hook(args.fault)(RunRecorder)
+            self.recorder = recorder(output, args.mode, profile=args.profile,
+                                     context=self.context, namespace=self.namespace)
         self.recorder.extra['lockstep'] = getattr(args, 'lockstep', 'on')
         if getattr(args, 'record', False):
             record_mcap(self.recorder, output, console)
         self.executor = make_executor(context=self.context)
         self.executor.add_node(self.recorder)
-        self.ros = GraphClient(self.recorder, self.executor, console,
-                               FaultPlan(getattr(args, 'fault', [])), self.check, self.signals,
+        self.ros = GraphClient(self.recorder, self.executor, console, self.check, self.signals,
                                args.ready_timeout, self.namespace)
         self.cpu = CpuMeter()
         self._next_poll = self._next_checkpoint = self._next_watch = 0.0
@@ -355,10 +360,15 @@ class Launcher:
 
     # --- supervision -----------------------------------------------------------------------
     def check(self) -> None:
-        """Raise :class:`RunEnd` on a signal, a dead node process or a silent node."""
+        """Raise :class:`RunEnd` on a signal, a dead node process or a silent node.
+
+        A crash that is due (``--fault crash:``) is the supervisor's kill, at every look.
+        """
         if self.signals:
             sig = self.signals[0]
             raise RunEnd(sig, 130 if sig == 'SIGINT' else 143)
+        if self.processes.crashes:
+            self.processes.crash_due(self.recorder.sim_time)
         now = time.monotonic()
         if now < self._next_poll:
             return

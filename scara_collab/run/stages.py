@@ -7,12 +7,17 @@ scara_collab.run.container --node ... --node ...``). With ``--namespace`` every 
 the cell's namespace with the cell's remaps (:func:`scara_collab.graph.ros_args`); a cell of a
 line of cells (``--line-cell K`` of ``--cells N``) also gets its bridge's line parameters and
 its upstream cell's handoff topic (:func:`scara_collab.graph.line_params`).
+
+With ``--fault`` each node process gets the entries the nodes apply (``--fault SPEC`` after
+the entry: :mod:`scara_collab.run.child`, :mod:`scara_collab.run.container`); a crash is the
+supervisor's (:func:`crashes`), and one that names the bridge also makes it pause at that sim
+time (its ``pause_at``), so the supervisor kills it there to the physics step.
 """
 import argparse
 from dataclasses import dataclass, field
 from pathlib import Path
 import sys
-from typing import Dict, List, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from scara_collab import graph
 
@@ -31,6 +36,7 @@ class Stage:
     members: Tuple['Stage', ...] = ()  # --one-process: the stages this process runs
     namespace: str = ''         # the cell's namespace ('' = the root)
     upstream: Tuple[str, ...] = ()  # in a line: the cells upstream, nearest first
+    faults: Tuple[str, ...] = ()  # --fault entries its nodes apply (not the crashes)
 
 
 def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
@@ -64,16 +70,35 @@ def stages(args: argparse.Namespace, with_automation: bool) -> List[Stage]:
     for name, values in graph.line_params(k, cells).items():
         own.setdefault(name, {}).update(values)
     upstream = tuple(graph.line_upstream(k, cells))
-    faults = getattr(args, 'fault', [])
+    faults: Tuple[str, ...] = ()
+    if getattr(args, 'fault', []):  # every node applies the entries naming its endpoints
+        from scara_collab.run.faults import node_entries
+        faults = tuple(node_entries(args.fault))
+        at = crashes(args, namespace).get('pybullet_bridge')
+        if at is not None and 0 < at < float(args.duration):
+            bridge['pause_at'] = repr(float(at))  # where the supervisor kills it
     out = []
     for spec in specs:
         params = dict(common, **by_mode[spec.name], **own.get(spec.name, {}))
-        if faults:  # every node applies the entries naming its own publishers and clients
-            params['faults'] = graph.param_value(faults)
         out.append(Stage(spec.name, spec.entry, spec.configs,
                          spec.ready.describe(spec.name, params, namespace), params,
-                         namespace=namespace, upstream=upstream))
+                         namespace=namespace, upstream=upstream, faults=faults))
     return out
+
+
+def crashes(args: argparse.Namespace, namespace: Optional[str] = None) -> Dict[str, float]:
+    """Return the crashes ``--fault`` asks of this cell's nodes: ``{node name: sim s}``.
+
+    A crash names a node by its fully qualified name (``/cell_1/pybullet_bridge``); those of
+    other cells (a line passes the same entries to every cell) are not this cell's.
+    """
+    if not getattr(args, 'fault', []):
+        return {}
+    from scara_collab.run.faults import crashes as named
+    ns = graph.namespace_of(getattr(args, 'namespace', None) if namespace is None else namespace)
+    prefix = ns + '/'
+    return {name[len(prefix):]: at for name, at in named(args.fault).items()
+            if name.startswith(prefix) and name[len(prefix):] in graph.BY_NAME}
 
 
 def node_args(stage: Stage, config_dir: Path) -> List[str]:
@@ -85,12 +110,17 @@ def node_args(stage: Stage, config_dir: Path) -> List[str]:
 def command(stage: Stage, config_dir: Path) -> List[str]:
     """Return the command line of one stage (or of the one process running ``members``)."""
     if stage.members:
-        cmd = [sys.executable, '-m', stage.entry]
+        cmd = [sys.executable, '-m', stage.entry] + fault_args(stage.members[0].faults)
         for member in stage.members:
             cmd += ['--node', member.entry] + node_args(member, config_dir)
         return cmd
-    return [sys.executable, '-m', 'scara_collab.run.child', stage.entry] + node_args(
-        stage, config_dir)
+    return [sys.executable, '-m', 'scara_collab.run.child', stage.entry] + fault_args(
+        stage.faults) + node_args(stage, config_dir)
+
+
+def fault_args(faults: Sequence[str]) -> List[str]:
+    """Return ``--fault SPEC`` per entry (:func:`scara_collab.run.child.take_faults`)."""
+    return [a for spec in faults for a in ('--fault', spec)]
 
 
 def one_process(members: Sequence[Stage]) -> Stage:
