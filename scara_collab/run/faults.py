@@ -34,8 +34,9 @@ SPEC`` (repeatable), each one of:
 ``crash:<node>:<sim s>``
     the node of that fully qualified name (``/cell_1/pybullet_bridge``) dies at that sim
     time, at once and without a goodbye: the launcher's supervisor sends SIGKILL to the
-    process that runs it (:class:`Crash`; :meth:`scara_collab.run.supervisor.Supervisor.
-    crash_due`).
+    process that runs it (:class:`Crash`; :mod:`scara_collab.run.supervisor`). A crash of the
+    bridge also has the bridge pause there (:func:`scara_collab.run.stages.crashes`), so it
+    dies at that sim time to the physics step.
 
 Names are fully qualified (``/scara_left/gripper``, ``/scara_left/planner_status``).
 
@@ -340,9 +341,8 @@ class FaultPlan:
     def __init__(self, specs: Sequence[str] = ()):
         """Parse ``specs``; nothing is injected yet."""
         self.faults: Dict[str, Tuple[Fault, ...]] = {
-            name: tuple(f for f in faults if not isinstance(f, Crash))
-            for name, faults in parse_faults(specs).items()}
-        self.faults = {name: faults for name, faults in self.faults.items() if faults}
+            name: kept for name, faults in parse_faults(specs).items()
+            if (kept := tuple(f for f in faults if not isinstance(f, Crash)))}
         #: per name, how many messages each of its faults still takes (a drop's or a delay's)
         self._left: Dict[str, List[int]] = {
             name: [getattr(f, 'count', 0) for f in faults] for name, faults in self.faults.items()}
@@ -436,6 +436,8 @@ class FaultyPublisher:
 
     def __getattr__(self, attr: str):
         """Return the wrapped publisher's attribute (``topic_name``, counts, ``handle``)."""
+        if attr == 'publisher':  # not set yet: no recursion
+            raise AttributeError(attr)
         return getattr(self.publisher, attr)
 
     def publish(self, msg) -> None:
@@ -476,6 +478,8 @@ class FaultyClient:
 
     def __getattr__(self, attr: str):
         """Return the wrapped client's attribute (``srv_name``, ``service_is_ready``, ...)."""
+        if attr == 'client':  # not set yet: no recursion
+            raise AttributeError(attr)
         return getattr(self.client, attr)
 
     def call_async(self, request) -> Future:
