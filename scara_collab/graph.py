@@ -48,7 +48,7 @@ Qos(depth=1, latched=True)
 from dataclasses import dataclass, field, replace
 import importlib
 from pathlib import Path
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 PACKAGE = 'scara_collab'
 JOB_MODES = ('single', 'collaborative', 'mirrored')
@@ -209,10 +209,19 @@ class NodeSpec:
     optional: bool = False     # started only when asked for (the viewer, transforms)
     lockstep: bool = False     # answers clock on sim/lockstep (scara_collab.nodes.lockstep)
 
-    def build(self, **kwargs):
-        """Build the node in this process: ``Class(**fixed, **kwargs)`` (``context``, ...)."""
+    def node_class(self) -> type:
+        """Return the class that builds the node (imported on call)."""
         module, cls = self.component.split(':')
-        return getattr(importlib.import_module(module), cls)(**self.fixed, **kwargs)
+        return getattr(importlib.import_module(module), cls)
+
+    def build(self, wrap: Optional[Callable[[type], type]] = None, **kwargs):
+        """Build the node in this process: ``Class(**fixed, **kwargs)`` (``context``, ...).
+
+        :param wrap: turns the class into the one built (the launcher's ``--fault``:
+            :func:`scara_collab.run.faults.hook`); None builds the class itself.
+        """
+        cls = self.node_class()
+        return (cls if wrap is None else wrap(cls))(**self.fixed, **kwargs)
 
 
 def _n(module: str) -> str:

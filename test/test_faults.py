@@ -2,36 +2,59 @@
 
 The latency's bookkeeping (:class:`LatencyLine`) is fed made-up times; its delivery on a
 node's sim clock is driven by ``/clock`` messages the test publishes; the bridge's
-``/joint_states`` publisher is checked for both its direct and its late path.
+``/joint_states`` publisher is checked for both its direct and its late path. The hook wraps
+a node from outside (no production module imports the fault module, and without faults it is
+not even loaded); a crash is the supervisor's SIGKILL at a sim time.
 """
+import ast
+from pathlib import Path
+import subprocess
+import sys
+import time
+
 import numpy as np
 import pytest
+from rclpy.client import Client
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.publisher import Publisher
 from ros_harness import Graph, params_args
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger
 
+from scara_collab import graph
 from scara_collab.nodes import conversions as conv
-from scara_collab.nodes.faults import (declare_faults, Fault, FaultPlan, FaultyPublisher,
-                                       LatencyLine, parse_faults)
 from scara_collab.nodes.sim_timer import every
+from scara_collab.run.faults import (Crash, crashes, Delay, Drop, FaultPlan, FaultyClient,
+                                     FaultyPublisher, hook, Latency, LatencyLine, Loss,
+                                     node_entries, parse_faults, plan_of, Repeat, with_faults)
+
+PACKAGE = Path(__file__).resolve().parents[1] / 'scara_collab'
 
 
 # --- parsing -------------------------------------------------------------------------------
-def test_the_three_forms_parse():
-    """drop, delay and latency entries parse into their faults; empty entries are ignored."""
+def test_the_forms_parse():
+    """Every form parses into its typed record, one meaning per field; empty entries go."""
     faults = parse_faults(['drop:/a/gripper:2', '', 'delay:/a/status:3:0.5',
                            'latency:/joint_states:0.02:0.01', 'latency:/b/status:0.03:0.03',
-                           'latency:/c:0:0', 'drop:/joint_states:1'])
-    assert faults['/a/gripper'] == [Fault('drop', 2)]
-    assert faults['/a/status'] == [Fault('delay', 3, 0.5)]
-    assert faults['/joint_states'] == [Fault('latency', 0, 0.02, 0.01), Fault('drop', 1)]
-    assert faults['/b/status'] == [Fault('latency', 0, 0.03, 0.03)]  # jitter == mean: from 0
-    assert faults['/c'] == [Fault('latency', 0, 0.0, 0.0)]
+                           'latency:/c:0:0', 'drop:/joint_states:1', 'loss:/d:0.3',
+                           'repeat:/d:1', 'crash:/cell_1/pybullet_bridge:35'])
+    assert faults['/a/gripper'] == [Drop(2)]
+    assert faults['/a/status'] == [Delay(3, 0.5)]
+    assert faults['/joint_states'] == [Latency(0.02, 0.01), Drop(1)]
+    assert faults['/b/status'] == [Latency(0.03, 0.03)]  # jitter == mean: from 0
+    assert faults['/c'] == [Latency(0.0, 0.0)]
+    assert faults['/d'] == [Loss(0.3), Repeat(1.0)]
+    assert faults['/cell_1/pybullet_bridge'] == [Crash(35.0)]
     plan = FaultPlan(['latency:/joint_states:0.02:0.01'])
     assert set(plan.latency) == {'/joint_states'}
     assert plan.next('/joint_states') is None  # a latency is the line's business, not next's
+    # the crashes are the supervisor's: a node's plan and its entries leave them out
+    specs = ['crash:/cell_1/pybullet_bridge:35', 'drop:/a/gripper:2']
+    assert crashes(specs) == {'/cell_1/pybullet_bridge': 35.0}
+    assert node_entries(specs) == ['drop:/a/gripper:2']
+    assert set(FaultPlan(specs).faults) == {'/a/gripper'}
 
 
 @pytest.mark.parametrize('spec, reason', [
@@ -49,6 +72,10 @@ def test_the_three_forms_parse():
     ('drop:/a:1.5', 'N >= 0'),
     ('delay:/a:1:-0.5', 'seconds >= 0'),
     ('delay:/a:1', 'fully qualified name'),
+    ('loss:/a:1.5', '0 <= p <= 1'),
+    ('repeat:/a:-0.1', '0 <= p <= 1'),
+    ('crash:/a:-1', 'sim seconds >= 0'),
+    ('crash:/a', 'fully qualified name'),
 ])
 def test_a_malformed_entry_is_refused_with_the_reason(spec, reason):
     """Each malformed entry is refused with a ValueError that names it and the rule."""
@@ -129,13 +156,13 @@ def g():
 
 
 def test_a_publisher_no_entry_names_publishes_directly():
-    """No entry for its topic: ``publish`` is the publisher's own (no cost on a hot path)."""
+    """No entry for its topic: the plan hands back the publisher itself (no cost on a hot path)."""
     spy = Spy(None, '/joint_states')
     for specs in ([], ['drop:/scara_left/gripper:2', 'latency:/scara_left/planner_status:1:0']):
-        direct = FaultyPublisher(None, FaultPlan(specs), spy)
-        assert direct.publish == spy.publish and direct.topic_name == '/joint_states'
-    faulty = FaultyPublisher(None, FaultPlan(['latency:/joint_states:0.02:0.01']), spy)
-    assert faulty.publish != spy.publish
+        assert FaultPlan(specs).publisher(None, spy) is spy
+    faulty = FaultPlan(['latency:/joint_states:0.02:0.01']).publisher(None, spy)
+    assert isinstance(faulty, FaultyPublisher) and faulty.publish != spy.publish
+    assert faulty.topic_name == '/joint_states'  # the rest is the publisher's
 
 
 def test_on_sim_time_every_message_leaves_late_in_order_from_one_queue(g):
@@ -146,12 +173,11 @@ def test_on_sim_time_every_message_leaves_late_in_order_from_one_queue(g):
     gains one sim timer, however many messages wait. While the clock stands still, the
     messages in flight arrive within half a second (wall).
     """
-    node = g.add(Node('late', context=g.context, parameter_overrides=[
-        Parameter('use_sim_time', value=True),
-        Parameter('faults', value=['latency:/late/status:0.02:0.01'])]))
-    plan = declare_faults(node)
+    node = g.add(with_faults(Node, ['latency:/late/status:0.02:0.01'])(
+        'late', context=g.context, parameter_overrides=[Parameter('use_sim_time', value=True)]))
+    plan = plan_of(node)
     spy = Spy(node, '/late/status')
-    pub = FaultyPublisher(node, plan, spy)
+    pub = plan.publisher(node, spy)
     clock = g.probe.create_publisher(Clock, '/clock', 10)
     assert g.spin_until(lambda: clock.get_subscription_count() > 0, 10.0)
     sent = []
@@ -182,20 +208,24 @@ def test_the_bridge_publishes_joint_states_directly_or_late_in_order(g):
     order at the first value of the bridge's sim clock at or after its due time (the line's,
     drawn at the send).
     """
-    from scara_collab.nodes.pybullet_bridge import PyBulletBridge
+    spec = graph.node('pybullet_bridge')
 
-    def bridge(faults):
-        return PyBulletBridge(context=g.context, cli_args=params_args(
+    def bridge(wrap):
+        return spec.build(wrap, context=g.context, cli_args=params_args(
             'simulation', 'controllers', overrides={
-                'real_time_factor': 1.0, 'feed_interval': 0.0, 'faults': faults}))
-    plain = bridge([''])
-    try:
-        assert plain.outputs.state_pub.publish == plain.outputs.state_pub.publisher.publish
+                'real_time_factor': 1.0, 'feed_interval': 0.0}))
+    plain = bridge(None)
+    try:  # the class itself, its own rclpy publisher
+        assert type(plain) is spec.node_class() and plan_of(plain) is None
+        assert type(plain.outputs.state_pub) is Publisher
     finally:
         plain.destroy_node()
-    late = g.add(bridge(['latency:/joint_states:0.02:0.01']))
+    late = g.add(bridge(hook(['latency:/joint_states:0.02:0.01'])))
+    assert isinstance(late, spec.node_class()) and type(late).__name__ == 'PyBulletBridge'
+    assert isinstance(late.outputs.state_pub, FaultyPublisher)
+    assert type(late.outputs.clock_pub) is Publisher  # no entry names it: plain
     spy = late.outputs.state_pub.publisher = Spy(late, '/joint_states')  # what leaves, and when
-    line, dues = late.faults.latency['/joint_states'], []
+    line, dues = plan_of(late).latency['/joint_states'], []
     before = line.sent  # the state the bridge sent as it started (due unknown here)
     push = line.push
     line.push = lambda now, item: dues.append(push(now, item)) or dues[-1]
@@ -210,4 +240,157 @@ def test_the_bridge_publishes_joint_states_directly_or_late_in_order(g):
     seen = np.array(seen)
     first = [seen[seen >= d - 1e-9].min() for d in due]
     assert left.tolist() == pytest.approx(first), 'at the first clock at or after the due time'
-    assert late.faults.injected['/joint_states'] >= 100
+    assert plan_of(late).injected['/joint_states'] >= 100
+
+
+# --- the hook: from outside, per node --------------------------------------------------------
+def test_each_node_has_its_own_plan_and_the_first_n_are_its_own(g):
+    """Two nodes built with one hook: each loses its own first two messages of the topic."""
+    wrap = hook(['drop:/shared/status:2', 'crash:/a:1'])
+    nodes = [g.add(wrap(Node)(name, context=g.context)) for name in ('a', 'b')]
+    plans = [plan_of(n) for n in nodes]
+    assert plans[0] is not plans[1] and set(plans[0].faults) == {'/shared/status'}
+    spies = [Spy(n, '/shared/status') for n in nodes]
+    pubs = [p.publisher(n, s) for p, n, s in zip(plans, nodes, spies)]
+    for k in range(5):
+        pubs[0].publish(k)
+    pubs[1].publish(10)
+    assert [m for _, m in spies[0].out] == [2, 3, 4] and spies[1].out == []
+    # every publisher and client the node makes goes through its plan
+    real = nodes[0].create_publisher(JointState, '/shared/status', 10)
+    assert isinstance(real, FaultyPublisher) and isinstance(real.publisher, Publisher)
+    assert type(nodes[0].create_publisher(JointState, '/other', 10)) is Publisher
+
+
+def test_a_lost_response_never_completes_its_future_and_the_next_one_does(g):
+    """``drop:/<service>:1``: the server answers, the first response never arrives.
+
+    A repeated response runs the future's callbacks again; a client no entry names is the
+    node's own.
+    """
+    server = g.add(Node('server', context=g.context))
+    served = []
+
+    def answer(req, res):
+        served.append(1)
+        res.success, res.message = True, f'answer {len(served)}'
+        return res
+    server.create_service(Trigger, '/ask', answer)
+    node = g.add(with_faults(Node, ['drop:/ask:1', 'repeat:/again:1'])('client',
+                                                                       context=g.context))
+    cli = node.create_client(Trigger, 'ask')
+    assert isinstance(cli, FaultyClient) and cli.srv_name == 'ask'
+    assert type(node.create_client(Trigger, '/plain')) is Client
+    assert g.spin_until(cli.service_is_ready, 10.0)
+    lost = cli.call_async(Trigger.Request())
+    assert g.spin_until(lambda: len(served) == 1, 10.0)
+    assert not g.spin_until(lost.done, 0.5), 'the lost response arrived'
+    got = cli.call_async(Trigger.Request())
+    assert g.spin_until(got.done, 10.0) and got.result().message == 'answer 2'
+    assert plan_of(node).injected == {'/ask': 1}
+    server.create_service(Trigger, '/again', answer)
+    twice = node.create_client(Trigger, '/again')
+    assert g.spin_until(twice.service_is_ready, 10.0)
+    seen = []
+    future = twice.call_async(Trigger.Request())
+    future.add_done_callback(lambda f: seen.append(f.result().message))
+    assert g.spin_until(lambda: len(seen) == 2, 10.0) and seen[0] == seen[1] == 'answer 3'
+
+
+def _imports(path: Path):
+    """Yield the modules ``path`` imports (``from x import y`` as ``x`` and ``x.y``)."""
+    for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+        if isinstance(node, ast.Import):
+            yield from (a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            yield node.module
+            yield from (f'{node.module}.{a.name}' for a in node.names)
+
+
+def test_no_production_module_imports_the_fault_injection():
+    """Nodes, core and sim know nothing of the fault module: it wraps them from outside."""
+    assert not (PACKAGE / 'nodes' / 'faults.py').exists()
+    offenders = [f'{path.relative_to(PACKAGE.parent)}: {name}'
+                 for layer in ('nodes', 'core', 'sim') for path in (PACKAGE / layer).rglob('*.py')
+                 for name in _imports(path) if name.split('.')[-1] == 'faults'
+                 or name.startswith('scara_collab.run')]
+    assert offenders == []
+
+
+def test_without_faults_the_fault_module_is_not_loaded():
+    """The launcher, its node processes and the in-process job import it only for faults."""
+    modules = ['scara_collab.run.launcher', 'scara_collab.run.child',
+               'scara_collab.run.container', 'scara_collab.run.stages',
+               'scara_collab.run.supervisor', 'scara_collab.run.options', 'scara_collab.bench.job']
+    modules += sorted({spec.component.split(':')[0] for spec in graph.NODES})
+    code = (f'import importlib, sys\nfor m in {modules!r}:\n    importlib.import_module(m)\n'
+            'from scara_collab.run import options, stages\n'
+            'stages.stages(options.parse_options([]), True)\n'
+            "print('scara_collab.run.faults' in sys.modules)")
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         timeout=120, cwd=PACKAGE.parent)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == 'False'
+
+
+# --- the launcher's side: entries to the processes, crashes to the supervisor ----------------
+def test_the_processes_get_the_node_entries_and_the_bridge_pauses_where_it_dies():
+    """Each node process gets ``--fault`` pairs before its ``--ros-args``, never a crash.
+
+    A crash of this cell's bridge also becomes its ``pause_at``; another cell's is not this
+    cell's.
+    """
+    from scara_collab.run import container, stages as plan
+    from scara_collab.run.child import take_faults
+    from scara_collab.run.options import parse_options
+    args = parse_options(['--duration', '60', '--fault', 'drop:/scara_left/gripper:1',
+                          '--fault', 'crash:/pybullet_bridge:35', '--fault',
+                          'crash:/cell_1/left_planner:5'])
+    assert plan.crashes(args) == {'pybullet_bridge': 35.0}
+    stages = plan.stages(args, True)
+    assert stages[0].params['pause_at'] == '35.0'
+    cmd = plan.command(stages[1], Path('/cfg'))
+    assert take_faults(cmd[4:]) == (['drop:/scara_left/gripper:1'],
+                                    plan.node_args(stages[1], Path('/cfg')))
+    one = plan.command(plan.one_process(stages), Path('/cfg'))
+    faults, rest = take_faults(one[3:])
+    assert faults == ['drop:/scara_left/gripper:1'] and container.parse(rest)[0][0] == \
+        stages[0].entry
+    args = parse_options(['--duration', '60', '--cells', '3', '--line-cell', '1',
+                          '--fault', 'crash:/cell_1/pybullet_bridge:35',
+                          '--fault', 'crash:/cell_2/pybullet_bridge:20'])
+    assert plan.crashes(args) == {'pybullet_bridge': 35.0}
+    assert plan.stages(args, True)[0].params['pause_at'] == '35.0'
+    assert all(s.faults == () for s in plan.stages(args, True))
+    assert parse_options(['--duration', '30', '--fault', 'crash:/pybullet_bridge:45']
+                         ).faults  # beyond the run: it never comes
+    assert plan.stages(parse_options(['--duration', '30', '--fault',
+                                      'crash:/pybullet_bridge:45']), True)[0].params[
+        'pause_at'] == '30.0'
+
+
+def test_the_supervisor_kills_the_process_when_sim_time_reaches_the_crash(tmp_path):
+    """SIGKILL at T, not before; the log and the run's end say so."""
+    from scara_collab.run.console import Console
+    from scara_collab.run.stages import Stage
+    from scara_collab.run.supervisor import Child, RunEnd, Supervisor
+    console = Console(tmp_path / 'launch.log', quiet=True)
+    sup = Supervisor(tmp_path, tmp_path, console, {'left_planner': 5.0})
+    log = tmp_path / 'left_planner.log'
+    proc = subprocess.Popen(['sleep', '60'])
+    try:
+        sup.children.append(Child(Stage('left_planner', 'm:f', (), 'ready'), proc, log,
+                                  open(log, 'wb'), time.monotonic()))
+        sup.crash_due(4.99)
+        sup.check()
+        assert proc.poll() is None and sup.crashes
+        sup.crash_due(5.0)
+        assert proc.returncode == -9 and not sup.crashes
+        with pytest.raises(RunEnd, match=r'node left_planner was killed at sim t=5\.000 s'):
+            sup.check()
+        sup.children[0].log_file.close()
+        assert 'fault injection: crash of left_planner at sim t=5.000 s' in log.read_text()
+    finally:
+        proc.kill()
+        proc.wait()
+        console.close()

@@ -1,7 +1,7 @@
 """The real-time benchmark's bookkeeping: its rows, its faults, its page (no launcher run)."""
 from scara_collab.bench import realtime
 from scara_collab.bench.launched import row
-from scara_collab.nodes.faults import parse_faults
+from scara_collab.run.faults import parse_faults
 
 
 def _summary(**over):

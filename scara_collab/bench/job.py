@@ -16,7 +16,17 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
             seed: Optional[int] = None, faults: Sequence[str] = (),
             during: Optional[Callable[[InProcess, Dict[str, object], float], None]] = None
             ) -> Dict[str, object]:
-    """Run ``mode`` for ``duration`` sim s in one process; ``during(g, nodes, t)`` each turn."""
+    """Run ``mode`` for ``duration`` sim s in one process; ``during(g, nodes, t)`` each turn.
+
+    ``faults``: ``--fault`` entries, every node built with their hook
+    (:func:`scara_collab.run.faults.hook`); a crash needs the launcher's supervisor.
+    """
+    wrap = None
+    if faults:
+        from scara_collab.run.faults import crashes, hook
+        if crashes(faults):
+            raise ValueError(f'crash faults need the launcher (a process to kill): {faults}')
+        wrap = hook(faults)
     feed = default_feed() if feed is None else float(feed)
     seed = int(load_config('simulation')['item_seed'] if seed is None else seed)
     g = InProcess()
@@ -26,9 +36,8 @@ def run_job(mode: str, duration: float, feed: Optional[float] = None,
     params['automation_manager']['auto_start'] = 'true'
     nodes = {}
     for spec in graph.job_nodes():
-        own = dict(params[spec.name], **({'faults': list(faults)} if faults else {}))
-        nodes[spec.name] = g.add(spec.build(context=g.context,
-                                            cli_args=graph.ros_args(spec.configs, own)))
+        nodes[spec.name] = g.add(spec.build(wrap, context=g.context, cli_args=graph.ros_args(
+            spec.configs, params[spec.name])))
     bridge, job = nodes['pybullet_bridge'], nodes['automation_manager']
     wall = time.monotonic()
     try:

@@ -53,7 +53,6 @@ from scara_collab.core.planning import path_options, plan_path
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
-from scara_collab.nodes.faults import call_with_faults, declare_faults
 from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import DEFAULT, LATCHED
@@ -103,7 +102,6 @@ class AutomationManager(Node):
                 raise ValueError(str(exc)) from None
 
         self.job = SortingJob(self.cell, self.settings, plan, log_to(self.get_logger()))
-        self.faults = declare_faults(self)
         self.target_pub = {a.name: self.create_publisher(PointStamped, f'{a.name}/target', 10)
                            for a in self.cell.arms}
         self.plan_pub = {a.name: self.create_publisher(JointTrajectory,
@@ -280,11 +278,17 @@ class AutomationManager(Node):
                 key = ('gripper', cmd.robot, cmd.token)
                 if self.lockstep is not None:  # the grip acts before the bridge steps on
                     self.lockstep.await_reply(key)
-                call_with_faults(self, self.faults, self.grippers[cmd.robot],
-                                 SetBool.Request(data=cmd.grasp),
-                                 lambda res, t=cmd.token, k=key: self._on_grip(t, k, res))
+                future = self.grippers[cmd.robot].call_async(SetBool.Request(data=cmd.grasp))
+                future.add_done_callback(lambda f, t=cmd.token, k=key: self._on_grip(t, k, f))
 
-    def _on_grip(self, token: int, key: tuple, res: SetBool.Response) -> None:
+    def _on_grip(self, token: int, key: tuple, future) -> None:
+        """Hand the gripper's answer to the job; a failed call is a lost one (asked again)."""
+        try:
+            res = future.result()
+        except Exception:  # noqa: B902 - a failed call is a lost answer: the job asks again
+            return
+        if res is None:  # cancelled
+            return
         self.job.on_grip(token, res.success, res.message)
         if self.lockstep is not None:
             self.lockstep.reply(key)

@@ -1,6 +1,6 @@
 """What the simulator bridge publishes on sim time, each at its own rate.
 
-``/clock`` (``clock_rate``), ``joint_states`` (``state_rate``; through the fault injection),
+``/clock`` (``clock_rate``), ``joint_states`` (``state_rate``),
 ``conveyor/items`` (``markers_rate``) and the bridge's diagnostics (1 Hz), each on its own grid
 of sim time: :meth:`BridgeOutputs.publish_due` publishes whatever has fallen due, in that
 order, and :meth:`BridgeOutputs.steps_to_next` tells the bridge how far it may step before the
@@ -19,7 +19,6 @@ from scara_collab.core.model import CellModel
 from scara_collab.graph import CLOCK
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes.diagnostics import Diagnostics
-from scara_collab.nodes.faults import FaultyPublisher
 from scara_collab.sim.cell_sim import CellSim
 
 STATE_QOS = QoSProfile(depth=10)
@@ -34,7 +33,7 @@ class BridgeOutputs:
     """
 
     def __init__(self, node: Node, cell: CellModel, sim: CellSim, rates: Dict[str, float],
-                 faults, status: Callable[[], object], on_clock: Callable[[], None]):
+                 status: Callable[[], object], on_clock: Callable[[], None]):
         """Create the publishers; everything is due at once."""
         self.cell, self.sim, self._status, self._on_clock = cell, sim, status, on_clock
         self.periods = {'state': 1.0 / rates['state'], 'clock': 1.0 / rates['clock'],
@@ -45,8 +44,7 @@ class BridgeOutputs:
         self._origin = {k: 0.0 for k in self.periods}
         self._count = {k: 0 for k in self.periods}
         self.clock_pub = node.create_publisher(ClockMsg, CLOCK, STATE_QOS)
-        self.state_pub = FaultyPublisher(node, faults, node.create_publisher(
-            JointState, 'joint_states', STATE_QOS))  # direct when no fault names it
+        self.state_pub = node.create_publisher(JointState, 'joint_states', STATE_QOS)
         self.items_pub = node.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
         self.diagnostics = Diagnostics(node)
 

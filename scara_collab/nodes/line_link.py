@@ -32,7 +32,6 @@ from rclpy.node import Node
 from scara_collab.core.line import Bypass, Inbox, Outbox, Section
 from scara_collab.graph import LINE_HANDOFF, LINE_UPSTREAM, LINE_UPSTREAM2
 from scara_collab.nodes import protocol as proto
-from scara_collab.nodes.faults import FaultPlan, FaultyPublisher
 from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.qos import EVENTS
 
@@ -49,15 +48,13 @@ class LineLink:
     :param upstream: a cell upstream hands items on to this one.
     :param downstream: a cell downstream takes the items that pass this belt's end.
     :param on_news: called when a message from upstream may let the cell step on.
-    :param faults: the bridge's fault plan (``loss:``, ``repeat:``, ... on ``line/handoff``).
     :param timeout: wall s of silence after which the cell upstream is taken for dead.
     """
 
     ID_BLOCK = 1_000_000
 
     def __init__(self, node: Node, sim, cell: int, upstream: bool, downstream: bool,
-                 on_news: Callable[[], None], faults: Optional[FaultPlan] = None,
-                 timeout: float = 5.0):
+                 on_news: Callable[[], None], timeout: float = 5.0):
         """Join the line: the conveyor hands on (or misses) and numbers its items."""
         self.node, self.sim, self.cell = node, sim, int(cell)
         self.upstream, self.downstream = bool(upstream), bool(downstream)
@@ -75,8 +72,8 @@ class LineLink:
         self._heard: Optional[float] = None  # monotonic s of the last message from upstream
         self._last: Optional[proto.LineHandoff] = None
         sim.conveyor.join_line(self.downstream, self.cell * self.ID_BLOCK + 1)
-        self._pub = (FaultyPublisher(node, faults or FaultPlan(), node.create_publisher(
-            DiagnosticStatus, LINE_HANDOFF, EVENTS)) if self.downstream else None)
+        self._pub = (node.create_publisher(DiagnosticStatus, LINE_HANDOFF, EVENTS)
+                     if self.downstream else None)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         if self.downstream:  # a heartbeat: paused or waiting, the cell is alive
             node.create_timer(HEARTBEAT, guarded(node, lambda: self.publish(sim.time)),

@@ -18,7 +18,6 @@ from scara_collab.core.arm_planner import (ArmPlanner, planner_parameters, Plann
 from scara_collab.core.config import load_config
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import conversions as conv, lockstep, protocol as proto
-from scara_collab.nodes.faults import declare_faults, FaultyPublisher
 from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import DEFAULT, EVENTS
@@ -50,8 +49,8 @@ class Planner(Node):
         r, o = self.arm.name, self.other.name
         self.traj_pub = self.create_publisher(JointTrajectory, f'{r}/joint_trajectory', 10)
         self.path_pub = self.create_publisher(Path, f'{r}/planned_path', 10)
-        self.status_pub = FaultyPublisher(self, declare_faults(self), self.create_publisher(
-            DiagnosticStatus, f'{r}/planner_status', EVENTS))
+        self.status_pub = self.create_publisher(DiagnosticStatus, f'{r}/planner_status',
+                                                EVENTS)
         # every state, each in turn (a depth of 1 would take the newest, and a queued move
         # would start at one state or the next by timing)
         for kind, topic, callback, depth in (

@@ -18,7 +18,6 @@ its current command: :mod:`scara_collab.nodes.execution`), ``/emergency_stop`` a
 ``/<robot>/gripper`` (std_srvs/SetBool: true = grasp, false = release), idempotent: a grasp
 while holding an item and a release with an empty gripper succeed and say so, so a client may
 repeat a request whose answer was lost.
-Parameter ``faults`` (:mod:`scara_collab.nodes.faults`) can lose or delay its statuses.
 ``/sim/pause``, ``/sim/resume``, ``/sim/step`` and ``/sim/reset`` (std_srvs/Trigger) control
 the simulation (:mod:`scara_collab.nodes.sim_control`).
 
@@ -41,7 +40,6 @@ In a line of cells (``line_cell``, ``line_upstream``, ``line_downstream``, ``lin
 frontier plus the transit between sections, together with its own lockstep gate.
 """
 import math
-import os
 import time
 from typing import Dict, Optional
 
@@ -61,7 +59,6 @@ from scara_collab.core.model import load_cell
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.bridge_outputs import BridgeOutputs
 from scara_collab.nodes.execution import Execution, Holds
-from scara_collab.nodes.faults import CRASH_EXIT, declare_faults, FaultyPublisher
 from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.line_link import LineLink
 from scara_collab.nodes.lockstep import LockstepGate, parse_timeouts
@@ -166,7 +163,7 @@ class PyBulletBridge(Node):
             raise
 
     def _setup(self) -> None:
-        """Build what :meth:`__init__` says."""
+        """Build what :meth:`__init__` says, one part after the other (the builders below)."""
         cfg = declare_config(self, ('simulation', 'controllers'),
                              dynamic=('real_time_factor', 'feed_interval'),
                              on_change=self._on_config)
@@ -178,6 +175,24 @@ class PyBulletBridge(Node):
             self.declare_parameter(key, default, ParameterDescriptor(
                 type=ParameterType.PARAMETER_STRING_ARRAY, description=what))
         sim_cfg, ctl_cfg = cfg['simulation'], cfg['controllers']
+        self._build_simulator(sim_cfg, ctl_cfg, params)
+        self._build_outputs(sim_cfg, params)
+        self._build_execution()
+        window = self._build_gate(params)
+        self._build_line(params)
+        self._build_control()
+        self._publish_due(every=True)
+        self.get_logger().info(
+            f'cell ready: {len(self.sim.joint_state()[0])} joints, physics '
+            f'{sim_cfg["physics_rate"]:.0f} Hz, control {ctl_cfg["control_mode"]}, '
+            f'real-time factor {self.pacer.rtf or "unthrottled"}, lockstep '
+            f'{f"window {window:.3f} s" if window > 0 else "off"}')
+
+    def _build_simulator(self, sim_cfg: dict, ctl_cfg: dict, params: dict) -> None:
+        """Build the cell, its simulator with both arms at home, and the pace of its steps.
+
+        :raises ValueError: a home pose outside the joint limits.
+        """
         self.cell = load_cell(params['profile'] or None)
         self.sim = CellSim(self.cell, sim_cfg, ctl_cfg, gui=bool(sim_cfg['gui']))
         home = np.asarray(params['home'], dtype=float)
@@ -191,32 +206,41 @@ class PyBulletBridge(Node):
         self.pacer = Pacer(float(sim_cfg['real_time_factor']), self.dt,
                            max(1, int(round(float(params['step_chunk']) / self.dt))))
 
-        self.faults = declare_faults(self)
-        self.execution = Execution(self.cell, self.sim, self._report, self.get_logger().warning,
-                                   blocked=lambda: self.holds.blocked())
-        self.holds = Holds(self.cell, self.sim, self.execution, lambda: self.gate.absent,
-                           self.get_logger().warning)
+    def _build_outputs(self, sim_cfg: dict, params: dict) -> None:
+        """Create the publishers: clock, states, items, diagnostics, events, execution statuses."""
         self.outputs = BridgeOutputs(
             self, self.cell, self.sim, {'clock': float(sim_cfg['clock_rate']),
                                         'state': float(sim_cfg['state_rate']),
                                         'markers': float(params['markers_rate'])},
-            self.faults, lambda: self.status().to_msg(),
-            on_clock=lambda: self.line.publish(self.sim.time))
+            lambda: self.status().to_msg(), on_clock=lambda: self.line.publish(self.sim.time))
         self.events_pub = self.create_publisher(DiagnosticStatus, 'conveyor/events', EVENTS)
-        self.status_pub: Dict[str, object] = {}
+        self.status_pub: Dict[str, object] = {
+            arm.name: self.create_publisher(DiagnosticStatus, f'{arm.name}/execution_status',
+                                            EVENTS)
+            for arm in self.cell.arms}
+
+    def _build_execution(self) -> None:
+        """Build the trajectory execution and the holds, and subscribe what drives them.
+
+        Each arm's ``joint_trajectory``, then the stops (latched).
+        """
+        self.execution = Execution(self.cell, self.sim, self._report, self.get_logger().warning,
+                                   blocked=lambda: self.holds.blocked())
+        self.holds = Holds(self.cell, self.sim, self.execution, lambda: self.gate.absent,
+                           self.get_logger().warning)
         for arm in self.cell.arms:
-            name = arm.name
-            self.status_pub[name] = FaultyPublisher(self, self.faults, self.create_publisher(
-                DiagnosticStatus, f'{name}/execution_status', EVENTS))
             self.create_subscription(
-                JointTrajectory, f'{name}/joint_trajectory',
-                guarded(self, lambda msg, n=name: self.execution.run(n, msg)), 10)
-            self.create_service(
-                SetBool, f'{name}/gripper',
-                guarded(self, lambda req, res, n=name: self._on_gripper(n, req, res), True))
+                JointTrajectory, f'{arm.name}/joint_trajectory',
+                guarded(self, lambda msg, n=arm.name: self.execution.run(n, msg)), 10)
         for kind in self.holds.stops:
             self.create_subscription(Bool, f'{kind}_stop', guarded(
                 self, lambda msg, k=kind: self.holds.on_stop(k, msg.data)), LATCHED)
+
+    def _build_gate(self, params: dict) -> float:
+        """Build the lockstep gate; return its window (sim s, 0 = off).
+
+        :raises ValueError: a window shorter than the clock period.
+        """
         window = float(params['lockstep_window'])
         if 0 < window < self.outputs.periods['clock'] - 1e-9:
             raise ValueError(f'lockstep_window {window} s is shorter than the clock period '
@@ -229,12 +253,26 @@ class PyBulletBridge(Node):
             guards=[g for g in self.get_parameter('lockstep_guards').value or [] if g.strip()],
             on_guard=self.holds.on_guard,
             expect=[n for n in self.get_parameter('lockstep_expect').value or [] if n.strip()])
+        return window
+
+    def _build_line(self, params: dict) -> None:
+        """Join the line of cells (a lone cell: a link with no neighbour)."""
         if params['line_cell'] < 0:
             raise ValueError(f'line_cell must be >= 0, got {params["line_cell"]}')
         self.line = LineLink(self, self.sim, params['line_cell'], params['line_upstream'],
                              params['line_downstream'], on_news=self._wake,
-                             faults=self.faults, timeout=params['line_timeout'])
-        self._crash_at = self.faults.crash_time(self.get_fully_qualified_name())
+                             timeout=params['line_timeout'])
+
+    def _build_control(self) -> None:
+        """Serve the grippers, the simulation control and the trajectory actions; start stepping.
+
+        The stepping timer runs on wall time (steady), cancelled while paused; a 0.25 s look
+        re-arms it while the bridge waits for lockstep answers or for the cell upstream.
+        """
+        for arm in self.cell.arms:
+            self.create_service(
+                SetBool, f'{arm.name}/gripper',
+                guarded(self, lambda req, res, n=arm.name: self._on_gripper(n, req, res), True))
         self._steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._timer = self.create_timer(self.pacer.period, self._tick, clock=self._steady)
         self._parked = False  # the stepping timer is off while the bridge waits for answers
@@ -246,12 +284,6 @@ class PyBulletBridge(Node):
         if self.gate.enabled or self.line.upstream:  # re-arm now and then (a silent
             # participant times out; a late frontier from upstream is looked at again)
             self.create_timer(0.25, self._look, clock=self._steady)
-        self._publish_due(every=True)
-        self.get_logger().info(
-            f'cell ready: {len(self.sim.joint_state()[0])} joints, physics '
-            f'{sim_cfg["physics_rate"]:.0f} Hz, control {ctl_cfg["control_mode"]}, '
-            f'real-time factor {self.pacer.rtf or "unthrottled"}, lockstep '
-            f'{f"window {window:.3f} s" if window > 0 else "off"}')
 
     # --- stepping -------------------------------------------------------------------------
     def _on_config(self, name: str, tree: dict) -> None:
@@ -327,9 +359,6 @@ class PyBulletBridge(Node):
             self.sim.step(n)
             due -= n
             self._publish_due()
-            if self._crash_at is not None and self.sim.time >= self._crash_at - 1e-9:
-                self.get_logger().error(f'fault injection: crash at sim t={self.sim.time:.3f} s')
-                os._exit(CRASH_EXIT)  # killed: no goodbye, no lockstep leave, no files
         if left is not None and self.control.steps_to_pause(self.dt) == 0:
             self.outputs.publish_off_grid()  # the instant it pauses at, even off the grid
             self.control.pause_here()

@@ -1,6 +1,7 @@
 """Several nodes of the cell in one process, on one executor (``launch_cell.py --one-process``).
 
-``python -m scara_collab.run.container --node MODULE:FUNC [--ros-args ...] --node ...``
+``python -m scara_collab.run.container [--fault SPEC ...] --node MODULE:FUNC [--ros-args ...]
+--node ...``
 
 Each ``--node`` names a node by the entry point of its executable (the launcher's stages:
 ``scara_collab.nodes.planner:main_left``, ...) followed by that node's own ``--ros-args``,
@@ -10,7 +11,9 @@ run_nodes`): the ROS 2 way to run a graph in one process, as a component contain
 messages between them still go through DDS, but no callback waits for another process to be
 scheduled, and the process pays one executor and one interpreter instead of six.
 
-Like :mod:`scara_collab.run.child`, the container asks for SIGTERM when the launcher dies.
+Like :mod:`scara_collab.run.child`, the container asks for SIGTERM when the launcher dies,
+and leading ``--fault SPEC`` pairs (the launcher's ``--fault``) build every node with the fault
+injection's hook (:func:`scara_collab.run.faults.hook`), each with its own fault plan.
 """
 import functools
 import os
@@ -22,7 +25,7 @@ from rclpy.node import Node
 
 from scara_collab import graph
 from scara_collab.nodes.runner import run_nodes
-from scara_collab.run.child import die_with_parent
+from scara_collab.run.child import die_with_parent, take_faults
 
 FLAG = '--node'
 
@@ -52,22 +55,30 @@ def parse(argv: Sequence[str]) -> List[Tuple[str, List[str]]]:
     return out
 
 
-def factory(entry: str, args: Sequence[str]) -> Callable[[], Node]:
-    """Return a callable that builds the node of ``entry`` with its own ``cli_args``."""
-    return functools.partial(graph.BY_ENTRY[entry].build, cli_args=list(args))
+def factory(entry: str, args: Sequence[str],
+            wrap: Optional[Callable[[type], type]] = None) -> Callable[[], Node]:
+    """Return a callable that builds the node of ``entry`` with its own ``cli_args``.
+
+    :param wrap: the fault injection's hook (:meth:`scara_collab.graph.NodeSpec.build`).
+    """
+    return functools.partial(graph.BY_ENTRY[entry].build, wrap=wrap, cli_args=list(args))
 
 
 def main(argv: Optional[List[str]] = None) -> None:
     """Build the nodes named on the command line and spin them on one executor."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    faults, argv = take_faults(sys.argv[1:] if argv is None else argv)
     try:
         nodes = parse(argv)
     except ValueError as exc:
-        sys.exit(f'usage: python -m scara_collab.run.container {FLAG} MODULE:FUNC '
-                 f'[--ros-args ...] ...: {exc}')
+        sys.exit(f'usage: python -m scara_collab.run.container [--fault SPEC ...] {FLAG} '
+                 f'MODULE:FUNC [--ros-args ...] ...: {exc}')
     die_with_parent(int(os.environ.get('SCARA_LAUNCHER_PID', os.getppid())))
     try:
-        factories = [factory(entry, args) for entry, args in nodes]
+        wrap = None
+        if faults:
+            from scara_collab.run.faults import hook
+            wrap = hook(faults)
+        factories = [factory(entry, args, wrap) for entry, args in nodes]
     except KeyboardInterrupt:  # stopped while importing, before rclpy handles signals
         sys.exit(128 + signal.SIGINT)
     run_nodes(factories, args=[])

@@ -17,7 +17,6 @@ from rclpy.parameter_client import AsyncParameterClient
 from std_srvs.srv import SetBool, Trigger
 
 from scara_collab import graph
-from scara_collab.nodes.faults import call_with_faults, FaultPlan
 from scara_collab.run.console import Console
 from scara_collab.run.stages import Stage
 from scara_collab.run.supervisor import RunEnd
@@ -35,13 +34,22 @@ def http_ok(url: str, timeout: float = 0.5) -> bool:
         return False
 
 
+def take(future, answers: list) -> None:
+    """Append ``future``'s response to ``answers``; a failed or cancelled call adds nothing."""
+    try:
+        response = future.result()
+    except Exception:  # noqa: B902 - a failed call is a lost answer: asked again
+        return
+    if response is not None:
+        answers.append(response)
+
+
 class GraphClient:
     """Ask the graph from the launcher's node: wait, call, set parameters, check readiness.
 
     :param node: the launcher's node (the run recorder): clients and graph queries.
     :param executor: the executor that spins ``node``.
     :param console: where the "asking again" lines go.
-    :param faults: faults injected into the launcher's own service calls (``--fault``).
     :param check: the supervision run while waiting; raises
         :class:`~scara_collab.run.supervisor.RunEnd` to end the run.
     :param signals: the signals the launcher got so far (a second one ends any wait).
@@ -49,7 +57,7 @@ class GraphClient:
     :param namespace: the cell's namespace (default: the root).
     """
 
-    def __init__(self, node: Node, executor: Executor, console: Console, faults: FaultPlan,
+    def __init__(self, node: Node, executor: Executor, console: Console,
                  check: Callable[[], None], signals: List[str], timeout: float,
                  namespace: str = ''):
         """Keep what the waits and calls need; no client is created yet."""
@@ -57,7 +65,6 @@ class GraphClient:
         self.node = node
         self.executor = executor
         self.console = console
-        self.faults = faults
         self.check = check
         self.signals = signals
         self.timeout = timeout
@@ -118,7 +125,7 @@ class GraphClient:
                         supervise)
         for attempt in range(1, attempts + 1):
             answer: list = []
-            call_with_faults(self.node, self.faults, cli, request, answer.append)
+            cli.call_async(request).add_done_callback(lambda f: take(f, answer))
             try:
                 self.wait_until(lambda: bool(answer), attempt_timeout, lambda: '', supervise)
             except RunEnd as exc:

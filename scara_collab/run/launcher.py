@@ -26,7 +26,6 @@ from scara_collab import graph
 from scara_collab.core.config import load_config
 from scara_collab.core.paths import config_dir
 from scara_collab.nodes import lockstep
-from scara_collab.nodes.faults import FaultPlan
 from scara_collab.nodes.recorder import RunRecorder
 from scara_collab.nodes.runner import localhost_by_default, make_executor
 from scara_collab.records.report import format_progress, format_report
@@ -36,7 +35,7 @@ from scara_collab.run.console import Console
 from scara_collab.run.graph_client import GraphClient
 from scara_collab.run.liveness import Liveness
 from scara_collab.run.options import LaunchOptions, parse_options
-from scara_collab.run.stages import one_process, stages
+from scara_collab.run.stages import crashes, one_process, stages
 from scara_collab.run.supervisor import EXIT_FAILED, EXIT_USAGE, RunEnd, Supervisor
 
 AUTOMATION_MODULE = graph.node('automation_manager').entry.split(':')[0]
@@ -89,7 +88,7 @@ class Launcher:
         self.console = console
         self.with_automation = importlib.util.find_spec(AUTOMATION_MODULE) is not None
         self.stages = stages(opts, self.with_automation)
-        self.processes = Supervisor(output, config_dir(), console)
+        self.processes = Supervisor(output, config_dir(), console, crashes(opts))
         self.signals: List[str] = []
         self.job_started = False
         self.rtf_released = False
@@ -101,15 +100,18 @@ class Launcher:
         with discovery.super_client() as self.super_client:
             rclpy.init(args=[], context=self.context,
                        signal_handler_options=SignalHandlerOptions.NO)
-            self.recorder = RunRecorder(output, opts.mode, profile=opts.profile,
-                                        context=self.context, namespace=self.namespace)
+            recorder = RunRecorder
+            if opts.faults:  # its service calls too (drop:/.../start:1)
+                from scara_collab.run.faults import hook
+                recorder = hook(opts.faults)(RunRecorder)
+            self.recorder = recorder(output, opts.mode, profile=opts.profile,
+                                     context=self.context, namespace=self.namespace)
         self.recorder.extra['lockstep'] = opts.lockstep_name
         if opts.record:
             record_mcap(self.recorder, output, console)
         self.executor = make_executor(context=self.context)
         self.executor.add_node(self.recorder)
-        self.ros = GraphClient(self.recorder, self.executor, console,
-                               FaultPlan(opts.faults), self.check, self.signals,
+        self.ros = GraphClient(self.recorder, self.executor, console, self.check, self.signals,
                                opts.ready_timeout, self.namespace)
         self.cpu = CpuMeter()
         self._next_poll = self._next_checkpoint = self._next_watch = 0.0
@@ -132,10 +134,15 @@ class Launcher:
 
     # --- supervision -----------------------------------------------------------------------
     def check(self) -> None:
-        """Raise :class:`RunEnd` on a signal, a dead node process or a silent node."""
+        """Raise :class:`RunEnd` on a signal, a dead node process or a silent node.
+
+        A crash that is due (``--fault crash:``) is the supervisor's kill, at every look.
+        """
         if self.signals:
             sig = self.signals[0]
             raise RunEnd(sig, 130 if sig == 'SIGINT' else 143)
+        if self.processes.crashes:
+            self.processes.crash_due(self.recorder.sim_time)
         now = time.monotonic()
         if now < self._next_poll:
             return

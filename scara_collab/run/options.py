@@ -14,7 +14,6 @@ from typing import Optional, Sequence, Tuple
 
 from scara_collab import graph
 from scara_collab.core.config import load_config
-from scara_collab.nodes.faults import parse_faults
 
 RUN_MODES = graph.LAUNCH_MODES
 FAST_CHUNK = 0.02  # s: with the bridge's 2 ms tick, up to 10x real time
@@ -46,7 +45,7 @@ class LaunchOptions:
     profile: Optional[str]           # link profile (None: config/cell.yaml)
     seed: Optional[int]              # item feed seed (None: config/simulation.yaml)
     feed_interval: Optional[float]   # sim s between items (None: config/simulation.yaml)
-    faults: Tuple[str, ...]          # fault specs (scara_collab.nodes.faults)
+    faults: Tuple[str, ...]          # fault specs (scara_collab.run.faults)
     quiet: bool                      # errors and the report only
     ready_timeout: float             # wall s a stage may take to become ready
     stall_timeout: float             # wall s sim time may stand still
@@ -149,7 +148,8 @@ def parser() -> argparse.ArgumentParser:
                    help='inject a fault, e.g. drop:/scara_left/gripper:2 (lose the first 2 '
                    'gripper responses), delay:/scara_right/planner_status:3:0.5, '
                    'drop:/automation_manager/start:1, latency:/joint_states:0.02:0.01 (every '
-                   'message 20 +- 10 ms late, in order); repeatable (scara_collab.nodes.faults)')
+                   'message 20 +- 10 ms late, in order), crash:/pybullet_bridge:30 (its '
+                   'process killed at sim t=30 s); repeatable (scara_collab.run.faults)')
     p.add_argument('--quiet', action='store_true',
                    help='no stage or progress lines; errors and the report only')
     p.add_argument('--ready-timeout', type=float, default=60.0, metavar='S',
@@ -185,10 +185,12 @@ def parse_options(argv: Optional[Sequence[str]] = None) -> LaunchOptions:
         p.error('--launch-rtf must be >= 0')
     if a.feed_interval is not None and not a.feed_interval > 0:
         p.error('--feed-interval must be > 0')
-    try:
-        parse_faults(a.fault)
-    except ValueError as exc:
-        p.error(f'--fault: {exc}')
+    if a.fault:
+        from scara_collab.run.faults import parse_faults
+        try:
+            parse_faults(a.fault)
+        except ValueError as exc:
+            p.error(f'--fault: {exc}')
     if a.cells < 1:
         p.error('--cells must be >= 1')
     if a.line_cell is not None and not 0 <= a.line_cell < a.cells:

@@ -7,6 +7,11 @@ scara_collab.run.container --node ... --node ...``). With ``--namespace`` every 
 the cell's namespace with the cell's remaps (:func:`scara_collab.graph.ros_args`); a cell of a
 line of cells (``--line-cell K`` of ``--cells N``) also gets its bridge's line parameters and
 its upstream cell's handoff topic (:func:`scara_collab.graph.line_params`).
+
+With ``--fault`` each node process gets the entries the nodes apply (``--fault SPEC`` after
+the entry: :mod:`scara_collab.run.child`, :mod:`scara_collab.run.container`); a crash is the
+supervisor's (:func:`crashes`), and one that names the bridge also makes it pause at that sim
+time (its ``pause_at``), so the supervisor kills it there to the physics step.
 """
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +36,7 @@ class Stage:
     members: Tuple['Stage', ...] = ()  # --one-process: the stages this process runs
     namespace: str = ''         # the cell's namespace ('' = the root)
     upstream: Tuple[str, ...] = ()  # in a line: the cells upstream, nearest first
+    faults: Tuple[str, ...] = ()  # --fault entries its nodes apply (not the crashes)
 
 
 def stages(opts: LaunchOptions, with_automation: bool) -> List[Stage]:
@@ -62,16 +68,34 @@ def stages(opts: LaunchOptions, with_automation: bool) -> List[Stage]:
     for name, values in graph.line_params(opts.cell, opts.cells).items():
         own.setdefault(name, {}).update(values)
     upstream = tuple(graph.line_upstream(opts.cell, opts.cells))
-    faults = opts.faults
+    faults: Tuple[str, ...] = ()
+    if opts.faults:  # every node applies the entries naming its endpoints
+        from scara_collab.run.faults import node_entries
+        faults = tuple(node_entries(opts.faults))
+        at = crashes(opts).get('pybullet_bridge')
+        if at is not None and 0 < at < float(opts.duration):
+            bridge['pause_at'] = repr(float(at))  # where the supervisor kills it
     out = []
     for spec in specs:
         params = dict(common, **by_mode[spec.name], **own.get(spec.name, {}))
-        if faults:  # every node applies the entries naming its own publishers and clients
-            params['faults'] = graph.param_value(faults)
         out.append(Stage(spec.name, spec.entry, spec.configs,
                          spec.ready.describe(spec.name, params, opts.namespace), params,
-                         namespace=opts.namespace, upstream=upstream))
+                         namespace=opts.namespace, upstream=upstream, faults=faults))
     return out
+
+
+def crashes(opts: LaunchOptions) -> Dict[str, float]:
+    """Return the crashes ``--fault`` asks of this cell's nodes: ``{node name: sim s}``.
+
+    A crash names a node by its fully qualified name (``/cell_1/pybullet_bridge``); those of
+    other cells (a line passes the same entries to every cell) are not this cell's.
+    """
+    if not opts.faults:
+        return {}
+    from scara_collab.run.faults import crashes as named
+    prefix = graph.namespace_of(opts.namespace) + '/'
+    return {name[len(prefix):]: at for name, at in named(opts.faults).items()
+            if name.startswith(prefix) and name[len(prefix):] in graph.BY_NAME}
 
 
 def node_args(stage: Stage, config_dir: Path) -> List[str]:
@@ -83,12 +107,17 @@ def node_args(stage: Stage, config_dir: Path) -> List[str]:
 def command(stage: Stage, config_dir: Path) -> List[str]:
     """Return the command line of one stage (or of the one process running ``members``)."""
     if stage.members:
-        cmd = [sys.executable, '-m', stage.entry]
+        cmd = [sys.executable, '-m', stage.entry] + fault_args(stage.members[0].faults)
         for member in stage.members:
             cmd += ['--node', member.entry] + node_args(member, config_dir)
         return cmd
-    return [sys.executable, '-m', 'scara_collab.run.child', stage.entry] + node_args(
-        stage, config_dir)
+    return [sys.executable, '-m', 'scara_collab.run.child', stage.entry] + fault_args(
+        stage.faults) + node_args(stage, config_dir)
+
+
+def fault_args(faults: Sequence[str]) -> List[str]:
+    """Return ``--fault SPEC`` per entry (:func:`scara_collab.run.child.take_faults`)."""
+    return [a for spec in faults for a in ('--fault', spec)]
 
 
 def one_process(members: Sequence[Stage]) -> Stage:

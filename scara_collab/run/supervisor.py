@@ -5,6 +5,11 @@ launcher only) with its output in ``logs/<name>.log``; ``pids.json`` and ``launc
 what runs. A child that exits ends the run (:class:`RunEnd`, with the tail of its log); at the
 end the children get SIGINT in reverse order (SIGTERM if still starting) and SIGCONT, and what
 remains after the grace period is killed.
+
+Crashes (the launcher's ``--fault crash:/<node>:T``, :func:`scara_collab.run.stages.crashes`)
+are the supervisor's too: :meth:`Supervisor.crash_due` sends SIGKILL to the process that runs
+the node once sim time reaches T (no goodbye, as a killed process), says so on the console and
+at the end of that process's log, and the run then ends as for any process that died.
 """
 from dataclasses import dataclass
 import json
@@ -44,6 +49,7 @@ class Child:
     log_file: IO
     started: float
     ready_after: Optional[float] = None
+    crashed_at: Optional[float] = None  # sim s it was killed at (fault injection: crash)
 
 
 def tail(path: Path, lines: int = 20) -> str:
@@ -76,12 +82,17 @@ class Supervisor:
     :param console: where the stop lines go.
     """
 
-    def __init__(self, output: Path, config_dir: Path, console: Console):
-        """Start with no child."""
+    def __init__(self, output: Path, config_dir: Path, console: Console,
+                 crashes: Optional[Dict[str, float]] = None):
+        """Start with no child.
+
+        :param crashes: the nodes to kill and the sim time of each (``{name: s}``).
+        """
         self.output = output
         self.config_dir = config_dir
         self.console = console
         self.children: List[Child] = []
+        self.crashes: Dict[str, float] = dict(crashes or {})
 
     def env(self) -> Dict[str, str]:
         """Return the nodes' environment: the launcher's own ROS, unbuffered, uncoloured, its pid.
@@ -148,14 +159,38 @@ class Supervisor:
         return f'last lines of {log}:\n' + '\n'.join('    ' + ln
                                                      for ln in tail(log).splitlines())
 
+    def crash_due(self, sim_time: float) -> None:
+        """Kill the process of each node whose crash time ``sim_time`` (s) has reached.
+
+        SIGKILL, then a line at the end of its log (stamped with the wall time, like a ROS
+        log line) and on the console.
+        """
+        for node, at in list(self.crashes.items()):
+            child = self.child_of(node)
+            if sim_time < at - 1e-9 or child is None:
+                continue
+            del self.crashes[node]
+            if child.proc.poll() is not None:
+                continue
+            stamp = time.time()
+            child.proc.kill()
+            child.proc.wait()
+            child.crashed_at = sim_time
+            text = (f'fault injection: crash of {node} at sim t={sim_time:.3f} s: SIGKILL to '
+                    f'pid {child.proc.pid}')
+            child.log_file.write(f'[ERROR] [{stamp:.9f}] [launch]: {text}\n'.encode('utf-8'))
+            child.log_file.flush()
+            self.console.say(f'[launch] {text}', error=True)
+
     def check(self) -> None:
         """Raise :class:`RunEnd` if a child has exited (its name, code and log tail)."""
         for child in self.children:
             code = child.proc.poll()
             if code is not None:
                 name = child.stage.name
-                raise RunEnd(f'node {name} exited with {describe_exit(code)}', EXIT_FAILED,
-                             f'[launch] {self.log_tail(name)}')
+                how = (f'was killed at sim t={child.crashed_at:.3f} s (fault injection: crash)'
+                       if child.crashed_at is not None else f'exited with {describe_exit(code)}')
+                raise RunEnd(f'node {name} {how}', EXIT_FAILED, f'[launch] {self.log_tail(name)}')
 
     def cpu_now(self) -> Dict[str, Optional[float]]:
         """CPU seconds used so far by each node process and by the launcher itself."""

@@ -120,7 +120,8 @@ class Servo:
             else:  # the chain rule: the path at tau, run at s
                 pos, vel, acc = move.ref.sample(at)
                 s, rate = clock.scale, clock.rate
-                self.ref_q[a], self.ref_qd[a], self.ref_qdd[a] = pos, vel * s, acc * s * s + vel * rate
+                self.ref_q[a], self.ref_qd[a] = pos, vel * s
+                self.ref_qdd[a] = acc * s * s + vel * rate
         if self.control_mode == 'pid':
             tau = self._pid(q, qd, self.ref_q, self.ref_qd, self.dt)
         else:
