@@ -114,8 +114,8 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
     up = CellSim(CELL, dict(sim_cfg, feed_interval=0.0), ctl)
     down = CellSim(CELL, dict(sim_cfg, feed_interval=0.0), ctl)
     try:
-        up.conveyor.join_line(True, 1)
-        down.conveyor.join_line(False, 1_000_001)
+        up.conveyor.line.join(True, 1)
+        down.conveyor.line.join(False, 1_000_001)
         section = Section(CELL)
         out, box = Outbox(), Inbox(section)
         ids = [up.conveyor.spawn_item('red', 0.3, 4.2),
@@ -124,11 +124,11 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
         crossing = {}
         while up.time < 4.0:
             up.step(10)
-            for h in up.conveyor.pop_handoffs():
+            for h in up.conveyor.line.pop_handoffs():
                 out.add(h)
                 crossing[h.item] = h.time
             for h, at in box.offer(up.time, out.message(up.time), out.handed):
-                down.conveyor.receive(h, at)
+                down.conveyor.line.receive(h, at)
             while down.time + 0.01 <= box.limit() + 1e-9:
                 down.step(10)
             ev_up += up.conveyor.pop_events()
@@ -146,14 +146,14 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
         # the cell's own items never meet handed ids
         assert down.conveyor.spawn_item() == 1_000_001
         with pytest.raises(ValueError, match='already on this belt'):
-            down.conveyor.receive(Handoff(ids[0], 'red', 0.0, 1.0), down.time)
+            down.conveyor.line.receive(Handoff(ids[0], 'red', 0.0, 1.0), down.time)
         with pytest.raises(ValueError, match='unknown class'):
-            down.conveyor.receive(Handoff(77, 'green', 0.0, 1.0), down.time)
+            down.conveyor.line.receive(Handoff(77, 'green', 0.0, 1.0), down.time)
         with pytest.raises(ValueError, match='off the belt'):
-            down.conveyor.receive(Handoff(78, 'red', 0.51, 1.0), down.time)
+            down.conveyor.line.receive(Handoff(78, 'red', 0.51, 1.0), down.time)
         # pushed towards the edge upstream (a 3-cell benchmark run had one at y=-0.493): on
         # the belt while its centre is, so it is taken
-        down.conveyor.receive(Handoff(79, 'red', -0.493, down.time), down.time)
+        down.conveyor.line.receive(Handoff(79, 'red', -0.493, down.time), down.time)
         down.step(10)
         assert {e.item for e in down.conveyor.pop_events() if e.kind == 'received'} == {79}
     finally:
@@ -354,11 +354,11 @@ def test_an_item_handed_on_close_behind_another_comes_on_behind_it_not_into_it()
     sim_cfg, ctl = load_config('simulation'), load_config('controllers')
     down = CellSim(CELL, dict(sim_cfg, feed_interval=0.0), ctl)
     try:
-        down.conveyor.join_line(False, 1_000_001)
+        down.conveyor.line.join(False, 1_000_001)
         size, speed = CELL.item_size, CELL.belt.speed
         close = 0.6 * size / speed  # s apart at the boundary: their centres 0.6 sizes apart
-        down.conveyor.receive(Handoff(1, 'red', 0.05, 0.0), 0.0)
-        down.conveyor.receive(Handoff(2, 'red', 0.0, close), close)
+        down.conveyor.line.receive(Handoff(1, 'red', 0.05, 0.0), 0.0)
+        down.conveyor.line.receive(Handoff(2, 'red', 0.0, close), close)
         down.step(int(round(3.0 / down.dt)))
         events = down.conveyor.pop_events()
         assert [(e.kind, e.item) for e in events] == [('received', 1), ('received', 2)]

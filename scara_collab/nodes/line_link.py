@@ -74,7 +74,7 @@ class LineLink:
         self._lost_said = 0
         self._heard: Optional[float] = None  # monotonic s of the last message from upstream
         self._last: Optional[proto.LineHandoff] = None
-        sim.conveyor.join_line(self.downstream, self.cell * self.ID_BLOCK + 1)
+        sim.conveyor.line.join(self.downstream, self.cell * self.ID_BLOCK + 1)
         self._pub = (FaultyPublisher(node, faults or FaultPlan(), node.create_publisher(
             DiagnosticStatus, LINE_HANDOFF, EVENTS)) if self.downstream else None)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -109,11 +109,11 @@ class LineLink:
         if self._pub is None:
             return
         frontier = min(frontier, self.sim.conveyor.checked)
-        for h in self.sim.conveyor.pop_handoffs():
+        for h in self.sim.conveyor.line.pop_handoffs():
             self.outbox.add(h)
         msg = proto.LineHandoff(self.cell, round(frontier, 9), self.outbox.handed,
                                 [h.as_list() for h in self.outbox.message(frontier)],
-                                [b.as_list() for b in self.sim.conveyor.on_belt()])
+                                [b.as_list() for b in self.sim.conveyor.line.on_belt()])
         self._pub.publish(msg.to_msg())
 
     def _parse(self, msg: DiagnosticStatus):
@@ -127,7 +127,7 @@ class LineLink:
     def _take(self, frontier: float, handoffs, handed: Optional[int], source: str) -> None:
         for h, at in self.inbox.offer(frontier, handoffs, handed):
             try:
-                self.sim.conveyor.receive(h, at)
+                self.sim.conveyor.line.receive(h, at)
             except ValueError as exc:
                 self.node.get_logger().error(f'line: item not taken from {source}: {exc}')
         if self.inbox.lost > self._lost_said:
