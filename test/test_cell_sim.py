@@ -461,8 +461,8 @@ def test_payload_is_felt_by_the_arm(cell):
 def test_when_a_trajectory_arrives_before_its_start_does_not_change_the_run(cell):
     """A trajectory sent 80 ms or 20 ms before its start gives the same states, bit for bit.
 
-    In lockstep a trajectory reaches the bridge at either end of a window (README, *Repeatable
-    runs*); until its start the arm keeps its reference, never the position measured on
+    In lockstep a trajectory reaches the bridge at either end of a window (docs/realtime.md,
+    *Repeatable runs*); until its start the arm keeps its reference, never the position measured on
     arrival, so the run does not depend on which end it was.
     """
     states = []

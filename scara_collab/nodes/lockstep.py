@@ -21,8 +21,8 @@ namespace has its own lockstep):
   automation manager, until a planner's status for the move it offered and the bridge's
   answer to a gripper call: :meth:`LockstepParticipant.await_reply`), at most ``REPLY_WAIT``
   wall seconds: sim time then waits for the reply too, and the next ``/clock`` finds it
-  taken, however the processes were scheduled (README, *Repeatable runs*). A reply delayed
-  on sim time (a ``delay:`` or ``latency:`` fault) cannot come while sim time waits for it:
+  taken, however the processes were scheduled (docs/realtime.md, *Repeatable runs*). A reply
+  delayed on sim time (a ``delay:`` or ``latency:`` fault) cannot come while sim time waits for it:
   it costs ``REPLY_WAIT`` wall seconds, and the run is no longer repeatable;
 * a participant that leaves says so (stamp = the end of time), before its context shuts
   down (:func:`scara_collab.nodes.shutdown.before_shutdown`); one that keeps the bridge
@@ -37,7 +37,7 @@ namespace has its own lockstep):
   sim time 0, so the first steps do not depend on how soon each node answers;
 * unthrottled, the bridge steps to its limit at once and the answer that moves the limit
   steps it on, in that answer's callback: in one process every step takes its turn in the
-  executor's order, and the same seed gives the same run (README, *Repeatable runs*);
+  executor's order, and the same seed gives the same run (docs/realtime.md, *Repeatable runs*);
 * a *guard* (the collision monitor) is a participant without which the arms must not move:
   before the gate drops a guard, or when a guard leaves, it tells the bridge (``on_guard``),
   which holds both arms and refuses trajectories until the guard answers again
