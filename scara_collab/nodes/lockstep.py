@@ -75,9 +75,9 @@ TOPIC = 'sim/lockstep'  # relative: in the cell's namespace
 QOS = QoSProfile(depth=50)
 END_OF_TIME = Time(sec=2**31 - 1, nanosec=0)
 #: wall s a participant holds its answer for an awaited reply (a lost one: then it answers).
-#: A slow reply looks the same: a plan of 20-50 ms CPU took over 0.5 s wall with 30 processes
-#: on 2 cores, and the run parted there; 2 s covers that, within the bridge's 5 s
-#: ``lockstep_timeout`` for the waiting node
+#: Until then a slow reply looks the same, and one answered without it makes the run depend
+#: on scheduling: with 30 processes on 2 cores a plan of 20-50 ms CPU can take over 0.5 s
+#: wall. 2 s covers that, within the bridge's 5 s ``lockstep_timeout`` for the waiting node
 REPLY_WAIT = 2.0
 
 
