@@ -15,11 +15,11 @@ import sys
 import pytest
 
 from scara_collab.core.config import load_config
-from scara_collab.core.line import arm_extent, Handoff, Inbox, min_pitch, Outbox, Section, Share
+from scara_collab.core.line import arm_extent, HandedOn, Handoff, Inbox, min_pitch, Section, Share
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import protocol as proto
 from scara_collab.records import line_report as lr
-from scara_collab.run.line import cell_argv
+from scara_collab.run.line_launcher import cell_argv
 
 ROOT = Path(__file__).resolve().parents[1]
 CELL = load_cell()
@@ -67,7 +67,7 @@ def test_handoffs_survive_lost_and_repeated_messages():
     """
     rng = random.Random(4)
     section = Section(CELL)
-    out, box = Outbox(window=2.0), Inbox(section)
+    out, box = HandedOn(window=2.0), Inbox(section)
     t, downstream, item = 0.0, 0.0, 0
     arrivals = {}
     while item < 2000:
@@ -117,7 +117,7 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
         up.conveyor.line.join(True, 1)
         down.conveyor.line.join(False, 1_000_001)
         section = Section(CELL)
-        out, box = Outbox(), Inbox(section)
+        out, box = HandedOn(), Inbox(section)
         ids = [up.conveyor.spawn_item('red', 0.3, 4.2),
                up.conveyor.spawn_item('blue', -0.25, 4.35)]
         ev_up, ev_down = up.conveyor.pop_events(), down.conveyor.pop_events()
@@ -306,7 +306,7 @@ def test_the_line_benchmark_writes_each_scenario_into_its_own_block(tmp_path):
     1's log, the first sort after the takeover in cell 2's.
     """
     from scara_collab.bench import line as bench
-    from scara_collab.bench.util import write_block
+    from benchmarks.util import write_block
     page = tmp_path / 'LINE.md'
     page.write_text('# A line of cells\n\nkept by hand\n')
     rated = {'cells': 2, 'duration': 600.0, 'feed_interval': 0.9, 'missed': 0, 'dropped': 1,

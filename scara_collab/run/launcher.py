@@ -160,7 +160,7 @@ def parse_args(argv: Optional[Sequence[str]] = None) -> argparse.Namespace:
     p.add_argument('--cells', type=int, default=1, metavar='N',
                    help='a line of N cells along one belt, cell k under /cell_k with its own '
                    'processes and run folder <output>/cell_k; only cell 0 is fed, each cell '
-                   'hands on what passes its belt to the next (scara_collab.run.line; '
+                   'hands on what passes its belt to the next (scara_collab.run.line_launcher; '
                    'default: %(default)s, one cell in the root namespace)')
     p.add_argument('--line-cell', type=int, default=None, metavar='K',
                    help='with --cells N: run only cell K of the line, here (one machine per '
@@ -552,7 +552,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 def run(args: argparse.Namespace, argv: Optional[Sequence[str]]) -> int:
     """Run the cell or the line ``args`` (parsed from ``argv``); return the exit status."""
     if args.cells > 1 and args.line_cell is None:  # a line: one launcher per cell
-        from scara_collab.run.line import run_line
+        from scara_collab.run.line_launcher import run_line
         return run_line(args, list(sys.argv[1:] if argv is None else argv))
     if args.mode != 'idle' and importlib.util.find_spec(AUTOMATION_MODULE) is None:
         print(f'launch_cell: --mode {args.mode} needs the automation manager '
