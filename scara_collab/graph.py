@@ -21,7 +21,7 @@ shared).
 
 Everything that starts the graph reads this module: the launcher (one process per node, or
 all in one container), ``setup.py`` (the console scripts, so ``ros2 run`` has the same
-names), the in-process graph of the benchmarks (:func:`scara_collab.bench.job.run_job`) and
+names), the in-process graph of the benchmarks (:func:`benchmarks.job_in_process.run_job`) and
 the tests' graphs (``test/ros_harness.py``). In launch order::
 
     pybullet_bridge      clock, joint_states, trajectories, belt, gripper    ready: service

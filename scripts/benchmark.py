@@ -7,13 +7,16 @@ import shlex
 import sys
 import tempfile
 
-from scara_collab.bench import faults, line, protocol, realtime, report, soak
-from scara_collab.bench.util import Progress
-
 ROOT = Path(__file__).resolve().parents[1]
-LAUNCHER = {'protocol': protocol, 'faults': faults, 'soak': soak, 'realtime': realtime,
-            'line': line}
-KEYS = [s.key for s in report.SECTIONS] + list(LAUNCHER)
+sys.path.insert(0, str(ROOT))  # benchmarks/ lies beside scripts/: measured, never installed
+
+from benchmarks import (fault_matrix, job_protocol, line_scenarios,  # noqa: E402
+                        realtime_runs, results_page, soak)
+from benchmarks.util import Progress  # noqa: E402
+
+LAUNCHER = {'protocol': job_protocol, 'faults': fault_matrix, 'soak': soak,
+            'realtime': realtime_runs, 'line': line_scenarios}
+KEYS = [s.key for s in results_page.SECTIONS] + list(LAUNCHER)
 
 
 def keys(text: str) -> list:
@@ -33,7 +36,7 @@ OPTIONS = (  # flag, argparse keywords, help
     ('--duration', dict(type=float), 'sim s per run: realtime (600), soak (3600)'),
     ('--seeds', dict(type=int, nargs='+'), 'seeds: realtime (1 2 3), protocol mirrored runs '
      '(11 12 13)'),
-    ('--conditions', dict(nargs='+', choices=list(realtime.CONDITIONS)),
+    ('--conditions', dict(nargs='+', choices=list(realtime_runs.CONDITIONS)),
      'realtime conditions (default all)'),
     ('--one-process', dict(action='store_true'),
      'realtime: every node of the cell in one process, in every run'),
@@ -61,7 +64,8 @@ def parse(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     """Run the sections and write their blocks; return 1 if one failed or missed its targets."""
     args = parse(argv)
-    only = [k for group in args.only or [] for k in group] or [s.key for s in report.SECTIONS]
+    only = ([k for group in args.only or [] for k in group]
+            or [s.key for s in results_page.SECTIONS])
     # The in-process graphs must not hear another ROS graph on this machine (a demo, a test):
     # a domain of our own unless the caller chose one, and discovery on this host only.
     os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
@@ -75,8 +79,8 @@ def main(argv=None) -> int:
     numbered = [k for k in only if k not in LAUNCHER]
     if numbered:
         progress.note(f'writing {out / "RESULTS.md"} and {out / "figures"}/')
-        results = report.run(out, args.smoke, numbered, progress, args.json, command)
-        bad += report.failed(results)
+        results = results_page.run(out, args.smoke, numbered, progress, args.json, command)
+        bad += results_page.failed(results)
     for key in (k for k in only if k in LAUNCHER):
         with progress.section(key):
             target = page if key == 'realtime' else out / 'RESULTS.md'

@@ -34,7 +34,7 @@ def test_the_foresight_study_executes_its_conflicts_at_full_size(tmp_path):
     Both arms are put at their starts before either move is sent: the simulator's door checks
     a move against where the other arm stands, which is the previous pair's end otherwise.
     """
-    from scara_collab.bench import foresight
+    from benchmarks import foresight
     result = foresight.measure(False, tmp_path)
     executed = [p['executed_min_m'] for p in result['pairs'] if p['executed_min_m'] is not None]
     assert result['n_pairs'] == 200 and len(executed) == 30

@@ -7,10 +7,10 @@ import sys
 
 import pytest
 
-from scara_collab.bench import report
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.report import SECTIONS, SUMMARY_ORDER
-from scara_collab.bench.util import fmt_seconds, spread, table, write_block
+from benchmarks import results_page
+from benchmarks.claims import CLAIMS
+from benchmarks.results_page import SECTIONS, SUMMARY_ORDER
+from benchmarks.util import fmt_seconds, spread, table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 SEEDS = ROOT.parent / 'shared' / 'seeds'
@@ -49,7 +49,7 @@ def test_results_md_has_every_section_with_the_claims_beside(smoke):
     text = (out / 'RESULTS.md').read_text()
     sections = _sections(text)
     assert 'Summary' in sections
-    for title in report.headings():
+    for title in results_page.headings():
         assert title in sections, f'section {title!r} missing'
         body = sections[title]
         assert 'This section failed' not in body, body[:300]
@@ -111,11 +111,11 @@ def test_a_run_replaces_only_its_blocks_of_the_page(tmp_path, smoke):
             '## 1. Path deviation: straight line vs joint interpolation\n\nold paths\n\n'
             '## Notes\n\nhand-written\n\n<!-- faults:begin -->\nfaults\n<!-- faults:end -->\n')
     only_paths = dict(results, **{s.key: {'skipped': True} for s in SECTIONS[1:]})
-    text = report.render(only_paths, page)
+    text = results_page.render(only_paths, page)
     assert 'old paths' not in text and 'old run' not in text
     assert '<!-- benchmark:paths:begin -->' in text and '<!-- benchmark:solvers:' not in text
     assert 'hand-written' in text and '<!-- faults:begin -->\nfaults\n' in text
-    again = report.render(results, text)
+    again = results_page.render(results, text)
     sections = _sections(again)
     assert again.count('<!-- benchmark:paths:begin -->') == 1
     assert '| IK latency |' in sections['Summary'] and 'hand-written' in sections['Notes']
@@ -138,8 +138,8 @@ def test_render_reports_a_failed_section_and_keeps_a_skipped_ones_block(smoke):
     out, _, results = smoke
     previous = (out / 'RESULTS.md').read_text()
     results = dict(results, paths={'error': 'RuntimeError: boom'}, solvers={'skipped': True})
-    sections = _sections(report.render(results, previous))
-    first, second = report.headings()[:2]
+    sections = _sections(results_page.render(results, previous))
+    first, second = results_page.headings()[:2]
     assert '**This section failed:** `RuntimeError: boom`' in sections[first]
     assert sections[second] == _sections(previous)[second]
 

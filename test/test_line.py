@@ -305,7 +305,7 @@ def test_the_line_benchmark_writes_each_scenario_into_its_own_block(tmp_path):
     The killed-cell scenario reads the recovery from the logs' wall stamps: the kill in cell
     1's log, the first sort after the takeover in cell 2's.
     """
-    from scara_collab.bench import line as bench
+    from benchmarks import line_scenarios as bench
     from benchmarks.util import write_block
     page = tmp_path / 'LINE.md'
     page.write_text('# A line of cells\n\nkept by hand\n')
@@ -337,7 +337,7 @@ def test_the_line_benchmark_writes_each_scenario_into_its_own_block(tmp_path):
 
 def test_the_line_capacity_block_sets_each_cells_cpu_beside_one_cells():
     """The capacity block shows one cell's CPU beside the line's, and the worst ratio."""
-    from scara_collab.bench import line as bench
+    from benchmarks import line_scenarios as bench
     row = {'cells': 2, 'belt_speed': 0.4, 'feed_interval': 0.45, 'one_cell': 41.1,
            'items_per_minute': 79.3, 'ratio': 0.964, 'worst_cell_ratio': 0.948,
            'per_cell': [40.3, 39.0], 'min_separation_m': [0.142, 0.182],

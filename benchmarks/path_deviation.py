@@ -4,8 +4,8 @@ import time
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, fmt_seconds, met, mm, num, Rows, table
+from benchmarks.claims import CLAIMS
+from benchmarks.util import axes, finish, fmt_seconds, met, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import ArmModel, CellModel, load_cell

@@ -7,33 +7,35 @@ import time
 import traceback
 from typing import Dict, List, Optional, Sequence
 
-from scara_collab.bench import foresight, paths, payload, singularity, solvers, sync, throughput
-from scara_collab.bench.util import (machine, num, Progress, put_block, quote, Section, table,
-                                     usable, write_json)
+from benchmarks import (foresight, path_deviation, payload, singularity, solvers, sync,
+                        throughput)
+from benchmarks.util import (machine, num, Progress, put_block, quote, ResultsSection, table,
+                             usable, write_json)
 
-LAYOUT = (  # in the order of RESULTS.md: module, progress title, heading, claims, figure's alt
-    (paths, 'path deviation: straight line vs joint interpolation',
+LAYOUT = (  # in the order of RESULTS.md: key, module, progress title, heading, claims, alt
+    ('paths', path_deviation, 'path deviation: straight line vs joint interpolation',
      'Path deviation: straight line vs joint interpolation',
      ('joint_deviation', 'line_deviation', 'path_length'),
      'tool paths seen from above and their deviation'),
-    (solvers, 'solver speed vs reference implementations',
+    ('solvers', solvers, 'solver speed vs reference implementations',
      'Solver speed, against reference implementations', ('ik_latency', 'solver_latency'),
      'speed-up over the references'),
-    (payload, 'payload response', 'Payload response: PID vs computed torque', ('payload',),
-     'distance to the goal over time, per payload'),
-    (sync, 'synchronisation: mirrored moves through the graph',
+    ('payload', payload, 'payload response', 'Payload response: PID vs computed torque',
+     ('payload',), 'distance to the goal over time, per payload'),
+    ('sync', sync, 'synchronisation: mirrored moves through the graph',
      'Synchronisation: mirror error and start lag', ('mirror_error', 'lag'),
      'mirror error over the moves'),
-    (singularity, 'singularity: pseudo-inverse vs DLS',
+    ('singularity', singularity, 'singularity: pseudo-inverse vs DLS',
      'Singularity: pseudo-inverse vs damped least squares', ('singularity', 'unreachable'),
      'joint speed along the study paths'),
-    (foresight, 'collision foresight on crossing moves', 'Collision foresight and margins',
-     ('foresight', 'collision_risk'), 'foresight and separation histograms'),
-    (throughput, 'throughput: the sorting job', 'Throughput and real-time factor',
+    ('foresight', foresight, 'collision foresight on crossing moves',
+     'Collision foresight and margins', ('foresight', 'collision_risk'),
+     'foresight and separation histograms'),
+    ('throughput', throughput, 'throughput: the sorting job', 'Throughput and real-time factor',
      ('throughput', 'rtf'), 'items per minute per mode and seed'))
-SECTIONS = tuple(Section(m.__name__.rsplit('.', 1)[1], title, heading, claims, m.measure,
-                         m.tables, m.summary, m.figure, alt)
-                 for m, title, heading, claims, alt in LAYOUT)
+SECTIONS = tuple(ResultsSection(key, title, heading, claims, m.measure, m.tables, m.summary,
+                                m.figure, alt)
+                 for key, m, title, heading, claims, alt in LAYOUT)
 SUMMARY_ORDER = ('solvers', 'paths', 'sync', 'payload', 'singularity', 'foresight', 'throughput')
 
 

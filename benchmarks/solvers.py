@@ -7,8 +7,8 @@ from typing import Callable, List, Sequence
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, fmt_seconds, met, per_call, Rows, table
+from benchmarks.claims import CLAIMS
+from benchmarks.util import axes, finish, fmt_seconds, met, per_call, Rows, table
 from scara_collab.core import collision, dynamics, kinematics
 from scara_collab.core.model import expand_xacro, load_cell
 

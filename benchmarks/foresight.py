@@ -4,8 +4,8 @@ import time
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, fmt_seconds, met, num, Rows, spread, table
+from benchmarks.claims import CLAIMS
+from benchmarks.util import axes, finish, fmt_seconds, met, num, Rows, spread, table
 from scara_collab.core import collision
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik, IKError

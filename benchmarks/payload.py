@@ -3,8 +3,8 @@ from pathlib import Path
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS, PAYLOAD_CLAIMS
-from scara_collab.bench.util import axes, finish, mm, num, Rows, table
+from benchmarks.claims import CLAIMS, PAYLOAD_CLAIMS
+from benchmarks.util import axes, finish, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import CellModel, load_cell

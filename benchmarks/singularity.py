@@ -3,8 +3,8 @@ from pathlib import Path
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, met, mm, num, Rows, table
+from benchmarks.claims import CLAIMS
+from benchmarks.util import axes, finish, met, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import base_to_world, fk, ik, ik_both, IKError, manipulability
 from scara_collab.core.model import ArmModel, load_cell

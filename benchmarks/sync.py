@@ -9,9 +9,9 @@ import numpy as np
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
+from benchmarks.claims import CLAIMS
+from benchmarks.util import axes, finish, met, mm, num, Rows, table
 from scara_collab import graph
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, met, mm, num, Rows, table
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import load_cell

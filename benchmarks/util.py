@@ -14,7 +14,7 @@ from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Sequ
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS
+from benchmarks.claims import CLAIMS
 
 Log = Callable[[str], None]
 Rows = List[Sequence[str]]
@@ -152,7 +152,7 @@ def finish(ax, xlabel: str, ylabel: str, title: str, hlines: Dict[float, str] = 
 
 
 @dataclass(frozen=True)
-class Section:
+class ResultsSection:
     """A numbered section of ``RESULTS.md`` (``key``: ``--only`` and ``figures/<key>.png``)."""
 
     key: str

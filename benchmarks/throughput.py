@@ -7,11 +7,11 @@ from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 
-from scara_collab.bench import job
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.launched import run_launcher
-from scara_collab.bench.payload import LINES
-from scara_collab.bench.util import axes, finish, met, num, Rows, spread, table
+from benchmarks.claims import CLAIMS
+from benchmarks.job_in_process import default_feed, run_job
+from benchmarks.launched import run_launcher
+from benchmarks.payload import LINES
+from benchmarks.util import axes, finish, met, num, Rows, spread, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik, IKError
 from scara_collab.core.model import load_cell
@@ -137,12 +137,12 @@ def measure(smoke: bool, scratch: Path) -> dict:
     """Run the capacity runs, the repeats, the rated feed, the launcher, the bounds, the speed."""
     sizes = SMOKE if smoke else Sizes()
     feed, first = sizes.capacity_feed, sizes.job_seeds[0]
-    runs = [job.run_job(mode, sizes.job_duration, feed=feed, seed=seed)
+    runs = [run_job(mode, sizes.job_duration, feed=feed, seed=seed)
             for seed in sizes.job_seeds for mode in sizes.job_modes]
     repeats = [r for r in runs if r['mode'] == 'collaborative' and r['seed'] == first]
-    repeats += [job.run_job('collaborative', sizes.job_duration, feed=feed, seed=first)
+    repeats += [run_job('collaborative', sizes.job_duration, feed=feed, seed=first)
                 for _ in range(1, sizes.repeats)]
-    rated = job.run_job('collaborative', sizes.rated_duration, seed=first) \
+    rated = run_job('collaborative', sizes.rated_duration, seed=first) \
         if sizes.rated_duration else None
     launcher_runs = {}
     for k in range(sizes.launcher_repeats if sizes.launcher_duration else 0):
@@ -158,7 +158,7 @@ def measure(smoke: bool, scratch: Path) -> dict:
     return {'runs': runs, 'repeats': repeats, 'rated': rated, 'launcher_runs': launcher_runs,
             'cycle': cycle_bound(step=sizes.cycle_step), 'topp': spread(ratios),
             'speed': speed, 'duration': sizes.job_duration, 'modes': list(sizes.job_modes),
-            'feed_interval': feed, 'rated_feed': job.default_feed()}
+            'feed_interval': feed, 'rated_feed': default_feed()}
 
 
 def result_of(run: dict) -> tuple:

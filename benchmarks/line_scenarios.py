@@ -8,9 +8,9 @@ from typing import Dict, List, Sequence
 
 import yaml
 
-from scara_collab.bench.job import default_feed
-from scara_collab.bench.launched import Launch
-from scara_collab.bench.util import Log, table, write_block
+from benchmarks.job_in_process import default_feed
+from benchmarks.launched import Launch
+from benchmarks.util import Log, table, write_block
 from scara_collab.core.line import Section
 from scara_collab.core.model import load_cell
 from scara_collab.core.paths import share_dir
@@ -158,7 +158,7 @@ def capacity_text(rows: List[Dict[str, object]], command: str) -> str:
         'CPU s per sim s per cell (one cell)': ', '.join(_f(c) for c in r['cpu_per_cell'])
         + f' ({_f(r["one_cell_cpu"])})', 'worst CPU / one (<= 1.1)': _f(r['cpu_ratio'], 3),
         'handoffs (problems)': f'{r["handoffs"]} ({r["handoff_problems"]})',
-        'exit': r['exit_code']} for r in rows], ' (`scara_collab/bench/line.py`)')
+        'exit': r['exit_code']} for r in rows], ' (`benchmarks/line_scenarios.py`)')
 
 
 def rated_text(rows: List[Dict[str, object]], command: str) -> str:
