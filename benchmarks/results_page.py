@@ -79,7 +79,7 @@ def render(results: dict, previous: str = '') -> str:
         by_key = {s.key: s for s in SECTIONS}
         rows = [row for key in SUMMARY_ORDER if usable(results.get(key))
                 for row in by_key[key].summary(results[key])]
-        cols = ('what', "seeds' claim", 'measured here', 'SPEC target', 'target')
+        cols = ('what', "design documents' claim", 'measured here', 'SPEC target', 'target')
         page = put_block(page, 'benchmark:summary', 'Summary',
                          table([dict(zip(cols, r)) for r in rows]))
     for heading, section in zip(headings(), SECTIONS):

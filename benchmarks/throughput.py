@@ -20,7 +20,8 @@ from scara_collab.core.sorting import drop_point, pick_height
 from scara_collab.core.trajectory import line_move, Trajectory
 from scara_collab.sim.cell_sim import CellSim
 
-CLAIMED = {'single': 12.0, 'collaborative': 22.0}  # the seeds' capacity per mode, items/min
+#: the design documents' capacity per mode, items/min
+CLAIMED = {'single': 12.0, 'collaborative': 22.0}
 SAME = ('sorted', 'missed', 'dropped', 'wrong_bin', 'give_ups', 'retries', 'min_separation_m',
         'min_separation_time')  # what "the same job result" compares, to the last bit
 
@@ -214,11 +215,12 @@ def tables(t: dict) -> list:
             'real-time factor': num(np.mean([r['real_time_factor'] for r in runs]), 2),
             'in-step mirror error (mm)': ', '.join(num(r['mirror_error_max_m'] * 1e3, 3)
                                                    for r in runs) if mode == 'mirrored' else '',
-            "seeds' claim": f'{CLAIMED[mode]:g} items/min' if mode in CLAIMED else ''})
+            "design documents' claim": f'{CLAIMED[mode]:g} items/min' if mode in CLAIMED else ''})
     ratio, cyc, topp, rated = pair_ratio(t), t['cycle'], t['topp'], t['rated']
     bounds = [
         ('pair / single items per minute, per seed', f'{num(ratio["mean"])} ± '
-         f'{num(ratio["std"], 2)} ({ratio["n"]} seeds)', '≥ 1.9 (seeds: 22 / 12 = 1.83)'),
+         f'{num(ratio["std"], 2)} ({ratio["n"]} seeds)',
+         '≥ 1.9 (design documents: 22 / 12 = 1.83)'),
         (f'cycle bound, single arm, bin → pick → bin, {cyc["cases"]} pick points × both bins, '
          'no grasp or release: best', f'{cyc["best_s"]:.2f} s ({cyc["items_per_min_best"]:.1f} '
          f'items/min) at {", ".join(f"{v:.2f}" for v in cyc["best_pick"])} m', ''),
@@ -323,7 +325,7 @@ def summary(t: dict) -> Rows:
 
 
 def figure(t: dict):
-    """Items per minute per mode and seed, with the seeds' claims."""
+    """Items per minute per mode and seed, with the design documents' claims."""
     fig, (ax,) = axes(6.0, 3.6)
     for i, mode in enumerate(t['modes']):
         vals = [r['items_per_minute'] for r in jobs(t, mode)]
@@ -331,7 +333,7 @@ def figure(t: dict):
         ax.plot([i] * len(vals), vals, 'ko', ms=4, label='one seed' if i == 0 else None)
         if mode in CLAIMED:
             ax.plot([i - 0.4, i + 0.4], [CLAIMED[mode]] * 2, 'r--',
-                    label="seeds' claim" if mode == 'single' else None)
+                    label="design documents' claim" if mode == 'single' else None)
     ax.set_xticks(range(len(t['modes'])), t['modes'])
     finish(ax, '', 'items sorted per sim minute',
            f'capacity: an item every {t["feed_interval"]:g} s, {t["duration"]:g} sim s per run',

@@ -113,7 +113,7 @@ def met(flag: Optional[bool]) -> str:
 
 
 def quote(*keys: str) -> str:
-    """Blockquote the seeds' claims ``keys`` with their sources."""
+    """Blockquote the design documents' claims ``keys`` with their sources."""
     return '\n>\n'.join(f'> {CLAIMS[k].quote} — *{CLAIMS[k].source}*' for k in keys)
 
 

@@ -13,7 +13,11 @@ from benchmarks.results_page import SECTIONS, SUMMARY_ORDER
 from benchmarks.util import fmt_seconds, spread, table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
-SEEDS = ROOT.parent / 'shared' / 'seeds'
+#: the design documents' sentences the claims quote, kept word for word (the documents are not
+#: part of the repository)
+QUOTED = Path(__file__).resolve().parent / 'design_document_quotes.txt'
+#: a quote on the results page: ``> the quote — *its source*``
+QUOTE_LINE = re.compile(r'^> (.+) — \*(.+)\*$', re.M)
 
 
 @pytest.fixture(scope='module')
@@ -44,7 +48,7 @@ def test_every_section_reports_progress_with_elapsed_time(smoke):
 
 
 def test_results_md_has_every_section_with_the_claims_beside(smoke):
-    """RESULTS.md has every section, none failed, each with the seeds' claim quoted."""
+    """RESULTS.md has every section, none failed, each with its claims quoted."""
     out, _, _ = smoke
     text = (out / 'RESULTS.md').read_text()
     sections = _sections(text)
@@ -53,8 +57,8 @@ def test_results_md_has_every_section_with_the_claims_beside(smoke):
         assert title in sections, f'section {title!r} missing'
         body = sections[title]
         assert 'This section failed' not in body, body[:300]
-        assert "seeds' claim" in body, f'{title}: no claim column'
-        assert re.search(r'^> .+ — \*seeds/00\d', body, re.M), f'{title}: no quoted claim'
+        assert "design documents' claim" in body, f'{title}: no claim column'
+        assert QUOTE_LINE.search(body), f'{title}: no quoted claim'
     assert 'smoke run' in text and 'Machine:' in text
 
 
@@ -152,10 +156,36 @@ def test_helpers():
     assert table([{'a': 1, 'b': 2}], 'lr') == '| a | b |\n|---|---:|\n| 1 | 2 |'
 
 
-@pytest.mark.skipif(not SEEDS.is_dir(), reason='the design documents are not beside the repo')
+def quoted() -> dict:
+    """Return the design documents' sentences kept in the repository: ``{key: (source, text)}``."""
+    blocks = {}
+    for block in QUOTED.read_text(encoding='utf-8').split('\n== ')[1:]:
+        head, _, text = block.partition('\n')
+        key, _, source = head.partition(': ')
+        blocks[key] = (source, text)
+    return blocks
+
+
+def test_every_claim_has_its_sentences_kept_with_the_same_source():
+    """Each claim names the document and section its kept sentences come from."""
+    kept = quoted()
+    assert set(kept) == set(CLAIMS)
+    for key, claim in CLAIMS.items():
+        assert kept[key][0] == claim.source, key
+
+
 @pytest.mark.parametrize('key', ['ik_latency', 'solver_latency', 'mirror_error', 'lag',
-                                 'foresight', 'collision_risk', 'throughput', 'path_length'])
+                                 'foresight', 'collision_risk', 'throughput', 'path_length',
+                                 'joint_deviation'])
 def test_sentence_claims_are_verbatim_quotes(key):
-    """Each sentence claim is quoted verbatim from the seeds' design documents."""
-    seeds = ' '.join(p.read_text().replace('**', '') for p in SEEDS.glob('0*.txt'))
-    assert CLAIMS[key].quote in seeds
+    """Each sentence claim is word for word in the design documents' sentences kept here."""
+    assert CLAIMS[key].quote in quoted()[key][1]
+
+
+def test_the_page_quotes_only_the_claims_with_their_sources(smoke):
+    """Every quote on the results page is a claim's quote, cited with that claim's source."""
+    out, _, _ = smoke
+    quotes = QUOTE_LINE.findall((out / 'RESULTS.md').read_text())
+    assert quotes
+    known = {(c.quote, c.source) for c in CLAIMS.values()}
+    assert not [q for q in quotes if q not in known]
