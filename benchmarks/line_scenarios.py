@@ -1,4 +1,4 @@
-"""A line of cells through the launcher (``--only line``): a block of ``LINE.md`` a scenario."""
+"""A line of cells through the launcher (``--only line``): a block of the line page a scenario."""
 import os
 from pathlib import Path
 import re
@@ -10,7 +10,7 @@ import yaml
 
 from benchmarks.job_in_process import default_feed
 from benchmarks.launched import Launch
-from benchmarks.util import Log, table, write_block
+from benchmarks.util import LINE_PAGE, Log, table, write_block
 from scara_collab.core.line import Section
 from scara_collab.core.model import load_cell
 from scara_collab.core.paths import share_dir
@@ -200,8 +200,8 @@ def kill_text(r: Dict[str, object], command: str) -> str:
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the ``--scenarios`` (capacity) into blocks of ``LINE.md``; False if one missed."""
-    target = page.parent / 'LINE.md'
+    """Run the ``--scenarios`` (capacity) into blocks of the line page; False if one missed."""
+    target = page.parent / LINE_PAGE
     folder = Path(tempfile.mkdtemp(prefix='scara_line_'))
     log(f'run folders in {folder}')
     lines, bad = args.cells or [2, 3], []

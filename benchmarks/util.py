@@ -19,6 +19,10 @@ from benchmarks.claims import CLAIMS
 Log = Callable[[str], None]
 Rows = List[Sequence[str]]
 
+#: the pages the benchmarks write into their folder (``docs/results/`` by default), and the
+#: folder of the results page's figures beside them
+RESULTS_PAGE, REALTIME_PAGE, LINE_PAGE, FIGURES = 'results.md', 'realtime.md', 'line.md', 'figures'
+
 
 def machine() -> Dict[str, object]:
     """Describe this machine: CPU, cores, load, Python and numpy versions."""
@@ -153,7 +157,7 @@ def finish(ax, xlabel: str, ylabel: str, title: str, hlines: Dict[float, str] = 
 
 @dataclass(frozen=True)
 class ResultsSection:
-    """A numbered section of ``RESULTS.md`` (``key``: ``--only`` and ``figures/<key>.png``)."""
+    """A numbered section of the results page (``key``: ``--only`` and ``figures/<key>.png``)."""
 
     key: str
     title: str

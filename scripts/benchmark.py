@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Measure every result the design documents claim, on this machine; write docs/RESULTS.md."""
+"""Measure every result the design documents claim, on this machine; write docs/results/."""
 import argparse
 import os
 from pathlib import Path
@@ -12,7 +12,8 @@ sys.path.insert(0, str(ROOT))  # benchmarks/ lies beside scripts/: measured, nev
 
 from benchmarks import (fault_matrix, job_protocol, line_scenarios,  # noqa: E402
                         realtime_runs, results_page, soak)
-from benchmarks.util import Progress  # noqa: E402
+from benchmarks.util import (FIGURES, LINE_PAGE, Progress, REALTIME_PAGE,  # noqa: E402
+                             RESULTS_PAGE)
 
 LAUNCHER = {'protocol': job_protocol, 'faults': fault_matrix, 'soak': soak,
             'realtime': realtime_runs, 'line': line_scenarios}
@@ -30,8 +31,8 @@ def keys(text: str) -> list:
 
 OPTIONS = (  # flag, argparse keywords, help
     ('--smoke', dict(action='store_true'), 'tiny sizes: seconds, not minutes'),
-    ('--out', dict(type=Path), 'folder for RESULTS.md, REALTIME.md and figures/ (default docs/); '
-     'a .md path is the real-time page'),
+    ('--out', dict(type=Path), f'folder for {RESULTS_PAGE}, {REALTIME_PAGE}, {LINE_PAGE} and '
+     f'{FIGURES}/ (default docs/results/); a .md path is the real-time page'),
     ('--json', dict(type=Path), 'also write every measured value of the numbered sections here'),
     ('--duration', dict(type=float), 'sim s per run: realtime (600), soak (3600)'),
     ('--seeds', dict(type=int, nargs='+'), 'seeds: realtime (1 2 3), protocol mirrored runs '
@@ -71,19 +72,19 @@ def main(argv=None) -> int:
     os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     out = args.out or (Path(tempfile.mkdtemp(prefix='scara_bench_')) if args.smoke
-                       else ROOT / 'docs')
-    page, out = (out, out.parent) if out.suffix == '.md' else (out / 'REALTIME.md', out)
+                       else ROOT / 'docs' / 'results')
+    page, out = (out, out.parent) if out.suffix == '.md' else (out / REALTIME_PAGE, out)
     out.mkdir(parents=True, exist_ok=True)
     command = shlex.join(['scripts/benchmark.py', *(sys.argv[1:] if argv is None else argv)])
     progress, bad = Progress(), []
     numbered = [k for k in only if k not in LAUNCHER]
     if numbered:
-        progress.note(f'writing {out / "RESULTS.md"} and {out / "figures"}/')
+        progress.note(f'writing {out / RESULTS_PAGE} and {out / FIGURES}/')
         results = results_page.run(out, args.smoke, numbered, progress, args.json, command)
         bad += results_page.failed(results)
     for key in (k for k in only if k in LAUNCHER):
         with progress.section(key):
-            target = page if key == 'realtime' else out / 'RESULTS.md'
+            target = page if key == 'realtime' else out / RESULTS_PAGE
             if not LAUNCHER[key].section(args, target, command, progress.note):
                 bad.append(key)
     print(f'{out} written in {progress.elapsed():.0f} s'

@@ -10,7 +10,7 @@ import pytest
 from benchmarks import results_page
 from benchmarks.claims import CLAIMS
 from benchmarks.results_page import SECTIONS, SUMMARY_ORDER
-from benchmarks.util import fmt_seconds, spread, table, write_block
+from benchmarks.util import FIGURES, fmt_seconds, RESULTS_PAGE, spread, table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
 #: the design documents' sentences the claims quote, kept word for word (the documents are not
@@ -47,10 +47,10 @@ def test_every_section_reports_progress_with_elapsed_time(smoke):
                          proc.stderr, re.M), f'no progress line for {section.title!r}'
 
 
-def test_results_md_has_every_section_with_the_claims_beside(smoke):
-    """RESULTS.md has every section, none failed, each with its claims quoted."""
+def test_the_results_page_has_every_section_with_the_claims_beside(smoke):
+    """The results page has every section, none failed, each with its claims quoted."""
     out, _, _ = smoke
-    text = (out / 'RESULTS.md').read_text()
+    text = (out / RESULTS_PAGE).read_text()
     sections = _sections(text)
     assert 'Summary' in sections
     for title in results_page.headings():
@@ -63,25 +63,25 @@ def test_results_md_has_every_section_with_the_claims_beside(smoke):
 
 
 def test_figures_exist_are_small_pngs_and_are_linked(smoke):
-    """Every figure is a PNG of 5-200 kB, and RESULTS.md links it."""
+    """Every figure is a PNG of 5-200 kB, and the results page links it."""
     out, _, results = smoke
-    text = (out / 'RESULTS.md').read_text()
+    text = (out / RESULTS_PAGE).read_text()
     for key in (s.key for s in SECTIONS):
-        png = out / 'figures' / f'{key}.png'
+        png = out / FIGURES / f'{key}.png'
         assert png.is_file(), f'{png} missing ({results["figures"].get(key)})'
         data = png.read_bytes()
         assert data[:8] == b'\x89PNG\r\n\x1a\n'
         assert 5_000 < len(data) < 200_000
-        assert f'](figures/{key}.png)' in text
+        assert f']({FIGURES}/{key}.png)' in text
 
 
 def test_numbers_come_from_the_run(smoke):
-    """The numbers in RESULTS.md are those of the run, and they are plausible.
+    """The numbers on the results page are those of the run, and they are plausible.
 
     IK latency, line and joint deviations, throughput, mirror error, singularity and foresight.
     """
     out, _, results = smoke
-    text = (out / 'RESULTS.md').read_text()
+    text = (out / RESULTS_PAGE).read_text()
     ik = next(r for r in results['solvers']['rows'] if r['what'] == 'IK, one target')
     assert ik['ours'] > 0 and ik['reference'] > 0
     assert fmt_seconds(ik['ours']) in text
@@ -123,7 +123,7 @@ def test_a_run_replaces_only_its_blocks_of_the_page(tmp_path, smoke):
     sections = _sections(again)
     assert again.count('<!-- benchmark:paths:begin -->') == 1
     assert '| IK latency |' in sections['Summary'] and 'hand-written' in sections['Notes']
-    written = tmp_path / 'RESULTS.md'
+    written = tmp_path / RESULTS_PAGE
     write_block(written, 'soak', 'Soak', 'first')
     write_block(written, 'soak', 'Soak', 'second')
     assert written.read_text() == ('# Results, measured\n\n## Soak\n\n<!-- soak:begin -->\n'
@@ -140,7 +140,7 @@ def test_sections_are_registered_once_each():
 def test_render_reports_a_failed_section_and_keeps_a_skipped_ones_block(smoke):
     """A failed section shows its error; a skipped one keeps its block; other blocks stay."""
     out, _, results = smoke
-    previous = (out / 'RESULTS.md').read_text()
+    previous = (out / RESULTS_PAGE).read_text()
     results = dict(results, paths={'error': 'RuntimeError: boom'}, solvers={'skipped': True})
     sections = _sections(results_page.render(results, previous))
     first, second = results_page.headings()[:2]
@@ -185,7 +185,7 @@ def test_sentence_claims_are_verbatim_quotes(key):
 def test_the_page_quotes_only_the_claims_with_their_sources(smoke):
     """Every quote on the results page is a claim's quote, cited with that claim's source."""
     out, _, _ = smoke
-    quotes = QUOTE_LINE.findall((out / 'RESULTS.md').read_text())
+    quotes = QUOTE_LINE.findall((out / RESULTS_PAGE).read_text())
     assert quotes
     known = {(c.quote, c.source) for c in CLAIMS.values()}
     assert not [q for q in quotes if q not in known]

@@ -306,8 +306,8 @@ def test_the_line_benchmark_writes_each_scenario_into_its_own_block(tmp_path):
     1's log, the first sort after the takeover in cell 2's.
     """
     from benchmarks import line_scenarios as bench
-    from benchmarks.util import write_block
-    page = tmp_path / 'LINE.md'
+    from benchmarks.util import LINE_PAGE, write_block
+    page = tmp_path / LINE_PAGE
     page.write_text('# A line of cells\n\nkept by hand\n')
     rated = {'cells': 2, 'duration': 600.0, 'feed_interval': 0.9, 'missed': 0, 'dropped': 1,
              'handoffs': 301, 'handoff_problems': 0, 'balanced': True,

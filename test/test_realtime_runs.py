@@ -1,6 +1,7 @@
 """The real-time benchmark's bookkeeping: its rows, its faults, its page (no launcher run)."""
 from benchmarks import realtime_runs
 from benchmarks.launched import row
+from benchmarks.util import REALTIME_PAGE
 from scara_collab.nodes.faults import parse_faults
 
 
@@ -62,7 +63,7 @@ def test_the_page_has_a_row_per_run_and_the_capacity_ratio():
 def test_a_rerun_replaces_its_block_and_keeps_the_notes_written_by_hand(tmp_path, monkeypatch):
     """``--only realtime`` writes its block; the page's other block and notes stay."""
     from argparse import Namespace
-    page = tmp_path / 'REALTIME.md'
+    page = tmp_path / REALTIME_PAGE
     page.write_text('# Real time, without lockstep\n\n## One process, at 1×\n\n'
                     '<!-- realtime:one_process:begin -->\nold\n'
                     '<!-- realtime:one_process:end -->\n\nnotes by hand\n\n'
