@@ -21,7 +21,7 @@ shared).
 
 Everything that starts the graph reads this module: the launcher (one process per node, or
 all in one container), ``setup.py`` (the console scripts, so ``ros2 run`` has the same
-names), the in-process graph of the benchmarks (:func:`scara_collab.bench.job.run_job`) and
+names), the in-process graph of the benchmarks (:func:`benchmarks.job_in_process.run_job`) and
 the tests' graphs (``test/ros_harness.py``). In launch order::
 
     pybullet_bridge      clock, joint_states, trajectories, belt, gripper    ready: service
@@ -406,10 +406,10 @@ def lockstep_expect(nodes: Sequence[NodeSpec]) -> List[str]:
     return [n.name for n in nodes if n.lockstep]
 
 
-#: s, the planners' ``send_margin`` in real time: the planning lead, as in lockstep. A margin
-#: of 0.01 s (a trajectory reaches the bridge within milliseconds) made late starts common
-#: beside a CPU hog, and one such run broke the safety margin (docs/limits.md), so real time
-#: keeps the lead until the cause is found
+#: s, the planners' ``send_margin`` in real time: the planning lead, as in lockstep. A
+#: trajectory reaches the bridge within milliseconds, but beside a CPU hog a shorter margin
+#: lets trajectories start late, and a late start can bring the arms closer than the safety
+#: margin (docs/limits.md)
 REALTIME_SEND_MARGIN = 0.05
 
 

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Measure every result the design documents claim, on this machine; write docs/RESULTS.md."""
+"""Measure every result the design documents claim, on this machine; write docs/results/."""
 import argparse
 import os
 from pathlib import Path
@@ -7,13 +7,17 @@ import shlex
 import sys
 import tempfile
 
-from scara_collab.bench import faults, line, protocol, realtime, report, soak
-from scara_collab.bench.util import Progress
-
 ROOT = Path(__file__).resolve().parents[1]
-LAUNCHER = {'protocol': protocol, 'faults': faults, 'soak': soak, 'realtime': realtime,
-            'line': line}
-KEYS = [s.key for s in report.SECTIONS] + list(LAUNCHER)
+sys.path.insert(0, str(ROOT))  # benchmarks/ lies beside scripts/: measured, never installed
+
+from benchmarks import (fault_matrix, job_protocol, line_scenarios,  # noqa: E402
+                        realtime_runs, results_page, soak)
+from benchmarks.util import (FIGURES, LINE_PAGE, Progress, REALTIME_PAGE,  # noqa: E402
+                             RESULTS_PAGE)
+
+LAUNCHER = {'protocol': job_protocol, 'faults': fault_matrix, 'soak': soak,
+            'realtime': realtime_runs, 'line': line_scenarios}
+KEYS = [s.key for s in results_page.SECTIONS] + list(LAUNCHER)
 
 
 def keys(text: str) -> list:
@@ -27,13 +31,13 @@ def keys(text: str) -> list:
 
 OPTIONS = (  # flag, argparse keywords, help
     ('--smoke', dict(action='store_true'), 'tiny sizes: seconds, not minutes'),
-    ('--out', dict(type=Path), 'folder for RESULTS.md, REALTIME.md and figures/ (default docs/); '
-     'a .md path is the real-time page'),
+    ('--out', dict(type=Path), f'folder for {RESULTS_PAGE}, {REALTIME_PAGE}, {LINE_PAGE} and '
+     f'{FIGURES}/ (default docs/results/); a .md path is the real-time page'),
     ('--json', dict(type=Path), 'also write every measured value of the numbered sections here'),
     ('--duration', dict(type=float), 'sim s per run: realtime (600), soak (3600)'),
     ('--seeds', dict(type=int, nargs='+'), 'seeds: realtime (1 2 3), protocol mirrored runs '
      '(11 12 13)'),
-    ('--conditions', dict(nargs='+', choices=list(realtime.CONDITIONS)),
+    ('--conditions', dict(nargs='+', choices=list(realtime_runs.CONDITIONS)),
      'realtime conditions (default all)'),
     ('--one-process', dict(action='store_true'),
      'realtime: every node of the cell in one process, in every run'),
@@ -61,25 +65,26 @@ def parse(argv=None) -> argparse.Namespace:
 def main(argv=None) -> int:
     """Run the sections and write their blocks; return 1 if one failed or missed its targets."""
     args = parse(argv)
-    only = [k for group in args.only or [] for k in group] or [s.key for s in report.SECTIONS]
+    only = ([k for group in args.only or [] for k in group]
+            or [s.key for s in results_page.SECTIONS])
     # The in-process graphs must not hear another ROS graph on this machine (a demo, a test):
     # a domain of our own unless the caller chose one, and discovery on this host only.
     os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     out = args.out or (Path(tempfile.mkdtemp(prefix='scara_bench_')) if args.smoke
-                       else ROOT / 'docs')
-    page, out = (out, out.parent) if out.suffix == '.md' else (out / 'REALTIME.md', out)
+                       else ROOT / 'docs' / 'results')
+    page, out = (out, out.parent) if out.suffix == '.md' else (out / REALTIME_PAGE, out)
     out.mkdir(parents=True, exist_ok=True)
     command = shlex.join(['scripts/benchmark.py', *(sys.argv[1:] if argv is None else argv)])
     progress, bad = Progress(), []
     numbered = [k for k in only if k not in LAUNCHER]
     if numbered:
-        progress.note(f'writing {out / "RESULTS.md"} and {out / "figures"}/')
-        results = report.run(out, args.smoke, numbered, progress, args.json, command)
-        bad += report.failed(results)
+        progress.note(f'writing {out / RESULTS_PAGE} and {out / FIGURES}/')
+        results = results_page.run(out, args.smoke, numbered, progress, args.json, command)
+        bad += results_page.failed(results)
     for key in (k for k in only if k in LAUNCHER):
         with progress.section(key):
-            target = page if key == 'realtime' else out / 'RESULTS.md'
+            target = page if key == 'realtime' else out / RESULTS_PAGE
             if not LAUNCHER[key].section(args, target, command, progress.note):
                 bad.append(key)
     print(f'{out} written in {progress.elapsed():.0f} s'

@@ -1,7 +1,7 @@
 """The sorting job in-process on sim time: each mode sorts, misses are counted, margin holds."""
 import pytest
 
-from scara_collab.bench.job import run_job as run_graph
+from benchmarks.job_in_process import run_job as run_graph
 
 
 def run_job(mode: str, seconds: float, feed: float, seed: int = 7, faults=()) -> dict:
@@ -174,7 +174,7 @@ class _Injector:
     """Injects a fault into an in-process job at given sim times, and watches what follows.
 
     ``inject(g, nodes, now)`` makes the fault and returns True if it did; the injector is the
-    job's ``during`` hook (:func:`scara_collab.bench.job.run_job`).
+    job's ``during`` hook (:func:`benchmarks.job_in_process.run_job`).
     """
 
     def __init__(self, times, inject):

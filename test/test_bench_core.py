@@ -4,6 +4,8 @@ from pathlib import Path
 import subprocess
 import sys
 
+from benchmarks.util import FIGURES, RESULTS_PAGE
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -23,9 +25,9 @@ def test_the_solver_section_runs_alone_and_compares_the_collision_formula(tmp_pa
     one = rows['capsule distances, one state pair (the one formula)']
     assert one['ours'] > 0 and one['reference'] > 0 and 'max diff' in one['note']
     assert float(one['note'].split()[-2]) <= 1e-15
-    page = (tmp_path / 'RESULTS.md').read_text()
+    page = (tmp_path / RESULTS_PAGE).read_text()
     assert '<!-- benchmark:solvers:begin -->' in page and '<!-- benchmark:paths:' not in page
-    assert (tmp_path / 'figures' / 'solvers.png').is_file()
+    assert (tmp_path / FIGURES / 'solvers.png').is_file()
 
 
 def test_the_foresight_study_executes_its_conflicts_at_full_size(tmp_path):
@@ -34,7 +36,7 @@ def test_the_foresight_study_executes_its_conflicts_at_full_size(tmp_path):
     Both arms are put at their starts before either move is sent: the simulator's door checks
     a move against where the other arm stands, which is the previous pair's end otherwise.
     """
-    from scara_collab.bench import foresight
+    from benchmarks import foresight
     result = foresight.measure(False, tmp_path)
     executed = [p['executed_min_m'] for p in result['pairs'] if p['executed_min_m'] is not None]
     assert result['n_pairs'] == 200 and len(executed) == 30

@@ -7,13 +7,17 @@ import sys
 
 import pytest
 
-from scara_collab.bench import report
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.report import SECTIONS, SUMMARY_ORDER
-from scara_collab.bench.util import fmt_seconds, spread, table, write_block
+from benchmarks import results_page
+from benchmarks.claims import CLAIMS
+from benchmarks.results_page import SECTIONS, SUMMARY_ORDER
+from benchmarks.util import FIGURES, fmt_seconds, RESULTS_PAGE, spread, table, write_block
 
 ROOT = Path(__file__).resolve().parents[1]
-SEEDS = ROOT.parent / 'shared' / 'seeds'
+#: the design documents' sentences the claims quote, kept word for word (the documents are not
+#: part of the repository)
+QUOTED = Path(__file__).resolve().parent / 'design_document_quotes.txt'
+#: a quote on the results page: ``> the quote — *its source*``
+QUOTE_LINE = re.compile(r'^> (.+) — \*(.+)\*$', re.M)
 
 
 @pytest.fixture(scope='module')
@@ -43,41 +47,41 @@ def test_every_section_reports_progress_with_elapsed_time(smoke):
                          proc.stderr, re.M), f'no progress line for {section.title!r}'
 
 
-def test_results_md_has_every_section_with_the_claims_beside(smoke):
-    """RESULTS.md has every section, none failed, each with the seeds' claim quoted."""
+def test_the_results_page_has_every_section_with_the_claims_beside(smoke):
+    """The results page has every section, none failed, each with its claims quoted."""
     out, _, _ = smoke
-    text = (out / 'RESULTS.md').read_text()
+    text = (out / RESULTS_PAGE).read_text()
     sections = _sections(text)
     assert 'Summary' in sections
-    for title in report.headings():
+    for title in results_page.headings():
         assert title in sections, f'section {title!r} missing'
         body = sections[title]
         assert 'This section failed' not in body, body[:300]
-        assert "seeds' claim" in body, f'{title}: no claim column'
-        assert re.search(r'^> .+ — \*seeds/00\d', body, re.M), f'{title}: no quoted claim'
+        assert "design documents' claim" in body, f'{title}: no claim column'
+        assert QUOTE_LINE.search(body), f'{title}: no quoted claim'
     assert 'smoke run' in text and 'Machine:' in text
 
 
 def test_figures_exist_are_small_pngs_and_are_linked(smoke):
-    """Every figure is a PNG of 5-200 kB, and RESULTS.md links it."""
+    """Every figure is a PNG of 5-200 kB, and the results page links it."""
     out, _, results = smoke
-    text = (out / 'RESULTS.md').read_text()
+    text = (out / RESULTS_PAGE).read_text()
     for key in (s.key for s in SECTIONS):
-        png = out / 'figures' / f'{key}.png'
+        png = out / FIGURES / f'{key}.png'
         assert png.is_file(), f'{png} missing ({results["figures"].get(key)})'
         data = png.read_bytes()
         assert data[:8] == b'\x89PNG\r\n\x1a\n'
         assert 5_000 < len(data) < 200_000
-        assert f'](figures/{key}.png)' in text
+        assert f']({FIGURES}/{key}.png)' in text
 
 
 def test_numbers_come_from_the_run(smoke):
-    """The numbers in RESULTS.md are those of the run, and they are plausible.
+    """The numbers on the results page are those of the run, and they are plausible.
 
     IK latency, line and joint deviations, throughput, mirror error, singularity and foresight.
     """
     out, _, results = smoke
-    text = (out / 'RESULTS.md').read_text()
+    text = (out / RESULTS_PAGE).read_text()
     ik = next(r for r in results['solvers']['rows'] if r['what'] == 'IK, one target')
     assert ik['ours'] > 0 and ik['reference'] > 0
     assert fmt_seconds(ik['ours']) in text
@@ -111,15 +115,15 @@ def test_a_run_replaces_only_its_blocks_of_the_page(tmp_path, smoke):
             '## 1. Path deviation: straight line vs joint interpolation\n\nold paths\n\n'
             '## Notes\n\nhand-written\n\n<!-- faults:begin -->\nfaults\n<!-- faults:end -->\n')
     only_paths = dict(results, **{s.key: {'skipped': True} for s in SECTIONS[1:]})
-    text = report.render(only_paths, page)
+    text = results_page.render(only_paths, page)
     assert 'old paths' not in text and 'old run' not in text
     assert '<!-- benchmark:paths:begin -->' in text and '<!-- benchmark:solvers:' not in text
     assert 'hand-written' in text and '<!-- faults:begin -->\nfaults\n' in text
-    again = report.render(results, text)
+    again = results_page.render(results, text)
     sections = _sections(again)
     assert again.count('<!-- benchmark:paths:begin -->') == 1
     assert '| IK latency |' in sections['Summary'] and 'hand-written' in sections['Notes']
-    written = tmp_path / 'RESULTS.md'
+    written = tmp_path / RESULTS_PAGE
     write_block(written, 'soak', 'Soak', 'first')
     write_block(written, 'soak', 'Soak', 'second')
     assert written.read_text() == ('# Results, measured\n\n## Soak\n\n<!-- soak:begin -->\n'
@@ -136,10 +140,10 @@ def test_sections_are_registered_once_each():
 def test_render_reports_a_failed_section_and_keeps_a_skipped_ones_block(smoke):
     """A failed section shows its error; a skipped one keeps its block; other blocks stay."""
     out, _, results = smoke
-    previous = (out / 'RESULTS.md').read_text()
+    previous = (out / RESULTS_PAGE).read_text()
     results = dict(results, paths={'error': 'RuntimeError: boom'}, solvers={'skipped': True})
-    sections = _sections(report.render(results, previous))
-    first, second = report.headings()[:2]
+    sections = _sections(results_page.render(results, previous))
+    first, second = results_page.headings()[:2]
     assert '**This section failed:** `RuntimeError: boom`' in sections[first]
     assert sections[second] == _sections(previous)[second]
 
@@ -152,10 +156,36 @@ def test_helpers():
     assert table([{'a': 1, 'b': 2}], 'lr') == '| a | b |\n|---|---:|\n| 1 | 2 |'
 
 
-@pytest.mark.skipif(not SEEDS.is_dir(), reason='the design documents are not beside the repo')
+def quoted() -> dict:
+    """Return the design documents' sentences kept in the repository: ``{key: (source, text)}``."""
+    blocks = {}
+    for block in QUOTED.read_text(encoding='utf-8').split('\n== ')[1:]:
+        head, _, text = block.partition('\n')
+        key, _, source = head.partition(': ')
+        blocks[key] = (source, text)
+    return blocks
+
+
+def test_every_claim_has_its_sentences_kept_with_the_same_source():
+    """Each claim names the document and section its kept sentences come from."""
+    kept = quoted()
+    assert set(kept) == set(CLAIMS)
+    for key, claim in CLAIMS.items():
+        assert kept[key][0] == claim.source, key
+
+
 @pytest.mark.parametrize('key', ['ik_latency', 'solver_latency', 'mirror_error', 'lag',
-                                 'foresight', 'collision_risk', 'throughput', 'path_length'])
+                                 'foresight', 'collision_risk', 'throughput', 'path_length',
+                                 'joint_deviation'])
 def test_sentence_claims_are_verbatim_quotes(key):
-    """Each sentence claim is quoted verbatim from the seeds' design documents."""
-    seeds = ' '.join(p.read_text().replace('**', '') for p in SEEDS.glob('0*.txt'))
-    assert CLAIMS[key].quote in seeds
+    """Each sentence claim is word for word in the design documents' sentences kept here."""
+    assert CLAIMS[key].quote in quoted()[key][1]
+
+
+def test_the_page_quotes_only_the_claims_with_their_sources(smoke):
+    """Every quote on the results page is a claim's quote, cited with that claim's source."""
+    out, _, _ = smoke
+    quotes = QUOTE_LINE.findall((out / RESULTS_PAGE).read_text())
+    assert quotes
+    known = {(c.quote, c.source) for c in CLAIMS.values()}
+    assert not [q for q in quotes if q not in known]

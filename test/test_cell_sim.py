@@ -77,14 +77,14 @@ def test_computed_torque_holds_tightly(cell):
         assert drift.max() < 1e-4
 
 
-def test_pid_hold_with_the_seed_gains_is_measured(cell):
-    """The seeds' PID (quill Kp 10 N/m) cannot carry the 2.4 kg quill: report the sag."""
+def test_pid_hold_with_the_design_documents_gains_is_measured(cell):
+    """The design documents' PID (quill Kp 10 N/m) cannot carry the 2.4 kg quill: the sag."""
     with _make(cell, mode='pid') as sim:
         q0 = _home(sim, LEFT, [3.0, -0.6, 0.4])
         sim.step(2000)
         q, qd = sim.arm_state(LEFT)
         sag = q[2] - q0[2]
-        print(f'\nPID (seed gains), 2 s hold: quill sag {sag * 1000:.1f} mm, '
+        print(f"\nPID (design documents' gains), 2 s hold: quill sag {sag * 1000:.1f} mm, "
               f'theta drift {np.abs(q[:2] - q0[:2]).max():.2e} rad')
         assert np.all(np.isfinite(q)) and np.all(np.isfinite(qd))
         arm = cell.leader
@@ -461,8 +461,8 @@ def test_payload_is_felt_by_the_arm(cell):
 def test_when_a_trajectory_arrives_before_its_start_does_not_change_the_run(cell):
     """A trajectory sent 80 ms or 20 ms before its start gives the same states, bit for bit.
 
-    In lockstep a trajectory reaches the bridge at either end of a window (README, *Repeatable
-    runs*); until its start the arm keeps its reference, never the position measured on
+    In lockstep a trajectory reaches the bridge at either end of a window (docs/realtime.md,
+    *Repeatable runs*); until its start the arm keeps its reference, never the position measured on
     arrival, so the run does not depend on which end it was.
     """
     states = []

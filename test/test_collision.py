@@ -40,7 +40,7 @@ def point_segment(p, a, b):
 
 
 def endpoint_only_distance(p0, p1, q0, q1):
-    """Return the seeds' check: the four endpoint-to-segment distances (misses crossings)."""
+    """Return the design documents' check: 4 endpoint-to-segment distances (misses crossings)."""
     p0, p1, q0, q1 = (np.asarray(v, dtype=float) for v in (p0, p1, q0, q1))
     return min(point_segment(p0, q0, q1), point_segment(p1, q0, q1),
                point_segment(q0, p0, p1), point_segment(q1, p0, p1))
@@ -90,8 +90,8 @@ def test_segment_distance_known_cases_and_brute_force(name):
     assert brute - d <= bound + 1e-12
 
 
-def test_crossing_segments_are_what_the_seeds_check_missed():
-    """Two crossing diagonals touch at their midpoints; the seeds' endpoint check says 0.71 m."""
+def test_crossing_segments_are_what_the_design_documents_check_missed():
+    """Two crossing diagonals touch at their midpoints; the documents' endpoint check: 0.71 m."""
     p0, p1, q0, q1 = (0, 0, 0), (1, 1, 0), (0, 1, 0), (1, 0, 0)
     d, s, t = segment_distance(p0, p1, q0, q1)
     assert float(d) == 0.0 and (float(s), float(t)) == (0.5, 0.5)
@@ -264,7 +264,7 @@ def test_arms_reaching_the_same_belt_point_overlap(arms):
 def test_link_1_crossing_link_2_in_plan_view_is_detected(profile):
     """Link 1 crossing link 2 in plan view breaks the margin, in every profile.
 
-    The seeds' endpoint-only check calls the same poses safe.
+    The design documents' endpoint-only check calls the same poses safe.
     """
     cell = load_cell(profile)
     left, right = cell.leader, cell.follower
@@ -283,8 +283,8 @@ def test_link_1_crossing_link_2_in_plan_view_is_detected(profile):
     assert arm_distance(left, q_left, near, q_right) < cell.safety_margin
     start_l, end_l, _ = arm_capsules(left, q_left)
     start_r, end_r, _ = arm_capsules(near, q_right)
-    seeds = endpoint_only_distance(start_l[0], end_l[0], start_r[1], end_r[1])
-    assert seeds - 2 * left.link_radius > 3 * cell.safety_margin  # the seeds' check says safe
+    theirs = endpoint_only_distance(start_l[0], end_l[0], start_r[1], end_r[1])
+    assert theirs - 2 * left.link_radius > 3 * cell.safety_margin  # their check says safe
 
 
 def test_arm_distance_vectorised_and_symmetric(arms):

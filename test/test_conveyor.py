@@ -1,4 +1,6 @@
 """The belt's parts alone (sim/conveyor.py): the feed's timing, the ends of a line's section."""
+from types import SimpleNamespace
+
 import pytest
 
 from scara_collab.core.line import Handoff
@@ -21,7 +23,7 @@ def test_the_feed_comes_once_a_period_and_restarts_from_a_change():
 
 def test_handed_items_arrive_in_order_once_and_bad_ones_are_refused(cell):
     """Arrivals come by time then id, once; an unknown class, y or a repeated id is refused."""
-    ends = SectionEnds(cell)
+    ends = SectionEnds(SimpleNamespace(cell=cell))  # its bookkeeping alone, with no belt
     red = cell.item_classes[0]
     ends.expect(Handoff(9, red, 0.0, 4.0), at=5.0, known=lambda item: False)
     ends.expect(Handoff(3, red, 0.1, 4.0), at=5.0, known=lambda item: False)
@@ -47,3 +49,17 @@ def test_handed_items_arrive_in_order_once_and_bad_ones_are_refused(cell):
         ends.expect(Handoff(5, red, 0.0, 1.0), 2.0, lambda item: item == 5)
     ends.handed.append(Handoff(1, red, 0.0, 7.0))
     assert [h.item for h in ends.pop_handoffs()] == [1] and ends.pop_handoffs() == []
+
+
+def test_an_item_past_the_end_is_missed_alone_and_handed_on_in_a_line(cell):
+    """Alone the end misses; joined with a cell downstream it hands on, at the crossing time."""
+    numbered = []
+    ends = SectionEnds(SimpleNamespace(cell=cell, number_from=numbered.append))
+    red, belt = cell.item_classes[0], cell.belt
+    item = SimpleNamespace(id=4, cls=red)
+    assert ends.crossed(item, belt.x_end + 0.1, 0.2, now=10.0) == 'missed'
+    assert ends.pop_handoffs() == []
+    ends.join(True, first_id=1_000_001)
+    assert numbered == [1_000_001]
+    assert ends.crossed(item, belt.x_end + 0.1, 0.2, now=10.0) == 'handed_on'
+    assert ends.pop_handoffs() == [Handoff(4, red, 0.2, pytest.approx(10.0 - 0.1 / belt.speed))]

@@ -1,7 +1,7 @@
-"""Every docstring example (``>>>``) in the package runs and shows what the code returns.
+"""Every docstring example (``>>>``) in the package and the benchmarks runs and shows its result.
 
-The modules are found by scanning the package source for ``>>>``, so an example added to any
-module is run here, and an example that no longer matches the code fails the suite. Usage
+The modules are found by scanning their source for ``>>>``, so an example added to any module
+is run here, and an example that does not match the code fails the suite. Usage
 sketches that cannot run on their own (they need a running node or a run folder) are written
 without prompts.
 """
@@ -11,14 +11,15 @@ from pathlib import Path
 
 import pytest
 
-PACKAGE = Path(__file__).resolve().parents[1] / 'scara_collab'
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = (ROOT / 'scara_collab', ROOT / 'benchmarks')
 FLAGS = doctest.NORMALIZE_WHITESPACE | doctest.ELLIPSIS
 
 
 def modules_with_examples():
-    """Return the dotted names of the package's modules whose source holds ``>>>``, sorted."""
-    return sorted('.'.join(path.relative_to(PACKAGE.parent).with_suffix('').parts)
-                  for path in PACKAGE.rglob('*.py')
+    """Return the dotted names of the packages' modules whose source holds ``>>>``, sorted."""
+    return sorted('.'.join(path.relative_to(ROOT).with_suffix('').parts)
+                  for package in PACKAGES for path in package.rglob('*.py')
                   if '>>>' in path.read_text(encoding='utf-8'))
 
 
@@ -27,7 +28,8 @@ MODULES = modules_with_examples()
 
 def test_the_scan_finds_the_modules_with_examples():
     """The scan finds modules known to hold examples (so the parametrisation is not empty)."""
-    assert {'scara_collab.core.kinematics', 'scara_collab.core.mirror'} <= set(MODULES)
+    assert {'scara_collab.core.kinematics', 'scara_collab.core.mirror',
+            'benchmarks.util'} <= set(MODULES)
 
 
 @pytest.mark.parametrize('name', MODULES)

@@ -321,7 +321,8 @@ def test_without_faults_the_fault_module_is_not_loaded():
     """The launcher, its node processes and the in-process job import it only for faults."""
     modules = ['scara_collab.run.launcher', 'scara_collab.run.child',
                'scara_collab.run.container', 'scara_collab.run.stages',
-               'scara_collab.run.supervisor', 'scara_collab.run.options', 'scara_collab.bench.job']
+               'scara_collab.run.supervisor', 'scara_collab.run.options',
+               'benchmarks.job_in_process']
     modules += sorted({spec.component.split(':')[0] for spec in graph.NODES})
     code = (f'import importlib, sys\nfor m in {modules!r}:\n    importlib.import_module(m)\n'
             'from scara_collab.run import options, stages\n'

@@ -6,6 +6,7 @@ submodule when there is one, else of the package's ``__init__``.
 """
 import ast
 from pathlib import Path
+import re
 from typing import Dict, List, Set
 
 PACKAGE = 'scara_collab'
@@ -124,3 +125,14 @@ def test_no_module_of_the_package_imports_itself_round_a_loop():
     """The package's import graph has no cycle."""
     found = cycles(graph())
     assert not found, 'import cycles: ' + '; '.join(' -> '.join(c) for c in found)
+
+
+def test_the_benchmarks_have_no_loop_and_the_package_never_imports_them():
+    """benchmarks/ (beside the package, not installed) has no cycle; no package module uses it."""
+    benchmarks = ROOT.parent / 'benchmarks'
+    found = cycles(graph(benchmarks))
+    assert len(modules(benchmarks)) > 10  # the walk found the benchmarks
+    assert not found, 'import cycles: ' + '; '.join(' -> '.join(c) for c in found)
+    uses = re.compile(r'^\s*(?:from|import)\s+benchmarks\b', re.M)
+    users = [str(p.relative_to(ROOT)) for p in ROOT.rglob('*.py') if uses.search(p.read_text())]
+    assert not users, f'package modules importing the benchmarks: {users}'

@@ -619,8 +619,8 @@ def test_the_followers_move_goes_out_after_the_leaders_planner_has_answered(cell
     """Both lanes ask in one tick: the follower's offer is held for the leader's answer.
 
     Its planner schedules against the leader's trajectories; sent in the same tick, the offer
-    could reach it before or after the leader's new trajectory (README, *Repeatable runs*).
-    Held, it goes out, unchanged, in the first tick after the leader's planner answers, or
+    could reach it before or after the leader's new trajectory (docs/realtime.md, *Repeatable
+    runs*). Held, it goes out, unchanged, in the first tick after the leader's planner answers, or
     after ``answer_timeout`` if that answer is lost.
     """
     lead, foll = cell.leader, cell.follower
@@ -789,9 +789,8 @@ def test_every_item_in_reach_is_ranked_not_only_the_most_urgent(cell):
     """The cheapest cycle wins even behind many more urgent items (none of them urgent).
 
     Seven blue items ride ahead of one red item; the left arm waits above its red bin. The
-    red item, the least urgent, makes the shortest cycle and comes first (the job once
-    ranked only the six most urgent, which left it out: 6 % fewer items a minute for the
-    single arm, 12 % for the pair at saturation, README *The sorting job*).
+    red item, the least urgent, makes the shortest cycle and comes first: the job ranks every
+    item in reach, not only the few most urgent, whose cycles may all be longer.
     """
     from scara_collab.core import job_decisions, sharing, sorting
     job = make_job(cell)

@@ -1,7 +1,7 @@
 """Kinematics against independent references.
 
-The seeds' worked examples, the URDF's own chain, finite differences, and round trips over
-many random targets.
+The design documents' worked examples, the URDF's own chain, finite differences, and round
+trips over many random targets.
 """
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -19,8 +19,8 @@ CELL = load_cell()
 LEFT, RIGHT = CELL.leader, CELL.follower
 
 
-def test_seeds_worked_examples():
-    """The seeds' worked examples hold: FK and IK of (0, 90 deg) and case studies 1 and 2.
+def test_the_design_documents_worked_examples():
+    """The design documents' worked examples hold: FK and IK of (0, 90 deg), case studies 1, 2.
 
     The 3 m target is refused with its reason, the 1.5 m one is reached.
     """

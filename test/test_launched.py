@@ -5,7 +5,7 @@ import tempfile
 
 import pytest
 
-from scara_collab.bench import launched
+from benchmarks import launched
 
 
 def lock(path):

@@ -15,11 +15,11 @@ import sys
 import pytest
 
 from scara_collab.core.config import load_config
-from scara_collab.core.line import arm_extent, Handoff, Inbox, min_pitch, Outbox, Section, Share
+from scara_collab.core.line import arm_extent, HandedOn, Handoff, Inbox, min_pitch, Section, Share
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import protocol as proto
 from scara_collab.records import line_report as lr
-from scara_collab.run.line import cell_argv
+from scara_collab.run.line_launcher import cell_argv
 
 ROOT = Path(__file__).resolve().parents[1]
 CELL = load_cell()
@@ -67,7 +67,7 @@ def test_handoffs_survive_lost_and_repeated_messages():
     """
     rng = random.Random(4)
     section = Section(CELL)
-    out, box = Outbox(window=2.0), Inbox(section)
+    out, box = HandedOn(window=2.0), Inbox(section)
     t, downstream, item = 0.0, 0.0, 0
     arrivals = {}
     while item < 2000:
@@ -114,21 +114,21 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
     up = CellSim(CELL, dict(sim_cfg, feed_interval=0.0), ctl)
     down = CellSim(CELL, dict(sim_cfg, feed_interval=0.0), ctl)
     try:
-        up.conveyor.join_line(True, 1)
-        down.conveyor.join_line(False, 1_000_001)
+        up.conveyor.line.join(True, 1)
+        down.conveyor.line.join(False, 1_000_001)
         section = Section(CELL)
-        out, box = Outbox(), Inbox(section)
+        out, box = HandedOn(), Inbox(section)
         ids = [up.conveyor.spawn_item('red', 0.3, 4.2),
                up.conveyor.spawn_item('blue', -0.25, 4.35)]
         ev_up, ev_down = up.conveyor.pop_events(), down.conveyor.pop_events()
         crossing = {}
         while up.time < 4.0:
             up.step(10)
-            for h in up.conveyor.pop_handoffs():
+            for h in up.conveyor.line.pop_handoffs():
                 out.add(h)
                 crossing[h.item] = h.time
             for h, at in box.offer(up.time, out.message(up.time), out.handed):
-                down.conveyor.receive(h, at)
+                down.conveyor.line.receive(h, at)
             while down.time + 0.01 <= box.limit() + 1e-9:
                 down.step(10)
             ev_up += up.conveyor.pop_events()
@@ -146,14 +146,14 @@ def test_two_sections_hand_items_on_with_id_class_and_place():
         # the cell's own items never meet handed ids
         assert down.conveyor.spawn_item() == 1_000_001
         with pytest.raises(ValueError, match='already on this belt'):
-            down.conveyor.receive(Handoff(ids[0], 'red', 0.0, 1.0), down.time)
+            down.conveyor.line.receive(Handoff(ids[0], 'red', 0.0, 1.0), down.time)
         with pytest.raises(ValueError, match='unknown class'):
-            down.conveyor.receive(Handoff(77, 'green', 0.0, 1.0), down.time)
+            down.conveyor.line.receive(Handoff(77, 'green', 0.0, 1.0), down.time)
         with pytest.raises(ValueError, match='off the belt'):
-            down.conveyor.receive(Handoff(78, 'red', 0.51, 1.0), down.time)
+            down.conveyor.line.receive(Handoff(78, 'red', 0.51, 1.0), down.time)
         # pushed towards the edge upstream (a 3-cell benchmark run had one at y=-0.493): on
         # the belt while its centre is, so it is taken
-        down.conveyor.receive(Handoff(79, 'red', -0.493, down.time), down.time)
+        down.conveyor.line.receive(Handoff(79, 'red', -0.493, down.time), down.time)
         down.step(10)
         assert {e.item for e in down.conveyor.pop_events() if e.kind == 'received'} == {79}
     finally:
@@ -305,9 +305,9 @@ def test_the_line_benchmark_writes_each_scenario_into_its_own_block(tmp_path):
     The killed-cell scenario reads the recovery from the logs' wall stamps: the kill in cell
     1's log, the first sort after the takeover in cell 2's.
     """
-    from scara_collab.bench import line as bench
-    from scara_collab.bench.util import write_block
-    page = tmp_path / 'LINE.md'
+    from benchmarks import line_scenarios as bench
+    from benchmarks.util import LINE_PAGE, write_block
+    page = tmp_path / LINE_PAGE
     page.write_text('# A line of cells\n\nkept by hand\n')
     rated = {'cells': 2, 'duration': 600.0, 'feed_interval': 0.9, 'missed': 0, 'dropped': 1,
              'handoffs': 301, 'handoff_problems': 0, 'balanced': True,
@@ -337,7 +337,7 @@ def test_the_line_benchmark_writes_each_scenario_into_its_own_block(tmp_path):
 
 def test_the_line_capacity_block_sets_each_cells_cpu_beside_one_cells():
     """The capacity block shows one cell's CPU beside the line's, and the worst ratio."""
-    from scara_collab.bench import line as bench
+    from benchmarks import line_scenarios as bench
     row = {'cells': 2, 'belt_speed': 0.4, 'feed_interval': 0.45, 'one_cell': 41.1,
            'items_per_minute': 79.3, 'ratio': 0.964, 'worst_cell_ratio': 0.948,
            'per_cell': [40.3, 39.0], 'min_separation_m': [0.142, 0.182],
@@ -354,11 +354,11 @@ def test_an_item_handed_on_close_behind_another_comes_on_behind_it_not_into_it()
     sim_cfg, ctl = load_config('simulation'), load_config('controllers')
     down = CellSim(CELL, dict(sim_cfg, feed_interval=0.0), ctl)
     try:
-        down.conveyor.join_line(False, 1_000_001)
+        down.conveyor.line.join(False, 1_000_001)
         size, speed = CELL.item_size, CELL.belt.speed
         close = 0.6 * size / speed  # s apart at the boundary: their centres 0.6 sizes apart
-        down.conveyor.receive(Handoff(1, 'red', 0.05, 0.0), 0.0)
-        down.conveyor.receive(Handoff(2, 'red', 0.0, close), close)
+        down.conveyor.line.receive(Handoff(1, 'red', 0.05, 0.0), 0.0)
+        down.conveyor.line.receive(Handoff(2, 'red', 0.0, close), close)
         down.step(int(round(3.0 / down.dt)))
         events = down.conveyor.pop_events()
         assert [(e.kind, e.item) for e in events] == [('received', 1), ('received', 2)]

@@ -7,8 +7,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_flake8_is_clean():
-    """flake8 with ament's rules finds nothing in the package, tests, launch, scripts, setup."""
-    targets = ['scara_collab', 'test', 'launch', 'setup.py'] + [
+    """flake8 with ament's rules: nothing in the package, benchmarks, tests, launch, scripts."""
+    targets = ['scara_collab', 'benchmarks', 'test', 'launch', 'setup.py'] + [
         str(p.relative_to(ROOT)) for p in (ROOT / 'scripts').glob('*.py')]
     proc = subprocess.run([sys.executable, '-m', 'flake8', *targets], cwd=ROOT,
                           capture_output=True, text=True, timeout=300)

@@ -1,4 +1,4 @@
-"""Mirroring across the belt: the seeds' example, involution, joint-space equivalence."""
+"""Mirroring across the belt: the design documents' example, involution, joint-space sameness."""
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
@@ -13,8 +13,8 @@ LEFT, RIGHT = CELL.leader, CELL.follower
 coord = st.floats(-5, 5, allow_nan=False)
 
 
-def test_seeds_case_study_3():
-    """Check the seeds' case study 3 against the SPEC formula.
+def test_the_design_documents_case_study_3():
+    """Check the design documents' case study 3 against the SPEC formula.
 
     The case study moves "forward 1 m from the left base" and expects the right arm 1 m
     forward from its base, (2, 1). Forward (towards the belt) from (2, -2) is (2, -1); the

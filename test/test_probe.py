@@ -4,7 +4,7 @@ import time
 import rclpy
 from sensor_msgs.msg import JointState
 
-from scara_collab.bench.probe import Probe
+from benchmarks.probe import Probe
 
 
 def test_a_probe_publisher_waits_for_the_graphs_readers_not_its_own():

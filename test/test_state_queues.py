@@ -1,4 +1,6 @@
-"""The nodes that decide on sim time take every joint state, in order (README, *Repeatable runs*).
+"""The nodes that decide on sim time take every joint state, in order.
+
+docs/realtime.md, *Repeatable runs*: the same seed gives the same run.
 
 With a queue of one, the callback of a state takes the newest one: when a node is a state
 behind (busy, descheduled), it sees the state after the next ``/clock`` before that clock's

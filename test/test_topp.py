@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from scara_collab.bench.throughput import topp_ratios
+from benchmarks.throughput import topp_ratios
 
 pytest.importorskip('toppra')  # topp_ratios imports it when called
 

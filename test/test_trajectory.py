@@ -10,8 +10,8 @@ from scara_collab.core.trajectory import (
 
 CELL = load_cell()
 ARM = CELL.leader
-# The seeds' "standard 1.5 m move ... to the conveyor centre": from world (3.2, -0.9) to the
-# belt centre line at (2.0, 0.0), 0.1 m above an item's top.
+# The design documents' "standard 1.5 m move ... to the conveyor centre": from world (3.2, -0.9)
+# to the belt centre line at (2.0, 0.0), 0.1 m above an item's top.
 SEEDS_MOVE = (np.array([3.2, -0.9, 0.4]), np.array([2.0, 0.0, 0.4]))
 
 
@@ -27,8 +27,8 @@ def _well_formed(traj, dt=0.01):
     assert_allclose(traj.qd[[0, -1]], 0.0, atol=1e-12)  # starts and ends at rest
 
 
-def test_seeds_move_is_straight_to_1e6_and_joint_interpolation_is_not():
-    """The seeds' 1.5 m move as a line stays within 1e-6 m of the segment.
+def test_the_design_documents_move_is_straight_to_1e6_and_joint_interpolation_is_not():
+    """The design documents' 1.5 m move as a line stays within 1e-6 m of the segment.
 
     Joint interpolation between the same ends arcs more than 5 cm off and is longer.
     """

@@ -18,7 +18,7 @@ Example::
     >>> from scara_collab.core.model import load_cell
     >>> cell = load_cell(); left = cell.leader
     >>> sol = ik(left, [3.5, -1.0, 0.3])                  # world frame, no current state
-    >>> np.degrees(sol.q[:2]).round(6), float(sol.q[2])   # the seeds' worked example
+    >>> np.degrees(sol.q[:2]).round(6), float(sol.q[2])   # the design documents' worked example
     (array([ 0., 90.]), 0.4)
 """
 import math

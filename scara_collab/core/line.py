@@ -24,7 +24,7 @@ or machines, and a cell's log depends only on its seed and what it was handed, s
 seed gives the same line log.
 
 **Lost, late and repeated messages.** Every message repeats the handoffs of the last
-:attr:`Outbox.window` seconds before its frontier, so a lost message is made up for by the next
+:attr:`HandedOn.window` seconds before its frontier, so a lost message is made up for by the next
 one; the inbox takes an item once, by id (:meth:`Inbox.offer`), so repeats change nothing.
 Each message also carries the number of items handed on up to its frontier, so a downstream
 cell that missed one for longer than the window knows it (:attr:`Inbox.lost`).
@@ -149,7 +149,7 @@ class Section:
         return k * self.pitch
 
 
-class Outbox:
+class HandedOn:
     """The handoffs a cell has made, the last :attr:`window` seconds of them repeated.
 
     :param window: s of handoffs each message repeats (they make up for lost messages).

@@ -5,8 +5,8 @@ A leader target ``P_L`` (world) maps to the follower target
 across the base's x axis, z unchanged (both bases at the same height). In joint space the
 reflection negates both angles: ``(theta1, theta2, d3) -> (-theta1, -theta2, d3)``.
 
-Example (the seeds' case study 3: "forward 1 m from the left base" is (2, -1), which
-mirrors to (2, 1); the (2, -3) the seeds print is 1 m *away* from the belt, and mirrors to
+Example (the design documents' case study 3: "forward 1 m from the left base" is (2, -1),
+which mirrors to (2, 1); the (2, -3) they print is 1 m *away* from the belt, and mirrors to
 (2, 3))::
 
     >>> from scara_collab.core.model import load_cell

@@ -1,7 +1,7 @@
 """Trajectories: joint interpolation (the baseline) and the straight Cartesian line.
 
-The straight line follows the Lagrange-multiplier note (seeds/003): at every point the joint
-velocity is the minimum-norm solution of ``J q_dot = v``,
+The straight line follows the design documents' Lagrange-multiplier trajectory note: at every
+point the joint velocity is the minimum-norm solution of ``J q_dot = v``,
 
     min 1/2 |q_dot|^2  s.t.  J q_dot = v   ->   q_dot = J^T (J J^T)^-1 v,
 
@@ -472,11 +472,11 @@ def line_move(arm: ArmModel, q0: ArrayLike, target: ArrayLike, dt: float = 0.01,
 def resolved_rate(arm: ArmModel, q0: ArrayLike, p_ref: ArrayLike, v_ref: ArrayLike, dt: float,
                   gain: float = 0.0, dls_threshold: float = 0.5,
                   dls_max_damping: float = 0.15) -> np.ndarray:
-    """Run the seeds' differential-kinematics loop at a fixed timing (no re-timing).
+    """Run the design documents' differential-kinematics loop at a fixed timing (no re-timing).
 
     ``q_dot_k = J^+_dls(q_k) (v_ref_k + gain (p_ref_k - fk(q_k)))``, ``q_{k+1} = q_k +
-    q_dot_k dt``. With ``dls_max_damping = 0`` this is the plain pseudo-inverse of
-    seeds/003, whose joint speed blows up near a singularity; DLS bounds it.
+    q_dot_k dt``. With ``dls_max_damping = 0`` this is the plain pseudo-inverse of the
+    trajectory note, whose joint speed blows up near a singularity; DLS bounds it.
 
     :param p_ref, v_ref: ``(N, 3)`` desired tool positions and velocities (world).
     :return: ``(N, 3)`` joint velocities commanded at each step (positions by cumsum).

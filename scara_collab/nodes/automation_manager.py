@@ -20,10 +20,11 @@ retries, :mod:`scara_collab.nodes.protocol` for the statuses):
   asked again). Its lockstep answer waits for the planners' status of each move it sent and
   for the bridge's answer to each gripper call (at most ``lockstep.REPLY_WAIT`` wall seconds
   each): the bridge cannot step before it has gripped, so the next ``/clock`` always finds the
-  reply taken (README, *Repeatable runs*). With ``state_sync`` (the default; the launcher turns
-  it off in real time) a tick at sim time T decides on the joint state stamped T: the bridge
-  sends it right after the clock of T, on another topic, so the tick waits for it (and the
-  lockstep answer with it) when it comes second, unless the states have stopped coming.
+  reply taken (docs/realtime.md, *Repeatable runs*). With ``state_sync`` (the default; the
+  launcher turns it off in real time) a tick at sim time T decides on the joint state stamped
+  T: the bridge sends it right after the clock of T, on another topic, so the tick waits for it
+  (and the lockstep answer with it) when it comes second, unless the states have stopped
+  coming.
 
 Services ``~/start`` and ``~/stop`` (std_srvs/Trigger, idempotent: starting a running job
 succeeds; a start before every endpoint the job uses is matched is refused, naming what is
@@ -126,7 +127,7 @@ class AutomationManager(Node):
                                                  self._on_trajectory(n, msg)), 10))
         # every state and item list, each in turn: with a depth of 1, the callback of one
         # takes the newest (one published after the next /clock, if the node is behind), and
-        # the tick sees it or not by timing (README, *Repeatable runs*)
+        # the tick sees it or not by timing (docs/realtime.md, *Repeatable runs*)
         self.world_subs = (
             self.create_subscription(MarkerArray, 'conveyor/items',
                                      guarded(self, self._on_items), DEFAULT),

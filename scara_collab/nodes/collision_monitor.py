@@ -61,8 +61,9 @@ PARAMETERS = {
     'safety_margin': -1.0,  # m; < 0: the cell's margin
     'marker_rate': 10.0,    # Hz of sim time, at most, for ~/capsules
     'stale_after': 0.2,     # sim s without a valid state: stop
-    # s from a state to the bridge braking on the stop it causes: a state period (20 ms at
-    # simulation.yaml's 50 Hz), the lockstep window (20 ms) and the monitor's own turn
+    # s from a state to the bridge braking on the stop it causes: a state period (10 ms at
+    # simulation.yaml's state_rate, 100 Hz), the lockstep window (20 ms, one period of its
+    # clock_rate, 50 Hz) and the monitor's own turn
     'stop_latency': 0.05,
     'resume_after': 0.3,    # sim s of valid states, arms at rest and apart: a protective stop ends
 }
@@ -236,10 +237,10 @@ class CollisionMonitor(Node):
     def _watch(self) -> None:
         """Fail closed when the valid states stop coming (sim time runs on without them).
 
-        Stale at two looks in a row (``stale_after / 2`` apart): after the monitor itself was
+        Stale at two looks in a row (``stale_after / 2`` apart): after the monitor itself is
         held up (starting, descheduled), the clock that wakes this timer can be taken before
         the state that came with it; one look would stop the arms for the monitor's delay,
-        not for missing states (seen at start-up, 0.32-0.34 s, in 3 of 16 launcher runs).
+        not for missing states.
         """
         now = conv.now(self)
         if self.last_time is None or now - self.last_time <= self.stale_after:

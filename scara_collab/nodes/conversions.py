@@ -71,8 +71,8 @@ def joint_state_arrays(msg: JointState, names: Sequence[str]) -> Tuple[np.ndarra
         raise MessageError(f'joint_states lacks {missing}')
     if len(msg.position) != len(have):
         raise MessageError('joint_states: position and name lengths differ')
-    # plain floats: every node takes every state (100 Hz), a few joints at a time; numpy's
-    # per-call overhead was three quarters of this function's cost
+    # plain floats: every node takes every state (100 Hz), a few joints at a time, and numpy's
+    # per-call overhead would be most of this function's cost
     if len(set(have)) < len(have):  # a name given twice: its last value, as a dict has it
         last = {n: i for i, n in enumerate(have)}
         idx = [last[n] for n in names]

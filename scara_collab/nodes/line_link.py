@@ -29,7 +29,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
-from scara_collab.core.line import Bypass, Inbox, Outbox, Section
+from scara_collab.core.line import Bypass, HandedOn, Inbox, Section
 from scara_collab.graph import LINE_HANDOFF, LINE_UPSTREAM, LINE_UPSTREAM2
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.guarded import guarded
@@ -59,7 +59,7 @@ class LineLink:
         self.node, self.sim, self.cell = node, sim, int(cell)
         self.upstream, self.downstream = bool(upstream), bool(downstream)
         self.section = Section(sim.cell)
-        self.outbox = Outbox()
+        self.handed_on = HandedOn()
         self.inbox = Inbox(self.section)
         self.bypass = Bypass(self.section)
         self.timeout = float(timeout)
@@ -71,7 +71,7 @@ class LineLink:
         self._lost_said = 0
         self._heard: Optional[float] = None  # monotonic s of the last message from upstream
         self._last: Optional[proto.LineHandoff] = None
-        sim.conveyor.join_line(self.downstream, self.cell * self.ID_BLOCK + 1)
+        sim.conveyor.line.join(self.downstream, self.cell * self.ID_BLOCK + 1)
         self._pub = (node.create_publisher(DiagnosticStatus, LINE_HANDOFF, EVENTS)
                      if self.downstream else None)
         steady = Clock(clock_type=ClockType.STEADY_TIME)
@@ -106,11 +106,11 @@ class LineLink:
         if self._pub is None:
             return
         frontier = min(frontier, self.sim.conveyor.checked)
-        for h in self.sim.conveyor.pop_handoffs():
-            self.outbox.add(h)
-        msg = proto.LineHandoff(self.cell, round(frontier, 9), self.outbox.handed,
-                                [h.as_list() for h in self.outbox.message(frontier)],
-                                [b.as_list() for b in self.sim.conveyor.on_belt()])
+        for h in self.sim.conveyor.line.pop_handoffs():
+            self.handed_on.add(h)
+        msg = proto.LineHandoff(self.cell, round(frontier, 9), self.handed_on.handed,
+                                [h.as_list() for h in self.handed_on.message(frontier)],
+                                [b.as_list() for b in self.sim.conveyor.line.on_belt()])
         self._pub.publish(msg.to_msg())
 
     def _parse(self, msg: DiagnosticStatus):
@@ -124,13 +124,13 @@ class LineLink:
     def _take(self, frontier: float, handoffs, handed: Optional[int], source: str) -> None:
         for h, at in self.inbox.offer(frontier, handoffs, handed):
             try:
-                self.sim.conveyor.receive(h, at)
+                self.sim.conveyor.line.receive(h, at)
             except ValueError as exc:
                 self.node.get_logger().error(f'line: item not taken from {source}: {exc}')
         if self.inbox.lost > self._lost_said:
             self.node.get_logger().error(
                 f'line: {self.inbox.lost - self._lost_said} item(s) handed on by {source} '
-                f'never arrived here (lost for longer than the {self.outbox.window:g} s the '
+                f'never arrived here (lost for longer than the {self.handed_on.window:g} s the '
                 'handoff messages repeat)')
             self._lost_said = self.inbox.lost
         self._on_news()
@@ -195,6 +195,6 @@ class LineLink:
         dead = f'; {self.dead_upstream}' if self.dead_upstream else ''
         if self.sorting_again is not None:
             dead += f', sorting again {self.sorting_again:.1f} s wall after'
-        return (f'line cell {self.cell}: {self.outbox.handed} handed on, '
+        return (f'line cell {self.cell}: {self.handed_on.handed} handed on, '
                 f'{self.inbox.received} received ({self.inbox.repeats} repeats, '
                 f'{self.inbox.lost} lost){dead}')

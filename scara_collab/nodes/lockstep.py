@@ -21,8 +21,8 @@ namespace has its own lockstep):
   automation manager, until a planner's status for the move it offered and the bridge's
   answer to a gripper call: :meth:`LockstepParticipant.await_reply`), at most ``REPLY_WAIT``
   wall seconds: sim time then waits for the reply too, and the next ``/clock`` finds it
-  taken, however the processes were scheduled (README, *Repeatable runs*). A reply delayed
-  on sim time (a ``delay:`` or ``latency:`` fault) cannot come while sim time waits for it:
+  taken, however the processes were scheduled (docs/realtime.md, *Repeatable runs*). A reply
+  delayed on sim time (a ``delay:`` or ``latency:`` fault) cannot come while sim time waits for it:
   it costs ``REPLY_WAIT`` wall seconds, and the run is no longer repeatable;
 * a participant that leaves says so (stamp = the end of time), before its context shuts
   down (:func:`scara_collab.nodes.shutdown.before_shutdown`); one that keeps the bridge
@@ -37,7 +37,7 @@ namespace has its own lockstep):
   sim time 0, so the first steps do not depend on how soon each node answers;
 * unthrottled, the bridge steps to its limit at once and the answer that moves the limit
   steps it on, in that answer's callback: in one process every step takes its turn in the
-  executor's order, and the same seed gives the same run (README, *Repeatable runs*);
+  executor's order, and the same seed gives the same run (docs/realtime.md, *Repeatable runs*);
 * a *guard* (the collision monitor) is a participant without which the arms must not move:
   before the gate drops a guard, or when a guard leaves, it tells the bridge (``on_guard``),
   which holds both arms and refuses trajectories until the guard answers again
@@ -75,9 +75,9 @@ TOPIC = 'sim/lockstep'  # relative: in the cell's namespace
 QOS = QoSProfile(depth=50)
 END_OF_TIME = Time(sec=2**31 - 1, nanosec=0)
 #: wall s a participant holds its answer for an awaited reply (a lost one: then it answers).
-#: A slow reply looks the same: a plan of 20-50 ms CPU took over 0.5 s wall with 30 processes
-#: on 2 cores, and the run parted there; 2 s covers that, within the bridge's 5 s
-#: ``lockstep_timeout`` for the waiting node
+#: Until then a slow reply looks the same, and one answered without it makes the run depend
+#: on scheduling: with 30 processes on 2 cores a plan of 20-50 ms CPU can take over 0.5 s
+#: wall. 2 s covers that, within the bridge's 5 s ``lockstep_timeout`` for the waiting node
 REPLY_WAIT = 2.0
 
 

@@ -323,7 +323,7 @@ class PyBulletBridge(Node):
         Unthrottled, with participants, the bridge steps to the gate's limit at once and the
         answer that moves the limit steps on (:meth:`_wake`): stepping takes its turn with the
         messages in the executor's order, never when a timer thread looks, so a run in one
-        process repeats exactly (README, *Repeatable runs*).
+        process repeats exactly (docs/realtime.md, *Repeatable runs*).
         """
         if self.control.paused:
             return

@@ -5,7 +5,7 @@ notices that is the executor's business: rclpy's ``EventsExecutor`` keeps its ti
 thread of their own, which queues the call whenever it happens to look, before or after the
 messages of the same sim instant. The job's decisions (the automation manager's tick, the
 collision monitor's watch) then see a state or not depending on the machine's timing, and two
-runs with the same seed part (README, *Repeatable runs*).
+runs with the same seed part (docs/realtime.md, *Repeatable runs*).
 
 :func:`every` runs the callback from the clock itself instead: a jump callback on the node's
 sim clock, called when the node takes a ``/clock`` message, in the executor's own order (like

@@ -92,8 +92,8 @@ class GraphClient:
     def pause(self, seconds: float) -> None:
         """Spin the recorder for ``seconds`` (wall), supervising; never a timeout of its own.
 
-        (A deadline just beyond the pause would fire whenever the busy machine descheduled
-        the launcher longer than the difference: seen with two CPU hogs.)
+        (A deadline just beyond the pause would fire whenever a busy machine deschedules the
+        launcher for longer than the difference.)
         """
         until = time.monotonic() + seconds
         while time.monotonic() < until:

@@ -1,7 +1,7 @@
 """Launch the whole cell on sim time, run the job, record it, report it (``launch_cell.py``).
 
 :func:`main` reads the options (:mod:`~scara_collab.run.options`), runs a line of cells
-(:mod:`~scara_collab.run.line`) or one cell: :class:`Launcher` starts the nodes of
+(:mod:`~scara_collab.run.line_launcher`) or one cell: :class:`Launcher` starts the nodes of
 :mod:`scara_collab.graph` stage by stage (:mod:`~scara_collab.run.stages`, started and
 stopped by :mod:`~scara_collab.run.supervisor`), starts the job and the clock, supervises
 the run (:mod:`~scara_collab.run.liveness`, :mod:`~scara_collab.run.graph_client`) and stops
@@ -335,7 +335,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 def run(opts: LaunchOptions, argv: Optional[Sequence[str]]) -> int:
     """Run the cell or the line ``opts`` (parsed from ``argv``); return the exit status."""
     if opts.cells > 1 and opts.line_cell is None:  # a line: one launcher per cell
-        from scara_collab.run.line import run_line
+        from scara_collab.run.line_launcher import run_line
         return run_line(opts, list(sys.argv[1:] if argv is None else argv))
     if opts.mode != 'idle' and importlib.util.find_spec(AUTOMATION_MODULE) is None:
         print(f'launch_cell: --mode {opts.mode} needs the automation manager '

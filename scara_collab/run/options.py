@@ -113,7 +113,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--cells', type=int, default=1, metavar='N',
                    help='a line of N cells along one belt, cell k under /cell_k with its own '
                    'processes and run folder <output>/cell_k; only cell 0 is fed, each cell '
-                   'hands on what passes its belt to the next (scara_collab.run.line; '
+                   'hands on what passes its belt to the next (scara_collab.run.line_launcher; '
                    'default: %(default)s, one cell in the root namespace)')
     p.add_argument('--line-cell', type=int, default=None, metavar='K',
                    help='with --cells N: run only cell K of the line, here (one machine per '

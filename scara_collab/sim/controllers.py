@@ -5,7 +5,8 @@ theta2, d3``), so one servo tick of the whole cell is one numpy evaluation. No P
 
 * PID: ``tau = Kp e + Ki int(e) + Kd (qd_ref - qd)`` with ``e = q_ref - q``, the integral
   clamped so that ``|Ki int(e)|`` never exceeds the joint's effort limit (anti-windup). No
-  gravity or inertia model: this is the seeds' controller, gains from ``controllers.yaml``.
+  gravity or inertia model: this is the design documents' controller, gains from
+  ``controllers.yaml``.
 * Computed torque: ``tau = M(q) (qdd_ref + Kp e + Kd (qd_ref - qd)) + C(q, qd) qd + G(q)
   + F(qd)``, evaluated as ``inverse_dynamics(q, qd, qdd_ref + Kp e + Kd e_dot)`` of
   :mod:`scara_collab.core.dynamics` with the held payload, plus the friction model the plant

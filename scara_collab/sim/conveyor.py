@@ -8,12 +8,16 @@ velocity exactly, and :meth:`Conveyor.update` re-imposes the belt velocity ``(sp
 on every item resting on the belt (after a push, a release onto the belt, a collision).
 
 Events, checked at every update: ``missed`` (an item on the belt passes ``x_end``, removed;
-``handed_on`` instead in a cell of a line with a cell downstream, :meth:`Conveyor.join_line`),
-``sorted`` / ``wrong_bin`` (an item at rest inside a bin, removed; the event names the bin's
-robot), ``dropped`` (at rest on the floor, removed), plus ``spawned`` as it happens and
-``received`` as an item handed on by the cell upstream comes onto the belt
-(:meth:`Conveyor.receive`); the gripper adds ``grasped`` and ``released``
+``handed_on`` instead in a cell of a line with a cell downstream), ``sorted`` / ``wrong_bin``
+(an item at rest inside a bin, removed; the event names the bin's robot), ``dropped`` (at rest
+on the floor, removed), plus ``spawned`` as it happens and ``received`` as an item handed on by
+the cell upstream comes onto the belt; the gripper adds ``grasped`` and ``released``
 (:meth:`Conveyor.event`).
+
+In a line of cells the belt is one section of the line: what comes onto it from the cell
+upstream and what it hands on to the cell downstream is its :class:`SectionEnds`
+(:attr:`Conveyor.line`: :meth:`SectionEnds.join`, :meth:`SectionEnds.receive`,
+:meth:`SectionEnds.pop_handoffs`).
 """
 from dataclasses import dataclass
 import math
@@ -196,17 +200,46 @@ def behind(x: float, y: float, boxes, half: float, gap: float = INLET_GAP) -> fl
 
 
 class SectionEnds:
-    """Where a belt meets its neighbours in a line of cells: items coming on, items handed on.
+    """The belt as a section of a line of cells: items handed in, items handed on.
 
+    The conveyor owns one (:attr:`Conveyor.line`) and calls it at each update: an item handed
+    in by the cell upstream comes onto the belt at ``x_start`` (:meth:`arrive`), an item that
+    passes ``x_end`` is handed on to the cell downstream or missed (:meth:`crossed`). Alone (not
+    in a line) nothing comes in and everything that passes the end is missed.
+
+    :param conveyor: the belt whose items it puts on and reads (its cell, records, poses).
     :ivar hand_on: a cell downstream takes what passes ``x_end`` (else it is missed).
     """
 
-    def __init__(self, cell: CellModel):
+    def __init__(self, conveyor: 'Conveyor'):
         """Not in a line: nothing comes on, nothing is handed on."""
-        self.cell = cell
+        self.conveyor = conveyor
+        self.cell = conveyor.cell
         self.hand_on = False
         self.handed: List[Handoff] = []
         self._arriving: List[Tuple[float, Handoff]] = []  # (arrival at x_start, item)
+
+    def join(self, hand_on: bool, first_id: int = 1) -> None:
+        """Make the belt a section of a line (:mod:`scara_collab.core.line`).
+
+        :param hand_on: a cell downstream takes the items that pass ``x_end``
+            (:meth:`pop_handoffs`), instead of their being missed.
+        :param first_id: the id of this cell's first own item (the automatic feed, a spawn
+            service), so that its ids never meet those handed on from upstream.
+        """
+        self.hand_on = bool(hand_on)
+        self.conveyor.number_from(first_id)
+
+    def receive(self, h: Handoff, at: float) -> None:
+        """Put the item ``h`` on the belt at ``x_start`` at sim time ``at`` (or now, if later).
+
+        It comes on at the first update at or after ``at``, as far along the belt as it rode
+        since then, with its id, class and lateral position: event ``received``.
+
+        :raises ValueError: an unknown class, a lateral position off the belt, or an id this
+            belt already has.
+        """
+        self.expect(h, at, lambda item: item in self.conveyor.records)
 
     def expect(self, h: Handoff, at: float, known: Callable[[int], bool]) -> None:
         """Take the item ``h`` to come on at ``x_start`` at sim time ``at``.
@@ -223,6 +256,12 @@ class SectionEnds:
         if known(h.item) or any(h.item == a.item for _, a in self._arriving):
             raise ValueError(f'handed item {h.item}: already on this belt')
         self._arriving.append((float(at), h))
+
+    def arrive(self, now: float) -> None:
+        """Put on the belt the items handed in that come on by ``now`` (:meth:`arrivals`)."""
+        conveyor = self.conveyor
+        for h, x in self.arrivals(now, conveyor.belt_boxes):
+            conveyor.place(h.cls, x, h.y, 'received', item_id=h.item)
 
     def arrivals(self, now: float, boxes: Callable[[], list]) -> List[Tuple[Handoff, float]]:
         """Return the items that come on by ``now``, in order, each with its ``x``; forget them.
@@ -250,10 +289,27 @@ class SectionEnds:
         self._arriving = [a for a in self._arriving if a[1].item not in taken]
         return placed
 
+    def crossed(self, rec: 'ItemRecord', x: float, y: float, now: float) -> str:
+        """Take the belt item ``rec``, at ``(x, y)`` past ``x_end`` now; return its event.
+
+        ``handed_on`` (kept for :meth:`pop_handoffs`, with the time it crossed) with a cell
+        downstream, else ``missed``.
+        """
+        if not self.hand_on:
+            return 'missed'
+        belt = self.cell.belt
+        self.handed.append(Handoff(rec.id, rec.cls, float(y), now - (x - belt.x_end) / belt.speed))
+        return 'handed_on'
+
     def pop_handoffs(self) -> List[Handoff]:
         """Return the items handed on since the last call, in crossing order."""
         out, self.handed = self.handed, []
         return out
+
+    def on_belt(self) -> List[OnBelt]:
+        """Return the items resting on the belt now (what it carries on if the cell dies)."""
+        return [OnBelt(rec.id, rec.cls, float(x), float(y))
+                for rec, (x, y, _) in self.conveyor.resting()]
 
 
 class Conveyor:
@@ -291,7 +347,7 @@ class Conveyor:
         self.records: Dict[int, ItemRecord] = {}
         self._next_id = 1
         self.checked = clock()  # sim time of the last update: every crossing by then is known
-        self.ends = SectionEnds(cell)  # in a line of cells: what comes on, what is handed on
+        self.line = SectionEnds(self)  # in a line of cells: what comes on, what is handed on
         self._events: List[SimEvent] = []
         self._get_pose = pb.getBasePositionAndOrientation
         self._get_vel = pb.getBaseVelocity
@@ -314,52 +370,6 @@ class Conveyor:
         cy = self.cell.belt.centre_y
         self.spawn_item(cls, cy + off)
         self.spawn_item(cls, cy - off)
-
-    # --- a line of cells -------------------------------------------------------------------
-    def join_line(self, hand_on: bool, first_id: int = 1) -> None:
-        """Make this belt a section of a line (:mod:`scara_collab.core.line`).
-
-        :param hand_on: a cell downstream takes the items that pass ``x_end``
-            (:meth:`pop_handoffs`), instead of their being missed.
-        :param first_id: the id of this cell's first own item (the automatic feed, a spawn
-            service), so that its ids never meet those handed on from upstream.
-        """
-        self.ends.hand_on = bool(hand_on)
-        self._next_id = max(self._next_id, int(first_id))
-
-    def receive(self, h: Handoff, at: float) -> None:
-        """Put the item ``h`` on the belt at ``x_start`` at sim time ``at`` (or now, if later).
-
-        It comes on at the first update at or after ``at``, as far along the belt as it rode
-        since then, with its id, class and lateral position: event ``received``.
-
-        :raises ValueError: an unknown class, a lateral position off the belt, or an id this
-            belt already has.
-        """
-        self.ends.expect(h, at, lambda item: item in self.records)
-
-    def on_belt(self) -> List[OnBelt]:
-        """Return the items resting on the belt now (what it carries on if the cell dies)."""
-        out = []
-        for rec in self.records.values():
-            if rec.state == 'belt':
-                x, y, _ = self._get_pose(rec.body)[0]
-                out.append(OnBelt(rec.id, rec.cls, float(x), float(y)))
-        return out
-
-    def pop_handoffs(self) -> List[Handoff]:
-        """Return the items handed on since the last call, in crossing order."""
-        return self.ends.pop_handoffs()
-
-    def _arrive(self, now: float) -> None:
-        belt = self.cell.belt
-        z = belt.top_z + self.cell.item_size / 2.0
-        for h, x in self.ends.arrivals(now, lambda: [
-                self._pb.getAABB(r.body) for r in self.records.values() if r.state == 'belt']):
-            rec = self.create_item(h.cls, (x, h.y, z), self.cell.item_mass, 'belt',
-                                   item_id=h.item)
-            self._set_vel(rec.body, [belt.speed, 0.0, 0.0], [0.0, 0.0, 0.0])
-            self.event('received', rec)
 
     # --- items ----------------------------------------------------------------------------
     def create_item(self, cls: str, pos, mass: float, state: str,
@@ -416,11 +426,33 @@ class Conveyor:
                              f'<= {self._half_free:.3f})')
         if not belt.x_start <= x < belt.x_end:
             raise ValueError(f'x={x:.3f} is not on the belt [{belt.x_start}, {belt.x_end})')
+        return self.place(cls, x, y, 'spawned').id
+
+    def place(self, cls: str, x: float, y: float, kind: str,
+              item_id: Optional[int] = None) -> ItemRecord:
+        """Put an item on the belt at ``(x, y)``, moving at belt speed; event ``kind``.
+
+        Its id is the next of this belt's own, or ``item_id`` (an item handed on from upstream).
+        """
+        belt = self.cell.belt
         z = belt.top_z + self.cell.item_size / 2.0
-        rec = self.create_item(cls, (x, y, z), self.cell.item_mass, 'belt')
+        rec = self.create_item(cls, (x, y, z), self.cell.item_mass, 'belt', item_id=item_id)
         self._set_vel(rec.body, [belt.speed, 0.0, 0.0], [0.0, 0.0, 0.0])
-        self.event('spawned', rec)
-        return rec.id
+        self.event(kind, rec)
+        return rec
+
+    def number_from(self, first_id: int) -> None:
+        """Give this belt's own items ids from ``first_id`` on (or later, if taken already)."""
+        self._next_id = max(self._next_id, int(first_id))
+
+    def resting(self) -> List[Tuple[ItemRecord, Tuple[float, float, float]]]:
+        """Return the items resting on the belt, each with its centre (world, m)."""
+        return [(rec, self._get_pose(rec.body)[0]) for rec in self.records.values()
+                if rec.state == 'belt']
+
+    def belt_boxes(self) -> list:
+        """Return the axis-aligned boxes ``(lo, hi)`` of the items resting on the belt."""
+        return [self._pb.getAABB(r.body) for r in self.records.values() if r.state == 'belt']
 
     def _remove(self, rec: ItemRecord, kind: str, robot: str = '') -> None:
         if rec.constraint is not None:
@@ -435,7 +467,7 @@ class Conveyor:
         self.checked = now
         if self.feed.due(now):
             self._feed()
-        self._arrive(now)
+        self.line.arrive(now)
         belt = self.cell.belt
         carry = [belt.speed, 0.0, 0.0]
         zero = [0.0, 0.0, 0.0]
@@ -445,10 +477,7 @@ class Conveyor:
                 continue
             x, y, z = self._get_pose(rec.body)[0]
             if x > belt.x_end and rec.state == 'belt':  # carried off the end (maybe tipping)
-                if self.ends.hand_on:
-                    self.ends.handed.append(Handoff(rec.id, rec.cls, float(y),
-                                                    now - (x - belt.x_end) / belt.speed))
-                self._remove(rec, 'handed_on' if self.ends.hand_on else 'missed')
+                self._remove(rec, self.line.crossed(rec, x, y, now))
                 continue
             if on_belt(self.cell, (x, y, z)):
                 rec.state = 'belt'

@@ -166,8 +166,8 @@ class Servo:
         Until ``t[0]`` the arm keeps its reference (the hold, or the running trajectory), as
         ros2_control's trajectory controller replaces a trajectory at the new one's start; so
         what the arm does never depends on when, before its start, a trajectory arrived (in
-        lockstep, at either end of a window: README, *Repeatable runs*). Between points the
-        reference is the cubic Hermite spline of positions and velocities (velocities by
+        lockstep, at either end of a window: docs/realtime.md, *Repeatable runs*). Between
+        points the reference is the cubic Hermite spline of positions and velocities (velocities by
         central finite differences, zero at both ends, if not given; accelerations its
         derivative unless given); after ``t[-1]`` it holds the last point. While the emergency
         stop is set, only a move that takes this arm away from the other one, standing still,

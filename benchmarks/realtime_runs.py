@@ -4,9 +4,9 @@ from pathlib import Path
 import tempfile
 from typing import Dict, Optional, Sequence
 
+from benchmarks.launched import launch
+from benchmarks.util import Log, table, write_block
 from scara_collab import graph
-from scara_collab.bench.launched import launch
-from scara_collab.bench.util import Log, table, write_block
 
 #: 20 +- 10 ms on the joint states and on every status the job's timing hangs on
 LATENCY = (['latency:/joint_states:0.02:0.01']

@@ -14,10 +14,14 @@ from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Sequ
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS
+from benchmarks.claims import CLAIMS
 
 Log = Callable[[str], None]
 Rows = List[Sequence[str]]
+
+#: the pages the benchmarks write into their folder (``docs/results/`` by default), and the
+#: folder of the results page's figures beside them
+RESULTS_PAGE, REALTIME_PAGE, LINE_PAGE, FIGURES = 'results.md', 'realtime.md', 'line.md', 'figures'
 
 
 def machine() -> Dict[str, object]:
@@ -113,7 +117,7 @@ def met(flag: Optional[bool]) -> str:
 
 
 def quote(*keys: str) -> str:
-    """Blockquote the seeds' claims ``keys`` with their sources."""
+    """Blockquote the design documents' claims ``keys`` with their sources."""
     return '\n>\n'.join(f'> {CLAIMS[k].quote} — *{CLAIMS[k].source}*' for k in keys)
 
 
@@ -152,8 +156,8 @@ def finish(ax, xlabel: str, ylabel: str, title: str, hlines: Dict[float, str] = 
 
 
 @dataclass(frozen=True)
-class Section:
-    """A numbered section of ``RESULTS.md`` (``key``: ``--only`` and ``figures/<key>.png``)."""
+class ResultsSection:
+    """A numbered section of the results page (``key``: ``--only`` and ``figures/<key>.png``)."""
 
     key: str
     title: str

@@ -7,11 +7,11 @@ from typing import Dict, List, Sequence, Tuple
 
 import numpy as np
 
-from scara_collab.bench import job
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.launched import run_launcher
-from scara_collab.bench.payload import LINES
-from scara_collab.bench.util import axes, finish, met, num, Rows, spread, table
+from benchmarks.claims import CLAIMS
+from benchmarks.job_in_process import default_feed, run_job
+from benchmarks.launched import run_launcher
+from benchmarks.payload import LINES
+from benchmarks.util import axes, finish, met, num, Rows, spread, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik, IKError
 from scara_collab.core.model import load_cell
@@ -20,7 +20,8 @@ from scara_collab.core.sorting import drop_point, pick_height
 from scara_collab.core.trajectory import line_move, Trajectory
 from scara_collab.sim.cell_sim import CellSim
 
-CLAIMED = {'single': 12.0, 'collaborative': 22.0}  # the seeds' capacity per mode, items/min
+#: the design documents' capacity per mode, items/min
+CLAIMED = {'single': 12.0, 'collaborative': 22.0}
 SAME = ('sorted', 'missed', 'dropped', 'wrong_bin', 'give_ups', 'retries', 'min_separation_m',
         'min_separation_time')  # what "the same job result" compares, to the last bit
 
@@ -137,12 +138,12 @@ def measure(smoke: bool, scratch: Path) -> dict:
     """Run the capacity runs, the repeats, the rated feed, the launcher, the bounds, the speed."""
     sizes = SMOKE if smoke else Sizes()
     feed, first = sizes.capacity_feed, sizes.job_seeds[0]
-    runs = [job.run_job(mode, sizes.job_duration, feed=feed, seed=seed)
+    runs = [run_job(mode, sizes.job_duration, feed=feed, seed=seed)
             for seed in sizes.job_seeds for mode in sizes.job_modes]
     repeats = [r for r in runs if r['mode'] == 'collaborative' and r['seed'] == first]
-    repeats += [job.run_job('collaborative', sizes.job_duration, feed=feed, seed=first)
+    repeats += [run_job('collaborative', sizes.job_duration, feed=feed, seed=first)
                 for _ in range(1, sizes.repeats)]
-    rated = job.run_job('collaborative', sizes.rated_duration, seed=first) \
+    rated = run_job('collaborative', sizes.rated_duration, seed=first) \
         if sizes.rated_duration else None
     launcher_runs = {}
     for k in range(sizes.launcher_repeats if sizes.launcher_duration else 0):
@@ -158,7 +159,7 @@ def measure(smoke: bool, scratch: Path) -> dict:
     return {'runs': runs, 'repeats': repeats, 'rated': rated, 'launcher_runs': launcher_runs,
             'cycle': cycle_bound(step=sizes.cycle_step), 'topp': spread(ratios),
             'speed': speed, 'duration': sizes.job_duration, 'modes': list(sizes.job_modes),
-            'feed_interval': feed, 'rated_feed': job.default_feed()}
+            'feed_interval': feed, 'rated_feed': default_feed()}
 
 
 def result_of(run: dict) -> tuple:
@@ -214,11 +215,12 @@ def tables(t: dict) -> list:
             'real-time factor': num(np.mean([r['real_time_factor'] for r in runs]), 2),
             'in-step mirror error (mm)': ', '.join(num(r['mirror_error_max_m'] * 1e3, 3)
                                                    for r in runs) if mode == 'mirrored' else '',
-            "seeds' claim": f'{CLAIMED[mode]:g} items/min' if mode in CLAIMED else ''})
+            "design documents' claim": f'{CLAIMED[mode]:g} items/min' if mode in CLAIMED else ''})
     ratio, cyc, topp, rated = pair_ratio(t), t['cycle'], t['topp'], t['rated']
     bounds = [
         ('pair / single items per minute, per seed', f'{num(ratio["mean"])} ± '
-         f'{num(ratio["std"], 2)} ({ratio["n"]} seeds)', '≥ 1.9 (seeds: 22 / 12 = 1.83)'),
+         f'{num(ratio["std"], 2)} ({ratio["n"]} seeds)',
+         '≥ 1.9 (design documents: 22 / 12 = 1.83)'),
         (f'cycle bound, single arm, bin → pick → bin, {cyc["cases"]} pick points × both bins, '
          'no grasp or release: best', f'{cyc["best_s"]:.2f} s ({cyc["items_per_min_best"]:.1f} '
          f'items/min) at {", ".join(f"{v:.2f}" for v in cyc["best_pick"])} m', ''),
@@ -323,7 +325,7 @@ def summary(t: dict) -> Rows:
 
 
 def figure(t: dict):
-    """Items per minute per mode and seed, with the seeds' claims."""
+    """Items per minute per mode and seed, with the design documents' claims."""
     fig, (ax,) = axes(6.0, 3.6)
     for i, mode in enumerate(t['modes']):
         vals = [r['items_per_minute'] for r in jobs(t, mode)]
@@ -331,7 +333,7 @@ def figure(t: dict):
         ax.plot([i] * len(vals), vals, 'ko', ms=4, label='one seed' if i == 0 else None)
         if mode in CLAIMED:
             ax.plot([i - 0.4, i + 0.4], [CLAIMED[mode]] * 2, 'r--',
-                    label="seeds' claim" if mode == 'single' else None)
+                    label="design documents' claim" if mode == 'single' else None)
     ax.set_xticks(range(len(t['modes'])), t['modes'])
     finish(ax, '', 'items sorted per sim minute',
            f'capacity: an item every {t["feed_interval"]:g} s, {t["duration"]:g} sim s per run',

@@ -7,8 +7,8 @@ from typing import Callable, List, Sequence
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, fmt_seconds, met, per_call, Rows, table
+from benchmarks.claims import CLAIMS
+from benchmarks.util import axes, finish, fmt_seconds, met, per_call, Rows, table
 from scara_collab.core import collision, dynamics, kinematics
 from scara_collab.core.model import expand_xacro, load_cell
 
@@ -17,7 +17,7 @@ IK_TARGET = (3.5, -1.0, 0.3)
 
 
 def textbook_ik(l1: float, l2: float, xy: np.ndarray) -> np.ndarray:
-    """Solve the seeds' IK for ``(N, 2)`` base-frame targets, elbow up, with no checks."""
+    """Solve the design documents' IK for ``(N, 2)`` base-frame targets, elbow up, unchecked."""
     c2 = np.clip((np.sum(xy ** 2, axis=1) - l1 ** 2 - l2 ** 2) / (2 * l1 * l2), -1, 1)
     t2 = np.arccos(c2)
     t1 = np.arctan2(xy[:, 1], xy[:, 0]) - np.arctan2(l2 * np.sin(t2), l1 + l2 * np.cos(t2))
@@ -213,7 +213,8 @@ def tables(s: dict) -> list:
         'reference (same run)': f'{_fmt(r, r["reference"])} ({r["reference_name"]})',
         'ours vs reference': f'{r["speedup"]:.2g}x', 'agreement / note': r['note'],
         'SPEC target': f'{r["target"]} {met(r["met"])}'.strip(),
-        "seeds' claim": CLAIMS['ik_latency'].figure if r['what'] == 'IK, one target' else ''}
+        "design documents' claim":
+            CLAIMS['ik_latency'].figure if r['what'] == 'IK, one target' else ''}
         for r in s['rows']])]
 
 

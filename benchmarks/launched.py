@@ -14,7 +14,7 @@ import threading
 import time
 from typing import Dict, Iterator, List, Optional, Sequence
 
-from scara_collab.bench.util import Log, mm, num, table, write_block
+from benchmarks.util import Log, mm, num, table, write_block
 
 Summary = Dict[str, object]
 HOG = 'import time\nend = time.monotonic() + {limit}\nwhile time.monotonic() < end: pass\n'

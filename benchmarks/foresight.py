@@ -4,8 +4,8 @@ import time
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, fmt_seconds, met, num, Rows, spread, table
+from benchmarks.claims import CLAIMS
+from benchmarks.util import axes, finish, fmt_seconds, met, num, Rows, spread, table
 from scara_collab.core import collision
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import ik, IKError
@@ -159,7 +159,7 @@ def tables(f: dict) -> list:
         (f'conflicting pairs executed in physics with their delays ({executed["n"]}): smallest '
          f'measured distance, min / mean', f'{_of(executed, "min mean", "m")}; breaches '
          f'{breaches("executed_min_m")}', '')]
-    return [table([{'what': w, 'measured': v, "seeds' claim": c} for w, v, c in rows])]
+    return [table([{'what': w, 'measured': v, "design documents' claim": c} for w, v, c in rows])]
 
 
 def summary(f: dict) -> Rows:
@@ -184,7 +184,7 @@ def figure(f: dict):
                                ('impact_s', 'tab:red', 'capsules touch')):
         ax.hist([p[key] for p in conflicts if p[key] is not None], bins=20, color=colour,
                 alpha=0.6, label=label)
-    ax.axvline(0.2, color='k', ls='--', lw=1, label="seeds' 200 ms")
+    ax.axvline(0.2, color='k', ls='--', lw=1, label="design documents' 200 ms")
     ax.axvline(f['lead'], color='0.5', ls=':', lw=1, label='motion starts')
     finish(ax, 'time after the decision (s)', 'conflicting pairs',
            f'{len(conflicts)} conflicts in {len(f["pairs"])} crossing pairs')

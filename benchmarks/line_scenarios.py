@@ -1,4 +1,4 @@
-"""A line of cells through the launcher (``--only line``): a block of ``LINE.md`` a scenario."""
+"""A line of cells through the launcher (``--only line``): a block of the line page a scenario."""
 import os
 from pathlib import Path
 import re
@@ -8,9 +8,9 @@ from typing import Dict, List, Sequence
 
 import yaml
 
-from scara_collab.bench.job import default_feed
-from scara_collab.bench.launched import Launch
-from scara_collab.bench.util import Log, table, write_block
+from benchmarks.job_in_process import default_feed
+from benchmarks.launched import Launch
+from benchmarks.util import LINE_PAGE, Log, table, write_block
 from scara_collab.core.line import Section
 from scara_collab.core.model import load_cell
 from scara_collab.core.paths import share_dir
@@ -158,7 +158,7 @@ def capacity_text(rows: List[Dict[str, object]], command: str) -> str:
         'CPU s per sim s per cell (one cell)': ', '.join(_f(c) for c in r['cpu_per_cell'])
         + f' ({_f(r["one_cell_cpu"])})', 'worst CPU / one (<= 1.1)': _f(r['cpu_ratio'], 3),
         'handoffs (problems)': f'{r["handoffs"]} ({r["handoff_problems"]})',
-        'exit': r['exit_code']} for r in rows], ' (`scara_collab/bench/line.py`)')
+        'exit': r['exit_code']} for r in rows], ' (`benchmarks/line_scenarios.py`)')
 
 
 def rated_text(rows: List[Dict[str, object]], command: str) -> str:
@@ -200,8 +200,8 @@ def kill_text(r: Dict[str, object], command: str) -> str:
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the ``--scenarios`` (capacity) into blocks of ``LINE.md``; False if one missed."""
-    target = page.parent / 'LINE.md'
+    """Run the ``--scenarios`` (capacity) into blocks of the line page; False if one missed."""
+    target = page.parent / LINE_PAGE
     folder = Path(tempfile.mkdtemp(prefix='scara_line_'))
     log(f'run folders in {folder}')
     lines, bad = args.cells or [2, 3], []

@@ -1,10 +1,10 @@
-"""Section 5, singularity: the seeds' loop, pseudo-inverse and DLS, and the planner's line."""
+"""Section 5, singularity: the documents' loop, pseudo-inverse and DLS, the planner's line."""
 from pathlib import Path
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, met, mm, num, Rows, table
+from benchmarks.claims import CLAIMS
+from benchmarks.util import axes, finish, met, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import base_to_world, fk, ik, ik_both, IKError, manipulability
 from scara_collab.core.model import ArmModel, load_cell
@@ -20,11 +20,12 @@ CASES = {
 """Study lines in the arm's base frame (m): start and end of the tool path."""
 PLANNER_LINE = ((1.0, 0.85, 0.4), (-1.0, 0.85, 0.4))
 """The closest tangent graze of the inner circle that the joint limits allow (base frame)."""
-FAR_TARGET = (3.0, 0.0, 0.4)  # the seeds' target 3.0 m from the shoulder axis (base frame)
+#: the design documents' target 3.0 m from the shoulder axis (base frame)
+FAR_TARGET = (3.0, 0.0, 0.4)
 
 
 def study(arm: ArmModel, a, b, damping: float, threshold: float, dt: float) -> dict:
-    """Run the seeds' loop along ``a`` -> ``b`` (base frame); ``damping`` 0: pseudo-inverse."""
+    """Run the design documents' loop along ``a`` -> ``b`` (base frame); ``damping`` 0: pinv."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     duration = float(np.linalg.norm(b - a)) / SPEED
     s = np.linspace(0.0, 1.0, int(round(duration / dt)) + 1)
@@ -81,7 +82,8 @@ def tables(sg: dict) -> list:
              'peak speed, DLS': num(c['dls']['peak_speed'], 3, 'rad/s'),
              'off the line, pseudo-inverse': mm(c['pinv']['max_tool_error'], 2),
              'off the line, DLS': mm(c['dls']['max_tool_error'], 2),
-             "seeds' claim": CLAIMS['singularity'].figure if 'inner' in c['name'] else ''}
+             "design documents' claim":
+                 CLAIMS['singularity'].figure if 'inner' in c['name'] else ''}
             for c in sg['cases']]
     pl = sg['planner']
     rows.append({'path': f'planner: time-optimal line {PLANNER_LINE[0]} → {PLANNER_LINE[1]} '
@@ -93,16 +95,17 @@ def tables(sg: dict) -> list:
                  'off the line, DLS': f'{num(pl["max_deviation"], 2, "m")} (planned)'})
     refusals = [
         {'asked': 'the planner, the line into the inner circle',
-         'answer': sg['planner_radial_inner'], "seeds' claim": ''},
-        {'asked': "IK, the seeds' target 3.0 m from the shoulder axis",
-         'answer': sg['far_target_result'], "seeds' claim": 'rejected the command immediately'}]
+         'answer': sg['planner_radial_inner'], "design documents' claim": ''},
+        {'asked': "IK, the design documents' target 3.0 m from the shoulder axis",
+         'answer': sg['far_target_result'],
+         "design documents' claim": 'rejected the command immediately'}]
     return [table(rows, 'lrrrrrrl'), table(refusals)]
 
 
 def summary(sg: dict) -> Rows:
     """Return the summary row: peak joint speed into the inner singularity, both ways."""
     case = sg['cases'][1]
-    return [("peak joint speed into the inner singularity (seeds' loop)",
+    return [("peak joint speed into the inner singularity (design documents' loop)",
              CLAIMS['singularity'].figure,
              f'pseudo-inverse {case["pinv"]["peak_speed"]:.3g} rad/s, DLS '
              f'{case["dls"]["peak_speed"]:.3g} rad/s; planner ≤ '
@@ -119,6 +122,7 @@ def figure(sg: dict):
                     label=f'{case["name"]}, {name}')
     ax.set_yscale('log')
     finish(ax, 'fraction of the path', 'fastest revolute joint (rad/s)',
-           f"straight lines at {SPEED} m/s through the seeds' differential-kinematics loop",
+           f"straight lines at {SPEED} m/s through the design documents' "
+           'differential-kinematics loop',
            {sg['velocity_limit']: 'joint limit'})
     return fig

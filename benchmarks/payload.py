@@ -1,10 +1,10 @@
-"""Section 3, payload response: PID with the seeds' gains vs computed torque, on a 1.5 m line."""
+"""Section 3, payload response: PID (design documents' gains) vs computed torque, 1.5 m line."""
 from pathlib import Path
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS, PAYLOAD_CLAIMS
-from scara_collab.bench.util import axes, finish, mm, num, Rows, table
+from benchmarks.claims import CLAIMS, PAYLOAD_CLAIMS
+from benchmarks.util import axes, finish, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import CellModel, load_cell
@@ -16,7 +16,7 @@ LINES = {'scara_left': ((3.3, -0.8, 0.5), (1.8, -0.8, 0.5)),
          'scara_right': ((3.3, 0.8, 0.5), (1.8, 0.8, 0.5))}
 """A 1.5 m line along x for each arm, clear of the belt (|y| > 0.5), tool 0.5 m up."""
 SETTLED = 1e-3  # m: settled = the tool stays this close to the goal
-CONTROLLERS = {'pid': "PID (seeds' gains)", 'computed_torque': 'computed torque'}
+CONTROLLERS = {'pid': "PID (design documents' gains)", 'computed_torque': 'computed torque'}
 
 
 def tracking(cell: CellModel, mode: str, payload: float, settle: float) -> dict:
@@ -84,7 +84,7 @@ def tables(pay: dict) -> list:
             'peak effort θ1, θ2, quill': ', '.join(f'{v:.1f}' for v in r['peak']),
             'overshoot': f'{r["overshoot"]:.2f} %', 'max tool error vs plan': mm(r['tool_err']),
             'max quill error': mm(r['quill_err']), 'final error': mm(r['final']),
-            "seeds' claim (settle, peak torque, overshoot)":
+            "design documents' claim (settle, peak torque, overshoot)":
                 f'{claim[0]} s, {claim[1]} N·m, {claim[2]} %' if claim else ''})
     return [table(rows, 'lllrlrrrrl')]
 
@@ -94,7 +94,7 @@ def summary(pay: dict) -> Rows:
     by_mode = {mode: ' / '.join(_settling(r) for r in pay['rows'] if r['mode'] == mode)
                for mode in CONTROLLERS}
     return [('payload 0 / 1 / 2.5 kg: settling to 1 mm', CLAIMS['payload'].figure,
-             f'computed torque: {by_mode["computed_torque"]}; PID (seeds\' gains): '
+             f'computed torque: {by_mode["computed_torque"]}; PID (design documents\' gains): '
              f'{by_mode["pid"]}', '', '')]
 
 

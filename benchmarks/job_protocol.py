@@ -3,8 +3,8 @@ from pathlib import Path
 import tempfile
 import time
 
-from scara_collab.bench.launched import cells, launch, publish, stamp
-from scara_collab.bench.util import Log
+from benchmarks.launched import cells, launch, publish, stamp
+from benchmarks.util import Log
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:

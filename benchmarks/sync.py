@@ -9,9 +9,9 @@ import numpy as np
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
+from benchmarks.claims import CLAIMS
+from benchmarks.util import axes, finish, met, mm, num, Rows, table
 from scara_collab import graph
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, met, mm, num, Rows, table
 from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import load_cell
@@ -21,9 +21,9 @@ from scara_collab.nodes import conversions as conv, protocol as proto
 from scara_collab.nodes.runner import InProcess
 
 MOVE = (np.array([3.4, -1.15, 0.4]), np.array([2.2, -0.25, 0.4]))
-"""A 1.5 m move towards the belt like the seeds' "rest position to the conveyor centre", but
-ending 0.25 m short of the centre line: mirrored, the seeds' own move would put both tools on
-the same belt point, and the right arm (correctly) waits for the left instead."""
+"""A 1.5 m move towards the belt like the design documents' "rest position to the conveyor
+centre", but ending 0.25 m short of the centre line: mirrored, their own move would put both
+tools on the same belt point, and the right arm (correctly) waits for the left instead."""
 ONSET = 1e-4  # m: a tool has started moving once it is this far from where it rested
 SETTLE = 0.3  # s of sim time observed after the later arm's move ends
 TIMEOUT = 120.0  # wall s to wait for any one step
@@ -131,7 +131,7 @@ def _metrics(cell, states: List[JointState], t_send: float, start: np.ndarray,
 
 
 def tables(g: dict) -> list:
-    """Return every move's mirror error and start lags, with the seeds' claims."""
+    """Return every move's mirror error and start lags, with the design documents' claims."""
     def ms(s):
         return 'n/a' if s is None else num(s * 1e3, 2, 'ms')
     rows = [{'move': i,
@@ -145,7 +145,7 @@ def tables(g: dict) -> list:
              'onsets Δ': ms(mv['start_lag_measured_s']),
              'leader off the line': mm(mv['leader_line_deviation_m'])}
             for i, mv in enumerate(g['moves'], 1)]
-    rows.append({'left target (m)': "*seeds' claim*", 'mean': '4 mm (average)',
+    rows.append({'left target (m)': "*design documents' claim*", 'mean': '4 mm (average)',
                  'start stamps Δ': '15 ms (max lag)', 'bridge starts Δ': '15 ms (max lag)',
                  'onsets Δ': '15 ms (max lag)', 'leader off the line': '< 1 mm (planned)'})
     return [table(rows, 'rlrrrrrrr'),
@@ -177,5 +177,5 @@ def figure(g: dict):
     ax.set_ylim(1e-6, 20)
     finish(ax, 'sim time over the moves, one after another (s)', 'mirror error (mm)',
            f'{len(g["moves"])} mirrored moves through the ROS graph (1e-6 mm floor)',
-           {1.0: 'target 1 mm', 4.0: "seeds' claim: 4 mm average"})
+           {1.0: 'target 1 mm', 4.0: "design documents' claim: 4 mm average"})
     return fig

@@ -1,4 +1,4 @@
-"""The numbered sections of ``RESULTS.md``: their run, and their blocks (the rest of it stays)."""
+"""The numbered sections of the results page: their run and their blocks (the rest of it stays)."""
 from pathlib import Path
 import re
 import resource
@@ -7,38 +7,40 @@ import time
 import traceback
 from typing import Dict, List, Optional, Sequence
 
-from scara_collab.bench import foresight, paths, payload, singularity, solvers, sync, throughput
-from scara_collab.bench.util import (machine, num, Progress, put_block, quote, Section, table,
-                                     usable, write_json)
+from benchmarks import (foresight, path_deviation, payload, singularity, solvers, sync,
+                        throughput)
+from benchmarks.util import (FIGURES, machine, num, Progress, put_block, quote, RESULTS_PAGE,
+                             ResultsSection, table, usable, write_json)
 
-LAYOUT = (  # in the order of RESULTS.md: module, progress title, heading, claims, figure's alt
-    (paths, 'path deviation: straight line vs joint interpolation',
+LAYOUT = (  # in the page's order: key, module, progress title, heading, claims, figure's alt
+    ('paths', path_deviation, 'path deviation: straight line vs joint interpolation',
      'Path deviation: straight line vs joint interpolation',
      ('joint_deviation', 'line_deviation', 'path_length'),
      'tool paths seen from above and their deviation'),
-    (solvers, 'solver speed vs reference implementations',
+    ('solvers', solvers, 'solver speed vs reference implementations',
      'Solver speed, against reference implementations', ('ik_latency', 'solver_latency'),
      'speed-up over the references'),
-    (payload, 'payload response', 'Payload response: PID vs computed torque', ('payload',),
-     'distance to the goal over time, per payload'),
-    (sync, 'synchronisation: mirrored moves through the graph',
+    ('payload', payload, 'payload response', 'Payload response: PID vs computed torque',
+     ('payload',), 'distance to the goal over time, per payload'),
+    ('sync', sync, 'synchronisation: mirrored moves through the graph',
      'Synchronisation: mirror error and start lag', ('mirror_error', 'lag'),
      'mirror error over the moves'),
-    (singularity, 'singularity: pseudo-inverse vs DLS',
+    ('singularity', singularity, 'singularity: pseudo-inverse vs DLS',
      'Singularity: pseudo-inverse vs damped least squares', ('singularity', 'unreachable'),
      'joint speed along the study paths'),
-    (foresight, 'collision foresight on crossing moves', 'Collision foresight and margins',
-     ('foresight', 'collision_risk'), 'foresight and separation histograms'),
-    (throughput, 'throughput: the sorting job', 'Throughput and real-time factor',
+    ('foresight', foresight, 'collision foresight on crossing moves',
+     'Collision foresight and margins', ('foresight', 'collision_risk'),
+     'foresight and separation histograms'),
+    ('throughput', throughput, 'throughput: the sorting job', 'Throughput and real-time factor',
      ('throughput', 'rtf'), 'items per minute per mode and seed'))
-SECTIONS = tuple(Section(m.__name__.rsplit('.', 1)[1], title, heading, claims, m.measure,
-                         m.tables, m.summary, m.figure, alt)
-                 for m, title, heading, claims, alt in LAYOUT)
+SECTIONS = tuple(ResultsSection(key, title, heading, claims, m.measure, m.tables, m.summary,
+                                m.figure, alt)
+                 for key, m, title, heading, claims, alt in LAYOUT)
 SUMMARY_ORDER = ('solvers', 'paths', 'sync', 'payload', 'singularity', 'foresight', 'throughput')
 
 
 def headings() -> List[str]:
-    """Return the sections' headings in ``RESULTS.md``, numbered: ``'1. Path deviation: …'``."""
+    """Return the sections' headings on the results page, numbered: ``'1. Path deviation: …'``."""
     return [f'{n}. {s.heading}' for n, s in enumerate(SECTIONS, 1)]
 
 
@@ -59,7 +61,7 @@ def section_text(section, results: dict) -> str:
     if not usable(data):
         return f'**This section failed:** `{data.get("error") if data else "no data"}`'
     name = results['figures'].get(section.key, '')
-    link = f'![{section.figure_alt}](figures/{name})' if name.endswith('.png') \
+    link = f'![{section.figure_alt}]({FIGURES}/{name})' if name.endswith('.png') \
         else f'*(figure not drawn: {name or "no data"})*'
     return '\n\n'.join([quote(*section.claims), *section.tables(data), link])
 
@@ -77,7 +79,7 @@ def render(results: dict, previous: str = '') -> str:
         by_key = {s.key: s for s in SECTIONS}
         rows = [row for key in SUMMARY_ORDER if usable(results.get(key))
                 for row in by_key[key].summary(results[key])]
-        cols = ('what', "seeds' claim", 'measured here', 'SPEC target', 'target')
+        cols = ('what', "design documents' claim", 'measured here', 'SPEC target', 'target')
         page = put_block(page, 'benchmark:summary', 'Summary',
                          table([dict(zip(cols, r)) for r in rows]))
     for heading, section in zip(headings(), SECTIONS):
@@ -96,7 +98,7 @@ def cpu_seconds() -> float:
 def run(out: Path, smoke: bool, only: Sequence[str], progress: Progress,
         json_path: Optional[Path], command: str) -> Dict[str, object]:
     """Measure the sections ``only`` (a failing one: its error) into ``out``: page, figures."""
-    (out / 'figures').mkdir(parents=True, exist_ok=True)
+    (out / FIGURES).mkdir(parents=True, exist_ok=True)
     results: Dict[str, object] = {
         'meta': {**machine(), 'smoke': smoke, 'command': command,
                  'date': time.strftime('%Y-%m-%d %H:%M %Z'), 'sections_s': {}},
@@ -118,12 +120,12 @@ def run(out: Path, smoke: bool, only: Sequence[str], progress: Progress,
             if usable(results.get(section.key)):
                 name = f'{section.key}.png'
                 try:
-                    section.figure(results[section.key]).savefig(out / 'figures' / name, dpi=90)
+                    section.figure(results[section.key]).savefig(out / FIGURES / name, dpi=90)
                 except Exception as exc:  # noqa: B902 - a figure must not lose the report
                     name = f'error: {type(exc).__name__}: {exc}'
                 results['figures'][section.key] = name
         results['meta'].update(wall_s=progress.elapsed(), cpu_s=cpu_seconds())
-        target = out / 'RESULTS.md'
+        target = out / RESULTS_PAGE
         target.write_text(render(results, target.read_text() if target.is_file() else ''))
     if json_path:
         write_json(json_path, results)

@@ -1,11 +1,11 @@
-"""Section 1, path deviation: the seeds' 1.5 m move as a straight line and as a joint move."""
+"""Section 1, path deviation: the design documents' 1.5 m move, as a line and as a joint move."""
 from pathlib import Path
 import time
 
 import numpy as np
 
-from scara_collab.bench.claims import CLAIMS
-from scara_collab.bench.util import axes, finish, fmt_seconds, met, mm, num, Rows, table
+from benchmarks.claims import CLAIMS
+from benchmarks.util import axes, finish, fmt_seconds, met, mm, num, Rows, table
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import ArmModel, CellModel, load_cell
@@ -15,7 +15,7 @@ from scara_collab.sim.cell_sim import CellSim
 
 ARRIVED = 1e-3  # m: an executed move has arrived once the tool stays this close to the goal
 START, GOAL = np.array([3.2, -0.9, 0.4]), np.array([2.0, 0.0, 0.4])
-"""The seeds' 1.5 m move, world frame (left arm): from a rest pose to the belt's centre line."""
+"""The design documents' 1.5 m move, world frame (left arm): rest pose to the belt centre line."""
 METHODS = {'joint': 'joint interp.', 'line': 'straight line'}
 
 
@@ -62,7 +62,7 @@ def measure(smoke: bool, scratch: Path) -> dict:
     return out
 
 
-ROWS = (  # metric, key, format, seeds' claim
+ROWS = (  # metric, key, format, design documents' claim
     ('largest distance from the straight segment', 'max_deviation', mm,
      'joint 0.385 m; line < 0.001 m'),
     ('tool path length', 'path_length', lambda x: num(x, 4, 'm'), 'line 14 % shorter'),
@@ -84,7 +84,7 @@ def tables(p: dict) -> list:
             for kind in ('planned', 'executed'):
                 value = p[kind][method].get(key)
                 row[f'{name}, {kind}'] = '' if value is None else fmt(value)
-        rows.append(dict(row, **{"seeds' claim": claim}))
+        rows.append(dict(row, **{"design documents' claim": claim}))
     return [table(rows)]
 
 
@@ -94,7 +94,7 @@ def summary(p: dict) -> Rows:
     saved = 1 - pl['line']['path_length'] / pl['joint']['path_length']
     lp, le = pl['line']['max_deviation'], ex['line']['max_deviation']
     return [
-        ("straight line, seeds' 1.5 m move: deviation planned / executed",
+        ("straight line, design documents' 1.5 m move: deviation planned / executed",
          CLAIMS['line_deviation'].figure, f'{num(lp, 2, "m")} / {mm(le)}',
          '≤ 1e-6 m / ≤ 1 mm', met(lp <= 1e-6 and le <= 1e-3)),
         ('joint interpolation, same move: deviation planned / executed',

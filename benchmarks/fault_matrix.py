@@ -14,9 +14,9 @@ import numpy as np
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
-from scara_collab.bench.launched import Launch, publish, stamp, stops, Summary, use_domain
-from scara_collab.bench.probe import Probe
-from scara_collab.bench.util import Log, table
+from benchmarks.launched import Launch, publish, stamp, stops, Summary, use_domain
+from benchmarks.probe import Probe
+from benchmarks.util import Log, table
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.model import load_cell
 from scara_collab.core.trajectory import joint_move

@@ -1,6 +1,7 @@
 """The real-time benchmark's bookkeeping: its rows, its faults, its page (no launcher run)."""
-from scara_collab.bench import realtime
-from scara_collab.bench.launched import row
+from benchmarks import realtime_runs
+from benchmarks.launched import row
+from benchmarks.util import REALTIME_PAGE
 from scara_collab.run.faults import parse_faults
 
 
@@ -36,14 +37,14 @@ def test_every_condition_is_a_launcher_setting_that_parses():
     The latency condition's faults are valid ``--fault`` entries for the joint states and
     every status the job's timing hangs on.
     """
-    lockstep, hogs, faults = realtime.CONDITIONS['latency']
+    lockstep, hogs, faults = realtime_runs.CONDITIONS['latency']
     assert not lockstep and hogs == 0
     parsed = parse_faults(faults)
     assert set(parsed) == {'/joint_states', '/scara_left/planner_status',
                            '/scara_right/planner_status', '/scara_left/execution_status',
                            '/scara_right/execution_status'}
-    assert [c for c, (on, _, _) in realtime.CONDITIONS.items() if on] == ['lockstep']
-    assert realtime.CONDITIONS['two_hogs'][1] == 2
+    assert [c for c, (on, _, _) in realtime_runs.CONDITIONS.items() if on] == ['lockstep']
+    assert realtime_runs.CONDITIONS['two_hogs'][1] == 2
 
 
 def test_the_page_has_a_row_per_run_and_the_capacity_ratio():
@@ -53,7 +54,7 @@ def test_the_page_has_a_row_per_run_and_the_capacity_ratio():
     cap = {'feed_interval': 0.9, 'duration': 240.0, 'seeds': [1],
            'lockstep_items_per_minute': 41.0, 'realtime_items_per_minute': 40.0,
            'ratio': 0.976}
-    text = realtime.markdown(rows, cap, 'scripts/bench_realtime.py --seeds 1', 600.0)
+    text = realtime_runs.markdown(rows, cap, 'scripts/bench_realtime.py --seeds 1', 600.0)
     assert text.count('| lockstep | 1 | 0 | 60 |') == 1 and '| quiet | 1 |' in text
     assert '| 1.100 | 2 | 1.279 |' in text  # lost_s, overspeed, cpu_s
     assert 'ratio 0.976' in text and 'Stop causes' in text
@@ -62,17 +63,17 @@ def test_the_page_has_a_row_per_run_and_the_capacity_ratio():
 def test_a_rerun_replaces_its_block_and_keeps_the_notes_written_by_hand(tmp_path, monkeypatch):
     """``--only realtime`` writes its block; the page's other block and notes stay."""
     from argparse import Namespace
-    page = tmp_path / 'REALTIME.md'
+    page = tmp_path / REALTIME_PAGE
     page.write_text('# Real time, without lockstep\n\n## One process, at 1×\n\n'
                     '<!-- realtime:one_process:begin -->\nold\n'
                     '<!-- realtime:one_process:end -->\n\nnotes by hand\n\n'
                     '## One process per node, at 1×\n\n<!-- realtime:processes:begin -->\n'
                     'kept\n<!-- realtime:processes:end -->\n')
-    monkeypatch.setattr(realtime, 'run', lambda c, runs, d, s, log, one_process: dict(
+    monkeypatch.setattr(realtime_runs, 'run', lambda c, runs, d, s, log, one_process: dict(
         row(_summary(protective_stops=[])), condition=c, seed=s))
     args = Namespace(duration=60.0, seeds=[1], conditions=['quiet'], capacity_duration=0,
                      one_process=True)
-    assert realtime.section(args, page, 'cmd', lambda text: None) is True
+    assert realtime_runs.section(args, page, 'cmd', lambda text: None) is True
     text = page.read_text()
     assert 'old' not in text and '| quiet | 1 | 0 | 60 |' in text
     assert 'notes by hand' in text and 'kept' in text and text.count('realtime:') == 4

@@ -7,8 +7,8 @@ import tempfile
 import time
 from typing import Dict, List, Optional, Tuple
 
-from scara_collab.bench.launched import Launch, publish, row, stamp
-from scara_collab.bench.util import Log, table
+from benchmarks.launched import Launch, publish, row, stamp
+from benchmarks.util import Log, table
 
 #: the bridge's words when it stops waiting for a silent node (scara_collab.nodes.lockstep)
 DROP_WORDS = 'not waiting for it any more'
