@@ -66,17 +66,3 @@ def test_a_malformed_message_is_refused_with_the_reason():
     optional = DiagnosticStatus(values=[KeyValue(key=k, value=v) for k, v in (
         ('kind', 'spawned'), ('item', '4'), ('cls', 'blue'), ('time', '2.0'))])
     assert proto.ItemEvent.from_msg(optional) == proto.ItemEvent('spawned', 4, 'blue', 2.0)
-
-
-def test_a_move_is_named_by_its_robot_and_request():
-    """``<robot>/<request ns>`` both ways; a planner's hold is its own; anything else is not."""
-    assert proto.parse_move_id(proto.move_id('scara_left', 15)) == ('scara_left', 15)
-    with pytest.raises(proto.ProtocolError):
-        proto.parse_move_id('scara_left/hold')
-    assert proto.planners_move('scara_right', proto.hold_id('scara_right'))
-    assert not proto.planners_move('scara_right', 'scara_left/15')
-
-    class Stamp:
-        sec, nanosec = 3, 250_000_000
-
-    assert proto.stamp_ns(Stamp) == 3_250_000_000

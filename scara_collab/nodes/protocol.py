@@ -18,13 +18,10 @@ topic                             type                publisher
 ``/collision_monitor/stops``      :class:`StopEvent`       collision monitor
 ================================  ==================  =======================================
 
-**Move identity.** A move is named by the request that asked for it: its id is
-``<robot>/<request>`` where ``request`` is the target's ``header.stamp`` in integer
-nanoseconds (the requested start time; a requester that needs to follow its moves, like the
-automation manager, sends each request with its own stamp). A target stamped zero ("start
-now") gets the planner's receipt time instead. The planner puts the id in the
-``header.frame_id`` of the ``JointTrajectory`` it publishes, the bridge reports on that id, so
-a status always says which move it is about, from the request to the end of the motion.
+**Moves** are named by the request that asked for them, ``<robot>/<request ns>``
+(:mod:`scara_collab.core.moves`): the planner puts the id in the ``header.frame_id`` of the
+``JointTrajectory`` it publishes, the bridge reports on that id, so a status always says which
+move it is about, from the request to the end of the motion.
 
 **A move's request.** A point (``/<robot>/target``, ``geometry_msgs/PointStamped``, frame
 ``world`` or ``<robot>_base``; ``/collab/target`` for a mirrored pair), or a plan of the move
@@ -43,6 +40,7 @@ from typing import ClassVar, Dict, get_type_hints, Optional, Tuple
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
 from scara_collab.core import line, sorting
+from scara_collab.core.moves import EXECUTION_STATES, move_id, PLANNER_STATES
 
 LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
@@ -50,72 +48,6 @@ LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
 
 class ProtocolError(ValueError):
     """A status message does not follow the protocol; the text says why."""
-
-
-def stamp_ns(stamp) -> int:
-    """``builtin_interfaces/Time`` -> integer nanoseconds (a move request's identity)."""
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-def move_id(robot: str, request: int) -> str:
-    """Return the id of the move ``robot`` makes for ``request`` (ns): ``'<robot>/<request>'``.
-
-    >>> move_id('scara_left', 1500000000)
-    'scara_left/1500000000'
-    """
-    return f'{robot}/{int(request)}'
-
-
-def hold_id(robot: str) -> str:
-    """Return the id of the hold a planner sends to keep ``robot`` where it is.
-
-    >>> hold_id('scara_right')
-    'scara_right/hold'
-    """
-    return f'{robot}/hold'
-
-
-def planners_move(robot: str, move: str) -> bool:
-    """Return True if ``move`` is one of ``robot``'s planner's (a move of a request, its hold).
-
-    >>> planners_move('scara_left', 'scara_left/15'), planners_move('scara_left', 'raw/1')
-    (True, False)
-    >>> planners_move('scara_left', 'scara_left/hold'), planners_move('scara_left', '')
-    (True, False)
-    """
-    if move == hold_id(robot):
-        return True
-    try:
-        return parse_move_id(move)[0] == robot
-    except ProtocolError:
-        return False
-
-
-def parse_move_id(move: str) -> Tuple[str, int]:
-    """Inverse of :func:`move_id`: ``'scara_left/15'`` -> ``('scara_left', 15)``.
-
-    :raises ProtocolError: if ``move`` is not ``<robot>/<integer>``.
-    """
-    robot, _, request = move.rpartition('/')
-    try:
-        return robot, int(request)
-    except ValueError:
-        raise ProtocolError(f'move id {move!r} is not <robot>/<request ns>') from None
-
-
-def request_of(robot: str, move: str) -> Optional[int]:
-    """Return the request of ``robot``'s planned move ``move``, or None for any other move.
-
-    >>> request_of('scara_left', 'scara_left/15'), request_of('scara_left', 'scara_left/hold')
-    (15, None)
-    >>> request_of('scara_left', 'scara_right/15') is None
-    True
-    """
-    try:
-        _, request = parse_move_id(move)
-    except ProtocolError:
-        return None  # a planner's hold, a raw command
-    return request if move_id(robot, request) == move else None
 
 
 def _encode(value) -> str:
@@ -243,9 +175,6 @@ class _MoveStatus(_Status):
 
 
 # --- planner ---------------------------------------------------------------------------------
-PLANNER_STATES = ('planned', 'queued', 'waiting', 'refused', 'superseded')
-
-
 @dataclass(frozen=True)
 class PlannerStatus(_MoveStatus):
     """What a planner did with one request (``/<robot>/planner_status``).
@@ -297,9 +226,6 @@ class PlannerStatus(_MoveStatus):
 
 
 # --- bridge ----------------------------------------------------------------------------------
-EXECUTION_STATES = ('accepted', 'refused', 'finished', 'preempted', 'held', 'cleared')
-
-
 @dataclass(frozen=True)
 class ExecutionStatus(_MoveStatus):
     """What the bridge does with one trajectory (``/<robot>/execution_status``).
