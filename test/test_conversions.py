@@ -3,10 +3,10 @@ from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
+from scara_collab.core import moves
 from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.move_time import stamp_time
 from scara_collab.nodes import conversions as conv
-from scara_collab.nodes import protocol as proto
 from scara_collab.nodes import runner
 
 
@@ -39,10 +39,10 @@ def test_a_move_id_is_its_request_stamp_exactly():
     """A move id carries its request stamp's nanoseconds exactly; a bad id is refused."""
     ns = 133_510_992_676
     stamp = conv.time_from_ns(ns)
-    assert proto.stamp_ns(stamp) == ns
-    assert proto.parse_move_id(proto.move_id('scara_left', ns)) == ('scara_left', ns)
-    with pytest.raises(proto.ProtocolError):
-        proto.parse_move_id('scara_left/not-a-number')
+    assert conv.request_id(stamp) == ns
+    assert moves.parse_move_id(moves.move_id('scara_left', ns)) == ('scara_left', ns)
+    with pytest.raises(moves.MoveIdError):
+        moves.parse_move_id('scara_left/not-a-number')
 
 
 def test_every_entry_point_keeps_discovery_on_this_host(monkeypatch):

@@ -12,10 +12,12 @@ import random
 import subprocess
 import sys
 
+from diagnostic_msgs.msg import KeyValue
 import pytest
 
 from scara_collab.core.config import load_config
-from scara_collab.core.line import arm_extent, HandedOn, Handoff, Inbox, min_pitch, Section, Share
+from scara_collab.core.line import (arm_extent, HandedOn, Handoff, Inbox, min_pitch, OnBelt,
+                                    Section, Share)
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import protocol as proto
 from scara_collab.records import line_report as lr
@@ -89,22 +91,31 @@ def test_handoffs_survive_lost_and_repeated_messages():
 
 
 def test_handoff_records_are_checked_at_the_door():
-    """Malformed handoffs and messages are refused with a ProtocolError / ValueError."""
-    assert Handoff.from_list([3, 'red', 0.1, 2.0]) == Handoff(3, 'red', 0.1, 2.0)
-    for bad in ([3, 'red', 0.1], [-1, 'red', 0, 1], [True, 'red', 0, 1], [3, '', 0, 1],
-                [3, 'red', float('nan'), 1], [3, 'red', 0, 'x'], 'abc'):
-        with pytest.raises(ValueError):
-            Handoff.from_list(bad)
-    msg = proto.LineHandoff(0, 2.5, 1, [[3, 'red', 0.1, 2.4]]).to_msg()
-    assert proto.LineHandoff.from_msg(msg).handoffs() == [Handoff(3, 'red', 0.1, 2.4)]
-    bad = proto.LineHandoff(0, 2.5, 1, [[3, 'red', 'y', 2.4]])
-    with pytest.raises(proto.ProtocolError):
-        proto.LineHandoff.from_msg(bad.to_msg()).handoffs()
-    for kv in (('frontier', 'inf'), ('handed', '-1'), ('items', '{"a": 1}')):
-        msg = proto.LineHandoff(0, 2.5, 1, []).to_msg()
-        next(v for v in msg.values if v.key == kv[0]).value = kv[1]
+    """A malformed handoff message is refused with a ProtocolError, a bad record with a reason."""
+    msg = proto.LineHandoff(0, 2.5, 1, (Handoff(3, 'red', 0.1, 2.4),),
+                            (OnBelt(4, 'blue', 1.0, 0.2),)).to_msg()
+    back = proto.LineHandoff.from_msg(msg)
+    assert back.handoffs == (Handoff(3, 'red', 0.1, 2.4),)
+    assert back.belt == (OnBelt(4, 'blue', 1.0, 0.2),)
+    for key, text in (('handoffs.3.y', 'nan'), ('handoffs.3.time', 'inf'), ('handoffs.3.y', 'y'),
+                      ('handoffs.3.cls', ''), ('belt.4.x', '-inf'), ('frontier', 'inf'),
+                      ('handed', '-1'), ('cell', '0.5')):
+        bad = proto.LineHandoff(0, 2.5, 1, (Handoff(3, 'red', 0.1, 2.4),),
+                                (OnBelt(4, 'blue', 1.0, 0.2),)).to_msg()
+        next(kv for kv in bad.values if kv.key == key).value = text
+        with pytest.raises(proto.ProtocolError, match=key.split('.')[-1]):
+            proto.LineHandoff.from_msg(bad)
+    for items in ([('handoffs.-3.cls', 'red'), ('handoffs.-3.y', '0.1'),
+                   ('handoffs.-3.time', '2.4')],  # a negative id
+                  [('handoffs.3.cls', 'red'), ('handoffs.3.y', '0.1')]):  # no time
+        bad = proto.LineHandoff(0, 2.5, 1).to_msg()
+        bad.values += [KeyValue(key=k, value=v) for k, v in items]
         with pytest.raises(proto.ProtocolError):
-            proto.LineHandoff.from_msg(msg)
+            proto.LineHandoff.from_msg(bad)
+    for bad in ((Handoff(-1, 'red', 0.0, 1.0),), (Handoff(3, '', 0.0, 1.0),),
+                (Handoff(3, 'red', float('nan'), 1.0),)):
+        with pytest.raises(ValueError):
+            proto.LineHandoff(0, 2.5, 1, bad)
 
 
 def test_two_sections_hand_items_on_with_id_class_and_place():

@@ -351,7 +351,7 @@ def test_an_offered_plan_is_scheduled_as_it_is_not_planned_again(cell):
     np.testing.assert_array_equal(q, traj.q)
     np.testing.assert_array_equal(qdd, traj.qdd)
     st = statuses(cell, 'scara_left')[-1]
-    assert st.state == 'planned' and st.request == proto.stamp_ns(msg.header.stamp)
+    assert st.state == 'planned' and st.request == conv.request_id(msg.header.stamp)
     assert sent.header.frame_id == st.move and abs(st.start - request) < 1e-6
     run_until(cell, st.end + 0.3)
     np.testing.assert_allclose(fk(left, cell.left.planner.joints), target, atol=1e-3)
@@ -443,8 +443,8 @@ def test_a_mirrored_offer_reaches_both_planners_mirrored_joint_by_joint(cell):
     qr = conv.trajectory_arrays(cell.trajs['scara_right'][-1], right.joint_names)[2]
     np.testing.assert_array_equal(ql, traj.q)
     np.testing.assert_array_equal(qr, mirror_joints(traj.q))
-    stamps = {proto.stamp_ns(cell.trajs[n][-1].header.stamp) for n in cell.trajs}
-    assert stamps == {proto.stamp_ns(msg.header.stamp)}
+    stamps = {conv.request_id(cell.trajs[n][-1].header.stamp) for n in cell.trajs}
+    assert stamps == {conv.request_id(msg.header.stamp)}
     run_until(cell, max(last_end(cell, n) for n in cell.status) + 0.3)
     np.testing.assert_allclose(fk(right, cell.right.planner.joints),
                                mirror_point(left, right, target),

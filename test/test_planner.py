@@ -141,7 +141,7 @@ def test_a_target_goes_out_as_a_trajectory_its_path_and_a_status(shell, cell):
     st = proto.PlannerStatus.from_msg(g.status[1])
     traj = g.trajs[0]
     assert st.state == 'planned' and st.kind == 'line' and g.status[1].level == DiagnosticStatus.OK
-    assert traj.header.frame_id == st.move == f'scara_left/{proto.stamp_ns(target.header.stamp)}'
+    assert traj.header.frame_id == st.move == f'scara_left/{conv.request_id(target.header.stamp)}'
     assert conv.to_sec(traj.header.stamp) == pytest.approx(st.start, abs=1e-9)
     assert len(g.paths[0].poses) == len(traj.points)
     _publish(g, PointStamped, 'scara_left/target', target)  # the same request again

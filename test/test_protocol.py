@@ -1,7 +1,11 @@
 """The job protocol's statuses alone (no node): typed fields <-> DiagnosticStatus key-values."""
+from dataclasses import fields
+
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+import numpy as np
 import pytest
 
+from scara_collab.core.line import Handoff, OnBelt
 from scara_collab.nodes import protocol as proto
 
 STATUSES = [
@@ -23,6 +27,9 @@ STATUSES = [
                         kind='emergency', emergency=1),
     proto.StopEvent('protective', 'end', 7.0, 'predicted conflict', since=6.5),
     proto.SimStatus(8.0, False, False, 1, 3),
+    proto.LineHandoff(1, 12.34, 7, (Handoff(1_000_003, 'red', 0.1, 12.0),
+                                    Handoff(1_000_004, 'blue', -0.2, 12.25)),
+                      (OnBelt(1_000_009, 'green', 1.5, 0.05),)),
 ]
 
 
@@ -68,15 +75,58 @@ def test_a_malformed_message_is_refused_with_the_reason():
     assert proto.ItemEvent.from_msg(optional) == proto.ItemEvent('spawned', 4, 'blue', 2.0)
 
 
-def test_a_move_is_named_by_its_robot_and_request():
-    """``<robot>/<request ns>`` both ways; a planner's hold is its own; anything else is not."""
-    assert proto.parse_move_id(proto.move_id('scara_left', 15)) == ('scara_left', 15)
-    with pytest.raises(proto.ProtocolError):
-        proto.parse_move_id('scara_left/hold')
-    assert proto.planners_move('scara_right', proto.hold_id('scara_right'))
-    assert not proto.planners_move('scara_right', 'scara_left/15')
+def test_every_status_says_how_each_of_its_fields_travels():
+    """``FIELDS`` names exactly the dataclass's fields: none travels untold, none is extra."""
+    for status in STATUSES:
+        assert list(type(status).FIELDS) == [f.name for f in fields(status)], type(status)
 
-    class Stamp:
-        sec, nanosec = 3, 250_000_000
 
-    assert proto.stamp_ns(Stamp) == 3_250_000_000
+def test_tables_and_records_travel_one_value_per_key_value():
+    """A dict is one key-value per entry, a record one per value: no JSON in any value."""
+    stats = STATUSES[5].to_msg()
+    values = {kv.key: kv.value for kv in stats.values}
+    assert values['counts.sorted'] == '3' and values['sorted_by.scara_right'] == '1'
+    assert values['phases.scara_left'] == 'to_bin' and 'counts' not in values
+    line = {kv.key: kv.value for kv in STATUSES[-1].to_msg().values}
+    assert line['handoffs.1000004.cls'] == 'blue' and line['handoffs.1000004.time'] == '12.25'
+    assert line['belt.1000009.x'] == '1.5' and 'handoffs' not in line
+    for msg in (stats, STATUSES[-1].to_msg()):
+        assert not any(kv.value[:1] in ('[', '{') for kv in msg.values)
+    empty = proto.JobStats('single', False, 0.0, None)  # empty tables: no key-values at all
+    assert proto.JobStats.from_msg(empty.to_msg()) == empty
+    assert [kv.key for kv in empty.to_msg().values if '.' in kv.key] == []
+
+
+def test_floats_come_back_exactly_and_nan_is_refused():
+    """``repr`` both ways: every float, numpy's too, comes back to the bit; NaN does not."""
+    for t in (0.1 + 0.2, 1e-300, 123456.78901234567, np.float64(2.0) / 3.0, float('inf')):
+        event = proto.ItemEvent('sorted', 1, 'red', t)
+        assert proto.ItemEvent.from_msg(event.to_msg()).time == t
+    msg = STATUSES[5].to_msg()
+    next(kv for kv in msg.values if kv.key == 'items_per_minute').value = 'nan'
+    with pytest.raises(proto.ProtocolError, match='items_per_minute'):
+        proto.JobStats.from_msg(msg)
+
+
+def test_a_malformed_table_or_record_is_refused_with_the_reason():
+    """A count that is no integer, a record short of a value or with a bad id: ProtocolError."""
+    msg = STATUSES[5].to_msg()
+    next(kv for kv in msg.values if kv.key == 'counts.sorted').value = '3.5'
+    with pytest.raises(proto.ProtocolError, match='counts.sorted'):
+        proto.JobStats.from_msg(msg)
+    msg = STATUSES[-1].to_msg()
+    msg.values = [kv for kv in msg.values if kv.key != 'handoffs.1000003.time']
+    with pytest.raises(proto.ProtocolError, match=r"handoffs.1000003: no \['time'\]"):
+        proto.LineHandoff.from_msg(msg)
+    msg = STATUSES[-1].to_msg()
+    msg.values.append(KeyValue(key='belt.x7.cls', value='red'))
+    with pytest.raises(proto.ProtocolError, match='belt.x7.cls'):
+        proto.LineHandoff.from_msg(msg)
+
+
+def test_a_value_of_the_wrong_kind_is_refused_when_sent():
+    """A float count or a text where a number goes fails at ``to_msg``, not at the receiver."""
+    with pytest.raises(TypeError, match='not an integer'):
+        proto.JobStats('single', True, 1.0, 0.0, counts={'sorted': 2.0}).to_msg()
+    with pytest.raises(TypeError, match='not a number'):
+        proto.ItemEvent('sorted', 1, 'red', '1.0').to_msg()

@@ -16,6 +16,7 @@ from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory
 
+from scara_collab.core import moves
 from scara_collab.core.kinematics import fk, ik
 from scara_collab.core.mirror import mirror_joints, mirror_point
 from scara_collab.nodes import conversions as conv
@@ -53,7 +54,7 @@ def test_a_collab_target_goes_to_both_arms_mirrored_with_one_stamp(g):
     pub.publish(conv.make_point_stamped([3.1, -0.9, 0.4], 'world', 12.5))
     assert g.spin_until(lambda: g.targets[lead.name] and g.targets[foll.name])
     to_lead, to_foll = g.targets[lead.name][0], g.targets[foll.name][0]
-    assert proto.stamp_ns(to_lead.header.stamp) == proto.stamp_ns(to_foll.header.stamp) \
+    assert conv.request_id(to_lead.header.stamp) == conv.request_id(to_foll.header.stamp) \
         == 12_500_000_000
     assert_allclose(_point(to_lead), [3.1, -0.9, 0.4])
     assert_allclose(_point(to_foll), mirror_point(lead, foll, [3.1, -0.9, 0.4]))
@@ -116,7 +117,7 @@ def test_a_non_finite_target_is_refused_and_the_node_lives_on(g):
 
 
 def _execution(robot, state, request, start, end):
-    return proto.ExecutionStatus(robot, state, proto.move_id(robot, request), start=start,
+    return proto.ExecutionStatus(robot, state, moves.move_id(robot, request), start=start,
                                  end=end, time=start, stamp=start).to_msg()
 
 

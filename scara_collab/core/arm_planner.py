@@ -54,12 +54,13 @@ from scara_collab.core.kinematics import fk, IKError
 from scara_collab.core.model import ArmModel
 from scara_collab.core.motion import Heard, schedule_for_door
 from scara_collab.core.move_time import lateness, Leads, MoveTime
+from scara_collab.core.moves import PLANNER_STATES
 from scara_collab.core.planning import (MODES, offered_move, path_options, Plan, plan_path,
                                         schedule, starts_at)
 from scara_collab.core.trajectory import path_metrics, Trajectory
 
-#: the states of a request a planner reports
-STATES = ('planned', 'queued', 'waiting', 'refused', 'superseded')
+#: the states of a request a planner reports (:data:`scara_collab.core.moves.PLANNER_STATES`)
+STATES = PLANNER_STATES
 
 #: the planner's times, s, parameters of its node that may change while it runs: the send
 #: margin of the start rule (:class:`scara_collab.core.move_time.Leads`; ``--lockstep off`` sets

@@ -29,6 +29,7 @@ from scara_collab.core.kinematics import fk
 from scara_collab.core.mirror import mirror_point
 from scara_collab.core.model import CellModel
 from scara_collab.core.move_time import Lateness, MoveTime
+from scara_collab.core.moves import PLANNER_STATES
 from scara_collab.core.trajectory import Trajectory
 
 
@@ -113,7 +114,7 @@ EVENTS = ('arrived', 'gripped', 'failed')
 #: 0.3 s of belt travel either way: aiming further than that misses for certain)
 GRASP_LEAD = 0.25
 #: the state a planner's status puts a move in (a state not listed changes nothing)
-PLANNER_STATUS = {s: s for s in ('planned', 'queued', 'waiting', 'refused', 'superseded')}
+PLANNER_STATUS = {s: s for s in PLANNER_STATES}
 #: the same for the bridge's; ``preempted`` by the arm's own planner (its new move, its hold): the
 #: planner took it back and says what comes next (a take-over by anyone else comes as refused)
 BRIDGE_STATUS = {'accepted': 'accepted', 'finished': 'finished', 'preempted': 'waiting',

@@ -72,29 +72,6 @@ class Handoff:
     y: float
     time: float
 
-    def as_list(self) -> list:
-        """Return ``[item, cls, y, time]`` (the wire form, :meth:`from_list` reads it)."""
-        return [self.item, self.cls, self.y, self.time]
-
-    @classmethod
-    def from_list(cls, v) -> 'Handoff':
-        """Read ``[item, cls, y, time]``.
-
-        :raises ValueError: not four fields, or a field of the wrong kind (a non-finite
-            number, a negative id).
-        """
-        if not isinstance(v, (list, tuple)) or len(v) != 4:
-            raise ValueError(f'a handoff is [item, class, y, time], got {v!r}')
-        item, name, y, t = v
-        if isinstance(item, bool) or not isinstance(item, int) or item < 0:
-            raise ValueError(f'handoff item id must be an int >= 0, got {item!r}')
-        if not isinstance(name, str) or not name:
-            raise ValueError(f'handoff class must be a name, got {name!r}')
-        for key, x in (('y', y), ('time', t)):
-            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-                raise ValueError(f'handoff {key} must be a finite number, got {x!r}')
-        return cls(item, name, float(y), float(t))
-
 
 def arm_extent(cell: CellModel) -> Tuple[float, float]:
     """Return the x range (cell frame, m) any part of either arm can reach, at full reach.
@@ -224,18 +201,6 @@ class OnBelt:
     cls: str
     x: float
     y: float
-
-    def as_list(self) -> list:
-        """Return ``[item, cls, x, y]``."""
-        return [self.item, self.cls, self.x, self.y]
-
-    @classmethod
-    def from_list(cls, v) -> 'OnBelt':
-        """Read ``[item, cls, x, y]``; :raises ValueError: as :meth:`Handoff.from_list`."""
-        if not isinstance(v, (list, tuple)) or len(v) != 4:
-            raise ValueError(f'an item on the belt is [item, class, x, y], got {v!r}')
-        h = Handoff.from_list([v[0], v[1], v[3], v[2]])  # the same checks
-        return cls(h.item, h.cls, h.time, h.y)
 
 
 class Bypass:

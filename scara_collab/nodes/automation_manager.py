@@ -45,7 +45,7 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from scara_collab.core import sorting
+from scara_collab.core import moves, sorting
 from scara_collab.core.config import load_config, Rule
 from scara_collab.core.job import GripCommand, JobSettings, MoveCommand, SortingJob
 from scara_collab.core.kinematics import IKError
@@ -186,19 +186,19 @@ class AutomationManager(Node):
         if st.robot in self.job.sorted_by:  # the cell's arms: what the arm is committed to
             self.job.on_arm_status(st.robot, st.state, st.move, st.start)
         try:
-            robot, request = proto.parse_move_id(st.move)
-        except proto.ProtocolError:
+            robot, request = moves.parse_move_id(st.move)
+        except moves.MoveIdError:
             return  # not a move of the job's (a raw command, a planner's hold)
         state, reason = st.state, st.reason
-        if state == 'preempted' and not proto.planners_move(robot, st.by):
+        if state == 'preempted' and not moves.planners_move(robot, st.by):
             # someone else's trajectory took the arm over: the move failed, plan again
             state, reason = 'refused', f'taken over by move {st.by or "(no id)"}'
         self.job.on_execution(robot, request, state, st.start, st.end, reason, st.stamp)
 
     def _on_trajectory(self, robot: str, msg: JointTrajectory) -> None:
         try:
-            owner, request = proto.parse_move_id(msg.header.frame_id)
-        except proto.ProtocolError:
+            owner, request = moves.parse_move_id(msg.header.frame_id)
+        except moves.MoveIdError:
             owner, request = robot, None
         if owner != robot:  # not a planner's move of a request of this arm: a raw one, a hold
             request = None  # (the bridge runs it on this arm all the same)

@@ -15,10 +15,10 @@ from std_msgs.msg import ColorRGBA, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
 
+from scara_collab.core import moves
 from scara_collab.core.arm_planner import HoldArm, SendMove
 from scara_collab.core.frames import quaternion
 from scara_collab.core.palette import class_colour
-from scara_collab.nodes import protocol
 
 
 class MessageError(ValueError):
@@ -34,6 +34,14 @@ def to_time(seconds: float) -> Time:
     """Seconds -> ``builtin_interfaces/Time`` (rounded to the nanosecond)."""
     ns = int(round(seconds * 1e9))
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def request_id(stamp) -> int:
+    """``builtin_interfaces/Time`` -> a move request's id: the stamp in integer nanoseconds.
+
+    (:func:`scara_collab.core.moves.request_id`; exact, unlike :func:`to_sec`.)
+    """
+    return moves.request_id(stamp.sec, stamp.nanosec)
 
 
 def time_from_ns(ns: int) -> Time:
@@ -182,16 +190,16 @@ def move_msg(robot: str, joint_names: Sequence[str],
              cmd: Union[SendMove, HoldArm]) -> JointTrajectory:
     """Return the ``JointTrajectory`` ``robot``'s planner sends for a ``SendMove`` or ``HoldArm``.
 
-    A move (:func:`~scara_collab.nodes.protocol.move_id`) from its start, or the hold
-    (:func:`~scara_collab.nodes.protocol.hold_id`) as one point at once (stamp 0); the
+    A move (:func:`~scara_collab.core.moves.move_id`) from its start, or the hold
+    (:func:`~scara_collab.core.moves.hold_id`) as one point at once (stamp 0); the
     commands are :mod:`scara_collab.core.arm_planner`'s.
     """
     if isinstance(cmd, HoldArm):
         return trajectory_msg(joint_names, np.array([0.0]), cmd.q.reshape(1, 3),
-                              frame_id=protocol.hold_id(robot))
+                              frame_id=moves.hold_id(robot))
     t = cmd.plan.traj
     return trajectory_msg(joint_names, t.t, t.q, t.qd, t.qdd, start=cmd.plan.start,
-                          frame_id=protocol.move_id(robot, cmd.request))
+                          frame_id=moves.move_id(robot, cmd.request))
 
 
 #: the most points a trajectory may have: 100 s at the planners' 100 Hz

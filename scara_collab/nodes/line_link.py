@@ -109,14 +109,13 @@ class LineLink:
         for h in self.sim.conveyor.line.pop_handoffs():
             self.handed_on.add(h)
         msg = proto.LineHandoff(self.cell, round(frontier, 9), self.handed_on.handed,
-                                [h.as_list() for h in self.handed_on.message(frontier)],
-                                [b.as_list() for b in self.sim.conveyor.line.on_belt()])
+                                tuple(self.handed_on.message(frontier)),
+                                tuple(self.sim.conveyor.line.on_belt()))
         self._pub.publish(msg.to_msg())
 
-    def _parse(self, msg: DiagnosticStatus):
+    def _parse(self, msg: DiagnosticStatus) -> Optional[proto.LineHandoff]:
         try:
-            m = proto.LineHandoff.from_msg(msg)
-            return m, m.handoffs(), m.on_belt()
+            return proto.LineHandoff.from_msg(msg)
         except proto.ProtocolError as exc:
             self.node.get_logger().warning(f'line: dropped a malformed handoff message: {exc}')
             return None
@@ -136,28 +135,26 @@ class LineLink:
         self._on_news()
 
     def _on_upstream(self, msg: DiagnosticStatus) -> None:
-        parsed = self._parse(msg)
-        if parsed is None:
+        m = self._parse(msg)
+        if m is None:
             return
-        m, handoffs, _ = parsed
         self._heard = time.monotonic()
         if self.dead_upstream is not None:
             # it speaks again: what it hands on that is new still comes (by id, once)
-            self._take(m.frontier, handoffs, None, f'cell {m.cell}')
+            self._take(m.frontier, m.handoffs, None, f'cell {m.cell}')
             return
         self._last = m
         self.bypass.prune(m.frontier)
-        self._take(m.frontier, handoffs, m.handed, f'cell {m.cell}')
+        self._take(m.frontier, m.handoffs, m.handed, f'cell {m.cell}')
 
     def _on_upstream2(self, msg: DiagnosticStatus) -> None:
-        parsed = self._parse(msg)
-        if parsed is None:
+        m = self._parse(msg)
+        if m is None:
             return
-        m, handoffs, _ = parsed
         if self.dead_upstream is None:
-            self.bypass.hear(handoffs)
+            self.bypass.hear(m.handoffs)
             return
-        frontier, through = self.bypass.relay(m.frontier, handoffs)
+        frontier, through = self.bypass.relay(m.frontier, m.handoffs)
         self._take(frontier, through, None, f'cell {m.cell} through the dead section')
 
     def _watch(self) -> None:
@@ -172,7 +169,7 @@ class LineLink:
         frontier = last.frontier if last is not None else self.inbox.frontier
         self.dead_upstream = (f'cell {self.cell - 1} silent for {silent:.1f} s at its sim '
                               f't={frontier:.2f} s')
-        belt = last.on_belt() if last is not None else []
+        belt = last.belt if last is not None else ()
         through = self.bypass.takeover(frontier, belt)
         self._dead_since = time.monotonic()
         self.node.get_logger().error(

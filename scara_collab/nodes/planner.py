@@ -13,6 +13,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
+from scara_collab.core import moves
 from scara_collab.core.arm_planner import (ArmPlanner, planner_parameters, PlannerCommand,
                                            PlannerSettings, SendMove, Status, TIMES)
 from scara_collab.core.config import load_config
@@ -85,12 +86,12 @@ class Planner(Node):
 
     def _on_target(self, msg: PointStamped) -> None:
         xyz, stamp, frame, error = conv.target_of(msg, self.arm.name)  # refused with a reason
-        self._send(self.planner.on_target(proto.stamp_ns(msg.header.stamp), stamp, xyz, frame,
+        self._send(self.planner.on_target(conv.request_id(msg.header.stamp), stamp, xyz, frame,
                                           error))
 
     def _on_offer(self, msg: JointTrajectory) -> None:
         arrays, error = conv.offer_of(msg, self.arm.joint_names)  # refused with the reason
-        self._send(self.planner.on_offer(proto.stamp_ns(msg.header.stamp), *arrays,
+        self._send(self.planner.on_offer(conv.request_id(msg.header.stamp), *arrays,
                                          error=error))
 
     def _on_other(self, msg: JointTrajectory) -> None:
@@ -103,7 +104,7 @@ class Planner(Node):
 
     def _on_own_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
-        if (request := proto.request_of(self.arm.name, st.move)) is not None:  # not a hold
+        if (request := moves.request_of(self.arm.name, st.move)) is not None:  # not a hold
             self._send(self.planner.on_own_execution(st.state, request, st.start, st.stamp))
 
 

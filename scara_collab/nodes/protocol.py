@@ -1,8 +1,8 @@
 """The job protocol: every status the nodes exchange, typed, in one module.
 
 Each status is a frozen dataclass with ``to_msg()`` and ``from_msg()`` on the standard
-``diagnostic_msgs/DiagnosticStatus`` (``name``, ``level``, a readable ``message`` and one
-key-value per field). No other module formats or parses these key-values: a node builds the
+``diagnostic_msgs/DiagnosticStatus`` (``name``, ``level``, a readable ``message`` and the
+fields as key-values). No other module formats or parses these key-values: a node builds the
 dataclass and publishes ``to_msg()``; a subscriber calls ``from_msg()`` and reads typed fields
 (a malformed message raises :class:`ProtocolError`, which the subscriber logs and drops).
 
@@ -16,15 +16,22 @@ topic                             type                publisher
 ``/replication_manager/status``   :class:`MirrorStatus`    replication manager
 ``/collision_monitor/status``     :class:`MonitorStatus`   collision monitor
 ``/collision_monitor/stops``      :class:`StopEvent`       collision monitor
+``line/handoff``                  :class:`LineHandoff`     bridge (a cell of a line)
 ================================  ==================  =======================================
 
-**Move identity.** A move is named by the request that asked for it: its id is
-``<robot>/<request>`` where ``request`` is the target's ``header.stamp`` in integer
-nanoseconds (the requested start time; a requester that needs to follow its moves, like the
-automation manager, sends each request with its own stamp). A target stamped zero ("start
-now") gets the planner's receipt time instead. The planner puts the id in the
-``header.frame_id`` of the ``JointTrajectory`` it publishes, the bridge reports on that id, so
-a status always says which move it is about, from the request to the end of the motion.
+**Encoding.** Each status class states how each of its fields travels, in its table
+``FIELDS`` (field name -> :class:`Codec`): one key-value per field, keyed by the field's name,
+except a table (:data:`COUNTS`, :data:`NAMES`: one key-value per entry, ``counts.sorted``) and
+records named by an id (:data:`HANDOFFS`, :data:`ON_BELT`: one key-value per value of each,
+``handoffs.1000012.time``). The values: text as it is; integers in decimal;
+floats as ``repr`` (they come back exactly; NaN is refused, ``inf`` is a float); ``true`` /
+``false``; an absent optional value as the empty string. A field with a default may be left
+out of a message; a field without one may not.
+
+**Moves** are named by the request that asked for them, ``<robot>/<request ns>``
+(:mod:`scara_collab.core.moves`): the planner puts the id in the ``header.frame_id`` of the
+``JointTrajectory`` it publishes, the bridge reports on that id, so a status always says which
+move it is about, from the request to the end of the motion.
 
 **A move's request.** A point (``/<robot>/target``, ``geometry_msgs/PointStamped``, frame
 ``world`` or ``<robot>_base``; ``/collab/target`` for a mirrored pair), or a plan of the move
@@ -34,15 +41,16 @@ point). The sorting job sends its own plan, so the planner schedules it without 
 again (:mod:`scara_collab.nodes.planner`). Either way ``header.stamp`` is the request.
 """
 from dataclasses import dataclass, field, fields, KW_ONLY, MISSING
-import functools
-import json
 import math
 import numbers
-from typing import ClassVar, Dict, get_type_hints, Optional, Tuple
+from typing import Callable, ClassVar, Dict, List, Mapping, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
-from scara_collab.core import line, sorting
+from scara_collab.core import sorting
+from scara_collab.core.line import Handoff, OnBelt
+from scara_collab.core.move_time import lateness
+from scara_collab.core.moves import EXECUTION_STATES, move_id, PLANNER_STATES
 
 LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
@@ -52,127 +60,190 @@ class ProtocolError(ValueError):
     """A status message does not follow the protocol; the text says why."""
 
 
-def stamp_ns(stamp) -> int:
-    """``builtin_interfaces/Time`` -> integer nanoseconds (a move request's identity)."""
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+#: what :meth:`Codec.decode` returns for a field the message has no key-value of
+ABSENT = object()
 
 
-def move_id(robot: str, request: int) -> str:
-    """Return the id of the move ``robot`` makes for ``request`` (ns): ``'<robot>/<request>'``.
+# --- how a field travels ---------------------------------------------------------------------
+class Codec:
+    """How one field of a status travels as key-values, and how it is read back.
 
-    >>> move_id('scara_left', 1500000000)
-    'scara_left/1500000000'
+    :param kind: what the value is, in words (for the errors).
+    :param write: value -> text; raises ``ValueError`` or ``TypeError`` on a value of the
+        wrong kind.
+    :param read: text -> value; raises ``ValueError`` on a text that is not one.
+
+    >>> INT.encode('request', 15)
+    [('request', '15')]
+    >>> INT.decode('request', {'request': '15'}), INT.decode('delay', {'request': '15'}) is ABSENT
+    (15, True)
     """
-    return f'{robot}/{int(request)}'
+
+    def __init__(self, kind: str, write: Callable[[object], str], read: Callable[[str], object]):
+        """Keep the two conversions."""
+        self.kind, self.write, self.read = kind, write, read
+
+    def encode(self, key: str, value) -> List[Tuple[str, str]]:
+        """Return the key-values of field ``key`` holding ``value``."""
+        return [(key, self.write(value))]
+
+    def decode(self, key: str, values: Mapping[str, str]):
+        """Return field ``key`` read from a message's key-values, :data:`ABSENT` if it has none.
+
+        :raises ProtocolError: a value that is not of the field's kind, naming the key.
+        """
+        if key not in values:
+            return ABSENT
+        return self.parse(key, values[key])
+
+    def parse(self, key: str, text: str):
+        """Return the value ``text`` stands for (the value of ``key``).
+
+        :raises ProtocolError: it stands for none, naming the key.
+        """
+        try:
+            return self.read(text)
+        except (ValueError, TypeError) as exc:
+            raise ProtocolError(f'{key}={text!r} is not {self.kind} ({exc})') from None
 
 
-def hold_id(robot: str) -> str:
-    """Return the id of the hold a planner sends to keep ``robot`` where it is.
+class OrNone(Codec):
+    """A value of ``codec``'s kind or None (the empty string)."""
 
-    >>> hold_id('scara_right')
-    'scara_right/hold'
+    def __init__(self, codec: Codec):
+        """Wrap ``codec``."""
+        super().__init__(f'{codec.kind} or empty', lambda v: '' if v is None else codec.write(v),
+                         lambda t: None if t == '' else codec.read(t))
+
+
+class Table(Codec):
+    """A dict of ``codec``'s values: one key-value per entry, keyed ``<field>.<entry>``.
+
+    >>> COUNTS.encode('counts', {'sorted': 3, 'missed': 0})
+    [('counts.sorted', '3'), ('counts.missed', '0')]
+    >>> COUNTS.decode('counts', {'counts.sorted': '3', 'time': '1.0'})
+    {'sorted': 3}
     """
-    return f'{robot}/hold'
+
+    def __init__(self, codec: Codec):
+        """Wrap ``codec`` (the entries' kind)."""
+        super().__init__(f'a table of {codec.kind}', codec.write, codec.read)
+
+    def encode(self, key: str, value) -> List[Tuple[str, str]]:
+        """Return one key-value per entry of ``value`` (none for an empty dict)."""
+        return [(f'{key}.{entry}', self.write(v)) for entry, v in dict(value).items()]
+
+    def decode(self, key: str, values: Mapping[str, str]):
+        """Return the entries keyed ``<key>.<entry>``, in message order (:data:`ABSENT`: none)."""
+        prefix = key + '.'
+        out = {k[len(prefix):]: self.parse(k, text) for k, text in values.items()
+               if k.startswith(prefix)}
+        return out or ABSENT
 
 
-def planners_move(robot: str, move: str) -> bool:
-    """Return True if ``move`` is one of ``robot``'s planner's (a move of a request, its hold).
+class Records(Codec):
+    """A tuple of records named by an integer id: one key-value per value, ``<field>.<id>.<name>``.
 
-    >>> planners_move('scara_left', 'scara_left/15'), planners_move('scara_left', 'raw/1')
-    (True, False)
-    >>> planners_move('scara_left', 'scara_left/hold'), planners_move('scara_left', '')
-    (True, False)
+    :param record: the record class, built as ``record(id, **values)``.
+    :param ident: the name of the record's id (an ``int``, its first field).
+    :param codecs: each value's codec, by name, in the record's order after the id.
+
+    >>> codec = Records(Handoff, 'item', cls=TEXT, y=FLOAT, time=FLOAT)
+    >>> pairs = codec.encode('handoffs', (Handoff(7, 'red', 0.1, 2.5),))
+    >>> pairs
+    [('handoffs.7.cls', 'red'), ('handoffs.7.y', '0.1'), ('handoffs.7.time', '2.5')]
+    >>> codec.decode('handoffs', dict(pairs))
+    (Handoff(item=7, cls='red', y=0.1, time=2.5),)
     """
-    if move == hold_id(robot):
-        return True
-    try:
-        return parse_move_id(move)[0] == robot
-    except ProtocolError:
-        return False
+
+    def __init__(self, record: type, ident: str, **codecs: Codec):
+        """Keep the record class, the name of its id and its values' codecs."""
+        super().__init__(f'{record.__name__} records', str, str)
+        self.record, self.ident, self.codecs = record, ident, codecs
+
+    def encode(self, key: str, value) -> List[Tuple[str, str]]:
+        """Return the key-values of every record of ``value`` (none for an empty tuple)."""
+        return [(f'{key}.{_write_int(getattr(r, self.ident))}.{name}',
+                 codec.write(getattr(r, name)))
+                for r in value for name, codec in self.codecs.items()]
+
+    def decode(self, key: str, values: Mapping[str, str]):
+        """Return the records keyed ``<key>.<id>.<name>``, in message order (:data:`ABSENT`: none).
+
+        :raises ProtocolError: an id that is not an integer, a value of the wrong kind, a
+            record without one of its values.
+        """
+        prefix = key + '.'
+        found: Dict[int, Dict[str, object]] = {}
+        for k, text in values.items():
+            if not k.startswith(prefix):
+                continue
+            ident, _, name = k[len(prefix):].partition('.')
+            if name in self.codecs:
+                found.setdefault(INT.parse(k, ident), {})[name] = self.codecs[name].parse(k, text)
+        for ident, got in found.items():
+            if len(got) < len(self.codecs):
+                missing = [n for n in self.codecs if n not in got]
+                raise ProtocolError(f'{key}.{ident}: no {missing}')
+        return tuple(self.record(ident, **got) for ident, got in found.items()) or ABSENT
 
 
-def parse_move_id(move: str) -> Tuple[str, int]:
-    """Inverse of :func:`move_id`: ``'scara_left/15'`` -> ``('scara_left', 15)``.
-
-    :raises ProtocolError: if ``move`` is not ``<robot>/<integer>``.
-    """
-    robot, _, request = move.rpartition('/')
-    try:
-        return robot, int(request)
-    except ValueError:
-        raise ProtocolError(f'move id {move!r} is not <robot>/<request ns>') from None
+def _write_int(v) -> str:
+    if isinstance(v, bool) or not isinstance(v, numbers.Integral):
+        raise TypeError(f'{v!r} is not an integer')
+    return str(int(v))
 
 
-def request_of(robot: str, move: str) -> Optional[int]:
-    """Return the request of ``robot``'s planned move ``move``, or None for any other move.
-
-    >>> request_of('scara_left', 'scara_left/15'), request_of('scara_left', 'scara_left/hold')
-    (15, None)
-    >>> request_of('scara_left', 'scara_right/15') is None
-    True
-    """
-    try:
-        _, request = parse_move_id(move)
-    except ProtocolError:
-        return None  # a planner's hold, a raw command
-    return request if move_id(robot, request) == move else None
+def _write_float(v) -> str:
+    if isinstance(v, bool) or not isinstance(v, numbers.Real):
+        raise TypeError(f'{v!r} is not a number')
+    return repr(float(v))  # round-trips exactly (numpy floats too)
 
 
-def _encode(value) -> str:
-    if value is None:
-        return ''
-    if isinstance(value, bool):
-        return 'true' if value else 'false'
-    if isinstance(value, numbers.Integral):
-        return str(int(value))
-    if isinstance(value, numbers.Real):
-        return repr(float(value))  # round-trips exactly (numpy floats too)
-    if isinstance(value, (dict, list, tuple)):
-        return json.dumps(value, separators=(',', ':'))
-    return str(value)
+def _read_float(text: str) -> float:
+    v = float(text)
+    if math.isnan(v):
+        raise ValueError('NaN')
+    return v
 
 
-def _decode(text: str, kind, key: str):
-    optional = getattr(kind, '__args__', None)
-    if optional is not None and type(None) in optional:  # Optional[X]
-        if text == '':
-            return None
-        kind = next(k for k in optional if k is not type(None))
-    origin = getattr(kind, '__origin__', kind)
-    try:
-        if origin is bool:
-            if text not in ('true', 'false'):
-                raise ValueError(text)
-            return text == 'true'
-        if origin is int:
-            return int(text)
-        if origin is float:
-            v = float(text)
-            if math.isnan(v):
-                raise ValueError('NaN')
-            return v
-        if origin in (dict, list, tuple):
-            v = json.loads(text)
-            return tuple(v) if origin is tuple else v
-        return text
-    except (ValueError, TypeError, json.JSONDecodeError) as exc:
-        raise ProtocolError(f'{key}={text!r} is not a valid {getattr(kind, "__name__", kind)}'
-                            f' ({exc})') from None
+def _read_bool(text: str) -> bool:
+    if text not in ('true', 'false'):
+        raise ValueError('neither true nor false')
+    return text == 'true'
 
 
-@functools.lru_cache(maxsize=None)
-def _hints(cls) -> Dict[str, object]:
-    """Return the field types of a status class (resolved once: it is on every message's path)."""
-    return get_type_hints(cls)
+#: text as it is
+TEXT = Codec('a text', str, str)
+#: an integer, in decimal
+INT = Codec('an integer', _write_int, int)
+#: a float as ``repr`` (exact); NaN refused
+FLOAT = Codec('a number', _write_float, _read_float)
+#: ``true`` or ``false``
+BOOL = Codec('true or false', lambda v: 'true' if v else 'false', _read_bool)
+#: a float or None (the empty string)
+OPTIONAL_FLOAT = OrNone(FLOAT)
+#: a dict of integers (counts by name)
+COUNTS = Table(INT)
+#: a dict of texts (a name by name)
+NAMES = Table(TEXT)
+#: a line's handoffs (:class:`~scara_collab.core.line.Handoff`): ``handoffs.<item>.cls``,
+#: ``.y``, ``.time``
+HANDOFFS = Records(Handoff, 'item', cls=TEXT, y=FLOAT, time=FLOAT)
+#: the items on a section's belt (:class:`~scara_collab.core.line.OnBelt`):
+#: ``belt.<item>.cls``, ``.x``, ``.y``
+ON_BELT = Records(OnBelt, 'item', cls=TEXT, x=FLOAT, y=FLOAT)
 
 
 class _Status:
-    """Fields <-> ``DiagnosticStatus`` key-values (one per field, typed by the annotations)."""
+    """Fields <-> ``DiagnosticStatus`` key-values, each field as its class's ``FIELDS`` says."""
 
     #: the ``DiagnosticStatus.name`` suffix or fixed name of this status
     KIND: ClassVar[str] = ''
     #: ``(field, allowed values)`` checked on construction, or None
     CHOICES: ClassVar[Optional[Tuple[str, tuple]]] = None
+    #: how each field travels (every field of the dataclass, by name)
+    FIELDS: ClassVar[Dict[str, Codec]] = {}
 
     def __post_init__(self):
         if self.CHOICES is not None:
@@ -193,11 +264,14 @@ class _Status:
         return self.KIND
 
     def to_msg(self) -> DiagnosticStatus:
-        """Return the status as a ``DiagnosticStatus``."""
+        """Return the status as a ``DiagnosticStatus``.
+
+        :raises TypeError: a field holding a value of the wrong kind (a float count).
+        """
         msg = DiagnosticStatus(level=LEVELS[self.level()], name=self.name(),
                                message=self.text())
-        msg.values = [KeyValue(key=f.name, value=_encode(getattr(self, f.name)))
-                      for f in fields(self)]
+        msg.values = [KeyValue(key=k, value=v) for f in fields(self)
+                      for k, v in self.FIELDS[f.name].encode(f.name, getattr(self, f.name))]
         return msg
 
     @classmethod
@@ -207,22 +281,21 @@ class _Status:
         :raises ProtocolError: a missing or malformed field.
         """
         values = {kv.key: kv.value for kv in msg.values}
-        hints = _hints(cls)
         kwargs = {}
         for f in fields(cls):
-            if f.name not in values:
-                if f.default is not MISSING or f.default_factory is not MISSING:
-                    continue  # an optional field
+            value = cls.FIELDS[f.name].decode(f.name, values)
+            if value is not ABSENT:
+                kwargs[f.name] = value
+            elif f.default is MISSING and f.default_factory is MISSING:
                 raise ProtocolError(f'{cls.__name__}: no {f.name!r} in {sorted(values)}')
-            kwargs[f.name] = _decode(values[f.name], hints[f.name], f.name)
         try:
             return cls(**kwargs)
         except (TypeError, ValueError) as exc:
             raise ProtocolError(f'{cls.__name__}: {exc}') from None
 
-    def values(self) -> Dict[str, object]:
-        """Return the fields as a plain dict (for JSON summaries)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+_MOVE_FIELDS = {'robot': TEXT, 'state': TEXT, 'move': TEXT, 'reason': TEXT,
+                'start': OPTIONAL_FLOAT, 'end': OPTIONAL_FLOAT}
 
 
 @dataclass(frozen=True)
@@ -243,9 +316,6 @@ class _MoveStatus(_Status):
 
 
 # --- planner ---------------------------------------------------------------------------------
-PLANNER_STATES = ('planned', 'queued', 'waiting', 'refused', 'superseded')
-
-
 @dataclass(frozen=True)
 class PlannerStatus(_MoveStatus):
     """What a planner did with one request (``/<robot>/planner_status``).
@@ -263,6 +333,7 @@ class PlannerStatus(_MoveStatus):
 
     KIND: ClassVar[str] = 'planner'
     CHOICES: ClassVar[Tuple[str, tuple]] = ('state', PLANNER_STATES)
+    FIELDS: ClassVar[Dict[str, Codec]] = dict(_MOVE_FIELDS, request=INT, delay=FLOAT, kind=TEXT)
 
     @classmethod
     def of(cls, robot: str, status) -> 'PlannerStatus':
@@ -297,9 +368,6 @@ class PlannerStatus(_MoveStatus):
 
 
 # --- bridge ----------------------------------------------------------------------------------
-EXECUTION_STATES = ('accepted', 'refused', 'finished', 'preempted', 'held', 'cleared')
-
-
 @dataclass(frozen=True)
 class ExecutionStatus(_MoveStatus):
     """What the bridge does with one trajectory (``/<robot>/execution_status``).
@@ -318,6 +386,8 @@ class ExecutionStatus(_MoveStatus):
 
     KIND: ClassVar[str] = 'execution'
     CHOICES: ClassVar[Tuple[str, tuple]] = ('state', EXECUTION_STATES)
+    FIELDS: ClassVar[Dict[str, Codec]] = dict(_MOVE_FIELDS, time=FLOAT, stamp=OPTIONAL_FLOAT,
+                                              by=TEXT)
 
     def name(self) -> str:
         """Return ``'<robot>/execution'``."""
@@ -336,10 +406,13 @@ class ExecutionStatus(_MoveStatus):
 
     @property
     def late(self) -> float:
-        """Seconds the bridge started after the requested stamp (0 if on time or unstamped)."""
-        if self.state != 'accepted' or not self.stamp or self.start is None:
+        """Seconds the bridge started after the requested stamp (0 if on time or unstamped).
+
+        The start rule's measure (:func:`scara_collab.core.move_time.lateness`).
+        """
+        if self.state != 'accepted' or self.start is None:
             return 0.0
-        return max(0.0, self.start - self.stamp)
+        return lateness(self.stamp, self.start)
 
 
 # --- items -----------------------------------------------------------------------------------
@@ -362,6 +435,8 @@ class ItemEvent(_Status):
     cause: str = ''
 
     CHOICES: ClassVar[Tuple[str, tuple]] = ('kind', ITEM_EVENTS)
+    FIELDS: ClassVar[Dict[str, Codec]] = {'kind': TEXT, 'item': INT, 'cls': TEXT, 'time': FLOAT,
+                                          'robot': TEXT, 'cause': TEXT}
 
     def name(self) -> str:
         """Return the event's kind (``'sorted'``, ``'missed'``, ...)."""
@@ -400,6 +475,10 @@ class JobStats(_Status):
     last_give_up: str = ''
 
     KIND: ClassVar[str] = 'automation_manager'
+    FIELDS: ClassVar[Dict[str, Codec]] = {
+        'mode': TEXT, 'running': BOOL, 'time': FLOAT, 'start_time': OPTIONAL_FLOAT,
+        'counts': COUNTS, 'sorted_by': COUNTS, 'items_per_minute': FLOAT, 'give_ups': INT,
+        'retries': INT, 'phases': NAMES, 'last_give_up': TEXT}
 
     def text(self) -> str:
         """Return the sorted, missed and dropped counts, the rate and the give-ups."""
@@ -429,6 +508,10 @@ class MirrorStatus(_Status):
     last_reason: str = ''
 
     KIND: ClassVar[str] = 'replication_manager'
+    FIELDS: ClassVar[Dict[str, Codec]] = {
+        'enabled': BOOL, 'time': FLOAT, 'error': OPTIONAL_FLOAT, 'error_max': OPTIONAL_FLOAT,
+        'error_max_time': OPTIONAL_FLOAT, 'in_step_moves': INT, 'not_in_step': INT,
+        'last_reason': TEXT}
 
     def text(self) -> str:
         """Return whether mirroring is on, the in-step error maximum and the step counts."""
@@ -458,6 +541,10 @@ class MonitorStatus(_Status):
     emergency: int = 0      # emergency stops so far
 
     KIND: ClassVar[str] = 'collision_monitor'
+    FIELDS: ClassVar[Dict[str, Codec]] = {
+        'time': FLOAT, 'distance': OPTIONAL_FLOAT, 'minimum': OPTIONAL_FLOAT,
+        'minimum_time': OPTIONAL_FLOAT, 'margin': FLOAT, 'stopped': BOOL, 'reason': TEXT,
+        'kind': TEXT, 'protective': INT, 'emergency': INT}
 
     def level(self) -> str:
         """Return ``'ERROR'`` under an emergency stop, ``'WARN'`` under a protective one."""
@@ -496,6 +583,8 @@ class StopEvent(_Status):
 
     KIND: ClassVar[str] = 'collision_monitor/stop'
     CHOICES: ClassVar[Tuple[str, tuple]] = ('kind', STOP_KINDS)
+    FIELDS: ClassVar[Dict[str, Codec]] = {'kind': TEXT, 'state': TEXT, 'time': FLOAT,
+                                          'cause': TEXT, 'since': OPTIONAL_FLOAT}
 
     def level(self) -> str:
         """Return ``'ERROR'`` for an emergency stop's begin, ``'WARN'`` for a protective one."""
@@ -528,6 +617,8 @@ class SimStatus(_Status):
     absent: str = ''
 
     KIND: ClassVar[str] = 'pybullet_bridge'
+    FIELDS: ClassVar[Dict[str, Codec]] = {'time': FLOAT, 'paused': BOOL, 'estop': BOOL,
+                                          'moving': INT, 'items': INT, 'absent': TEXT}
 
     def level(self) -> str:
         """Return ``'ERROR'`` under the e-stop or a missing guard, ``'WARN'`` paused, else OK."""
@@ -552,49 +643,45 @@ class LineHandoff(_Status):
 
     ``cell``: the sender's index along the line; ``frontier``: the sim time up to which every
     item it hands on is in this message or an earlier one; ``handed``: items handed on up to
-    the frontier, all told; ``items``: the handoffs of the last seconds before the frontier,
-    each ``[id, class, y, crossing time]`` (repeated from message to message, so a lost
-    message is made up for); ``belt``: the items resting on the sender's belt at the
-    frontier, each ``[id, class, x, y]`` (what its section still carries should it die;
-    :mod:`scara_collab.core.line`).
+    the frontier, all told; ``handoffs``: the handoffs of the last seconds before the frontier
+    (repeated from message to message, so a lost message is made up for); ``belt``: the items
+    resting on the sender's belt at the frontier (what its section still carries should it
+    die; :mod:`scara_collab.core.line`). The records travel as :data:`HANDOFFS` and
+    :data:`ON_BELT` say: one key-value per value, ``handoffs.<item>.time`` and the like.
     """
 
     cell: int
     frontier: float
     handed: int
-    items: list
-    belt: list = field(default_factory=list)
+    handoffs: Tuple[Handoff, ...] = ()
+    belt: Tuple[OnBelt, ...] = ()
 
     KIND: ClassVar[str] = 'line_handoff'
+    FIELDS: ClassVar[Dict[str, Codec]] = {'cell': INT, 'frontier': FLOAT, 'handed': INT,
+                                          'handoffs': HANDOFFS, 'belt': ON_BELT}
 
     def __post_init__(self):  # noqa: D105 (the checks the message's fields must pass)
         if not math.isfinite(self.frontier):
             raise ValueError(f'frontier must be a finite sim time, got {self.frontier!r}')
-        lists = isinstance(self.items, list) and isinstance(self.belt, list)
-        if self.handed < 0 or not lists:
-            raise ValueError(f'handed {self.handed!r} < 0, or items or belt not a list')
-
-    def handoffs(self) -> list:
-        """Return ``items`` as :class:`~scara_collab.core.line.Handoff` records.
-
-        :raises ProtocolError: an item that is not ``[id, class, y, time]``.
-        """
-        return self._read(line.Handoff, self.items)
-
-    def on_belt(self) -> list:
-        """Return ``belt`` as :class:`~scara_collab.core.line.OnBelt` records.
-
-        :raises ProtocolError: an item that is not ``[id, class, x, y]``.
-        """
-        return self._read(line.OnBelt, self.belt)
-
-    def _read(self, record, values: list) -> list:
-        try:
-            return [record.from_list(v) for v in values]
-        except ValueError as exc:
-            raise ProtocolError(f'LineHandoff from cell {self.cell}: {exc}') from None
+        if self.cell < 0 or self.handed < 0:
+            raise ValueError(f'cell {self.cell!r} or handed {self.handed!r} < 0')
+        for h in self.handoffs:
+            _check_item('handoff', h.item, h.cls, y=h.y, time=h.time)
+        for b in self.belt:
+            _check_item('item on the belt', b.item, b.cls, x=b.x, y=b.y)
 
     def text(self) -> str:
         """Return the frontier and the count."""
         return (f'cell {self.cell} at sim t={self.frontier:.3f} s, {self.handed} handed on, '
-                f'{len(self.items)} in this message')
+                f'{len(self.handoffs)} in this message')
+
+
+def _check_item(what: str, item: int, cls: str, **numbers: float) -> None:
+    """Refuse an item of a line message with a negative id, no class or a non-finite number."""
+    if item < 0:
+        raise ValueError(f'a {what} id must be >= 0, got {item!r}')
+    if not cls:
+        raise ValueError(f'{what} {item}: cls must name a class, got {cls!r}')
+    for key, v in numbers.items():
+        if not math.isfinite(v):
+            raise ValueError(f'{what} {item}: {key} must be a finite number, got {v!r}')

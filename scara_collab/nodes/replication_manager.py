@@ -34,6 +34,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory
 
+from scara_collab.core import moves
 from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import base_to_world, fk
 from scara_collab.core.mirror import is_joint_mirror, mirror_error, mirror_joints, mirror_point
@@ -128,7 +129,7 @@ class ReplicationManager(Node):
         if conv.target_frame(frame_id, lead.name) == 'base':
             xyz = base_to_world(lead, xyz)
         stamp = msg.header.stamp
-        if proto.stamp_ns(stamp) == 0:  # "now": one common start for both arms
+        if conv.request_id(stamp) == 0:  # "now": one common start for both arms
             stamp = conv.to_time(conv.now(self) + self.lead)
         out = conv.make_point_stamped(xyz, 'world')
         out.header.stamp = stamp  # passed through exactly: it is the move's id
@@ -143,7 +144,7 @@ class ReplicationManager(Node):
         """Pass the leader's plan on; offer the follower its mirror image (or the end point)."""
         lead, foll = self.cell.leader, self.cell.follower
         _, t, q, qd, qdd = conv.trajectory_arrays(msg, lead.joint_names)
-        if proto.stamp_ns(msg.header.stamp) == 0:  # "now": one common start for both arms
+        if conv.request_id(msg.header.stamp) == 0:  # "now": one common start for both arms
             msg.header.stamp = conv.to_time(conv.now(self) + self.lead)
         self.offer_pubs[0].publish(msg)
         if not self.enabled:
@@ -171,7 +172,7 @@ class ReplicationManager(Node):
         if not st.move:  # a trajectory without a request: not a replicated move
             self.in_step = None
             return
-        robot, request = proto.parse_move_id(st.move)
+        robot, request = moves.parse_move_id(st.move)
         pair = self.accepted.setdefault(request, {})
         pair[robot] = (st.start, st.end)
         while len(self.accepted) > 32:
