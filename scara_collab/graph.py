@@ -250,6 +250,9 @@ NODES: Tuple[NodeSpec, ...] = (
              _n('automation_manager:AutomationManager'), ('automation', 'controllers'),
              Readiness('service', 'automation_manager/start', 'std_srvs/srv/Trigger'),
              lockstep=True),
+    NodeSpec('separation_monitor', _n('separation_monitor:main'),
+             _n('separation_monitor:SeparationMonitorNode'), ('people',),
+             Readiness('subscribed', 'safety_scanner/scan'), optional=True, lockstep=True),
     NodeSpec('cell_viewer', _n('cell_viewer:main'), _n('cell_viewer:CellViewer'), (),
              Readiness('page', 'joint_states'), optional=True),
     NodeSpec('state_publisher', _n('state_publisher:main'),
@@ -322,6 +325,11 @@ TOPICS: Tuple[Topic, ...] = (
     Topic('protective_stop', 'std_msgs/msg/Bool', 'latched'),      # collision_monitor
     Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),   # bridge, monitor, managers
     Topic('robot_description', 'std_msgs/msg/String', 'latched'),  # state_publisher
+    Topic('safety_scanner/scan', 'sensor_msgs/msg/LaserScan'),     # bridge, with a person
+    Topic('person/poses', 'geometry_msgs/msg/PoseArray'),          # ... ground truth,
+    Topic('person/markers', 'visualization_msgs/msg/MarkerArray'),  # for records and views
+    Topic('person/truth', _STATUS),                                # ... against each arm
+    Topic('separation_monitor/status', _STATUS),                   # separation_monitor
     Topic('/rosout', 'rcl_interfaces/msg/Log', 'events'),  # rcl's (records.bag.ROSOUT_QOS)
 )
 #: the topics of each robot, ``{robot}`` standing for its namespace
@@ -332,6 +340,8 @@ ROBOT_TOPICS: Tuple[Topic, ...] = (
     Topic('{robot}/planned_path', 'nav_msgs/msg/Path'),
     Topic('{robot}/planner_status', _STATUS, 'events'),
     Topic('{robot}/execution_status', _STATUS, 'events'),          # pybullet_bridge
+    Topic('{robot}/trajectory_clock', _STATUS, 'events'),          # ... while speeds scale
+    Topic('{robot}/speed_scaling', 'std_msgs/msg/Float64', 'latched'),  # separation_monitor
 )
 
 
@@ -383,14 +393,17 @@ def node(name: str) -> NodeSpec:
 
 
 def job_nodes(automation: bool = True, viewer: bool = False,
-              transforms: bool = False) -> List[NodeSpec]:
+              transforms: bool = False, people: bool = False) -> List[NodeSpec]:
     """Return the nodes a run starts, in launch order.
 
     :param automation: with the job (the automation manager).
     :param viewer: with the live 3D view (``cell_viewer``).
     :param transforms: with ``state_publisher`` (``/robot_description``, ``/tf``).
+    :param people: with the speed and separation monitor (a person in the cell:
+        ``separation_monitor``; the bridge simulates the person and the safety scanner).
     """
-    wanted = {'cell_viewer': viewer, 'state_publisher': transforms}
+    wanted = {'cell_viewer': viewer, 'state_publisher': transforms,
+              'separation_monitor': people}
     return [n for n in NODES if (automation or n.name != 'automation_manager')
             and (not n.optional or wanted.get(n.name, False))]
 

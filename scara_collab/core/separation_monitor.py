@@ -34,7 +34,7 @@ This is a simulation of a safety function, not a certified one.
 """
 from dataclasses import dataclass
 import math
-from typing import List, Mapping, Optional, Sequence, Tuple
+from typing import List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -94,6 +94,27 @@ class MonitorSettings:
             ssm=SsmParams.from_config(cfg), scan_period=1.0 / float(cfg['scanner']['rate']),
             teach_scans=int(mon['teach_scans']), min_points=int(mon['min_points']),
             **{k: float(mon[k]) for k in keys})
+
+
+class PersonSeen(NamedTuple):
+    """A tracked person as it travels in a status: the column's centre, radius and velocity.
+
+    :ivar id: the track's number; :ivar x, y: m (world); :ivar radius: m; :ivar vx, vy: m/s.
+    """
+
+    id: int
+    x: float
+    y: float
+    radius: float
+    vx: float
+    vy: float
+
+    @staticmethod
+    def of(person: Person) -> 'PersonSeen':
+        """Return ``person`` (:class:`~scara_collab.core.ssm.Person`) as a record."""
+        return PersonSeen(int(person.id), float(person.position[0]), float(person.position[1]),
+                          float(person.radius), float(person.velocity[0]),
+                          float(person.velocity[1]))
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,7 @@ from scara_collab.core import sorting
 from scara_collab.core.line import Handoff, OnBelt
 from scara_collab.core.move_time import lateness
 from scara_collab.core.moves import EXECUTION_STATES, move_id, PLANNER_STATES
+from scara_collab.core.separation_monitor import PersonSeen
 
 LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
           'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
@@ -473,12 +474,14 @@ class JobStats(_Status):
     retries: int = 0
     phases: Dict[str, str] = field(default_factory=dict)
     last_give_up: str = ''
+    #: missed items the job last left for a person in the cell (its note said so)
+    missed_due_to_person: int = 0
 
     KIND: ClassVar[str] = 'automation_manager'
     FIELDS: ClassVar[Dict[str, Codec]] = {
         'mode': TEXT, 'running': BOOL, 'time': FLOAT, 'start_time': OPTIONAL_FLOAT,
         'counts': COUNTS, 'sorted_by': COUNTS, 'items_per_minute': FLOAT, 'give_ups': INT,
-        'retries': INT, 'phases': NAMES, 'last_give_up': TEXT}
+        'retries': INT, 'phases': NAMES, 'last_give_up': TEXT, 'missed_due_to_person': INT}
 
     def text(self) -> str:
         """Return the sorted, missed and dropped counts, the rate and the give-ups."""
@@ -685,3 +688,132 @@ def _check_item(what: str, item: int, cls: str, **numbers: float) -> None:
     for key, v in numbers.items():
         if not math.isfinite(v):
             raise ValueError(f'{what} {item}: {key} must be a finite number, got {v!r}')
+
+
+# --- a person in the cell ----------------------------------------------------------------------
+#: a float per arm (or per joint), keyed by its name
+FLOATS = Table(FLOAT)
+#: a flag per arm, keyed by its name
+FLAGS = Table(BOOL)
+
+
+@dataclass(frozen=True)
+class TrajectoryClock(_Status):
+    """One arm's trajectory clock (``/<robot>/trajectory_clock``, the bridge).
+
+    Published at the state rate while the cell scales its arms' speeds (a cell with a safety
+    scanner), never otherwise. ``lag``: sim time minus the arm's trajectory time, s (what speed
+    scaling has cost it; the times of its moves, stamps included, are trajectory time);
+    ``scale``: the factor its trajectory runs at now; ``target``: the factor asked
+    (``/<robot>/speed_scaling``); ``planned``: its trajectory's velocity at the trajectory
+    time, as planned (unscaled), by joint name; ``held_back``: its path-keeping stop fell
+    behind braking, so the bridge brakes it.
+    """
+
+    robot: str
+    time: float
+    lag: float
+    scale: float
+    target: float
+    planned: Dict[str, float] = field(default_factory=dict)
+    held_back: bool = False
+
+    KIND: ClassVar[str] = 'trajectory_clock'
+    FIELDS: ClassVar[Dict[str, Codec]] = {
+        'robot': TEXT, 'time': FLOAT, 'lag': FLOAT, 'scale': FLOAT, 'target': FLOAT,
+        'planned': FLOATS, 'held_back': BOOL}
+
+    def name(self) -> str:
+        """Return ``'<robot>/trajectory_clock'``."""
+        return f'{self.robot}/trajectory_clock'
+
+    def level(self) -> str:
+        """Return ``'WARN'`` while the arm runs below full speed, else ``'OK'``."""
+        return 'WARN' if self.scale < 1.0 else 'OK'
+
+    def text(self) -> str:
+        """Return the factor and the lag."""
+        return f'{self.robot} at {self.scale:.2f} of its speed, {self.lag:.3f} s behind'
+
+
+#: a person as the separation monitor tracks one, from the scans: ``persons.<id>.x``, ...
+PERSONS = Records(PersonSeen, 'id', x=FLOAT, y=FLOAT, radius=FLOAT, vx=FLOAT, vy=FLOAT)
+
+
+@dataclass(frozen=True)
+class SeparationStatus(_Status):
+    """The separation monitor's decision (``/separation_monitor/status``, at every decision).
+
+    Per arm (keyed by its name): ``scale`` the speed factor given, ``stop`` a protective stop
+    (the separation is below the protective separation even at rest), ``cause`` why it is
+    below 1 (``''``: it is not), ``separation`` the smallest ``S`` to a person seen, m
+    (``inf``: none), ``margin`` the smallest ``S - S_p`` at the arm's planned speed, m.
+    ``persons``: the persons tracked from the scans; ``fault``: why every arm stops whatever
+    the persons (a silent scanner, unusable ranges, the empty cell not taught), ``''`` if none.
+    """
+
+    time: float
+    scale: Dict[str, float] = field(default_factory=dict)
+    stop: Dict[str, bool] = field(default_factory=dict)
+    cause: Dict[str, str] = field(default_factory=dict)
+    separation: Dict[str, float] = field(default_factory=dict)
+    margin: Dict[str, float] = field(default_factory=dict)
+    persons: Tuple[PersonSeen, ...] = ()
+    fault: str = ''
+
+    KIND: ClassVar[str] = 'separation_monitor'
+    FIELDS: ClassVar[Dict[str, Codec]] = {
+        'time': FLOAT, 'scale': FLOATS, 'stop': FLAGS, 'cause': NAMES, 'separation': FLOATS,
+        'margin': FLOATS, 'persons': PERSONS, 'fault': TEXT}
+
+    def level(self) -> str:
+        """Return ``'ERROR'`` for a fault, ``'WARN'`` for a stop or a slowed arm, else OK."""
+        if self.fault:
+            return 'ERROR'
+        return 'WARN' if any(self.stop.values()) or any(
+            s < 1.0 for s in self.scale.values()) else 'OK'
+
+    def text(self) -> str:
+        """Return the fault, or each arm's factor and what it is for."""
+        if self.fault:
+            return f'every arm stopped: {self.fault}'
+        return '; '.join(f'{r} {self.scale[r]:.2f}' + (' stop' if self.stop.get(r) else '')
+                         + (f' ({self.cause[r]})' if self.cause.get(r) else '')
+                         for r in self.scale) + f'; {len(self.persons)} person(s) seen'
+
+
+@dataclass(frozen=True)
+class PersonTruth(_Status):
+    """Where the simulated person really is, against each arm (``/person/truth``, the bridge).
+
+    For the record, the tests and viewers only: no decision reads it. Published at the state
+    rate while the cell has a person. Per arm (keyed by its name): ``separation`` the true
+    distance between the person's capsules and the arm's, m (``inf`` while the person is
+    away); ``margin`` that separation less the protective separation with the true person
+    (no intrusion distance, no sensor tolerance: :func:`scara_collab.core.ssm.true_margin`),
+    m; ``moving`` the arm moves; ``contact`` the person touches the arm now.
+    """
+
+    time: float
+    present: bool
+    separation: Dict[str, float] = field(default_factory=dict)
+    margin: Dict[str, float] = field(default_factory=dict)
+    moving: Dict[str, bool] = field(default_factory=dict)
+    contact: Dict[str, bool] = field(default_factory=dict)
+
+    KIND: ClassVar[str] = 'person_truth'
+    FIELDS: ClassVar[Dict[str, Codec]] = {
+        'time': FLOAT, 'present': BOOL, 'separation': FLOATS, 'margin': FLOATS,
+        'moving': FLAGS, 'contact': FLAGS}
+
+    def level(self) -> str:
+        """Return ``'ERROR'`` while the person touches a moving arm, else ``'OK'``."""
+        return 'ERROR' if any(self.contact.get(r) and self.moving.get(r)
+                              for r in self.contact) else 'OK'
+
+    def text(self) -> str:
+        """Return where the person is against each arm."""
+        if not self.present:
+            return 'no person in the cell'
+        return '; '.join(f'{r} {d:.3f} m (margin {self.margin.get(r, float("inf")):.3f} m)'
+                         for r, d in self.separation.items())
