@@ -230,8 +230,8 @@ def _n(module: str) -> str:
 
 NODES: Tuple[NodeSpec, ...] = (
     NodeSpec('pybullet_bridge', _n('pybullet_bridge:main'), _n('pybullet_bridge:PyBulletBridge'),
-             ('simulation', 'controllers'), Readiness('service', 'sim/resume',
-                                                      'std_srvs/srv/Trigger')),
+             ('simulation', 'controllers', 'people'),
+             Readiness('service', 'sim/resume', 'std_srvs/srv/Trigger')),
     NodeSpec('left_planner', _n('planner:main_left'), _n('planner:Planner'), ('controllers',),
              Readiness('subscribed', f'{ROBOTS[0]}/target'),
              {'robot': ROBOTS[0], 'node_name': 'left_planner'}, lockstep=True),

@@ -56,7 +56,7 @@ from scara_collab.core.motion import Heard, schedule_for_door
 from scara_collab.core.move_time import lateness, Leads, MoveTime
 from scara_collab.core.moves import PLANNER_STATES
 from scara_collab.core.planning import (MODES, offered_move, path_options, Plan, plan_path,
-                                        schedule, starts_at)
+                                        schedule, starts_at, Timeline)
 from scara_collab.core.trajectory import path_metrics, Trajectory
 
 #: the states of a request a planner reports (:data:`scara_collab.core.moves.PLANNER_STATES`)
@@ -321,6 +321,9 @@ class ArmPlanner:
         self.blocked: Optional[MoveRequest] = None      # waiting for the other arm to move
         self.other_motion = Heard(other_arm.name, dt=dt)  # the other arm's commitments
         self.out = PlannerOutput()  # the commands decided, and the last answer to each request
+        #: s: sim time minus this arm's trajectory time (the bridge's clock of it): the planner
+        #: decides in trajectory time, the times its stamps and statuses carry
+        self.lag = 0.0
 
     @property
     def settings(self) -> PlannerSettings:
@@ -332,7 +335,28 @@ class ArmPlanner:
         self._settings = settings
         self.time.leads = settings.leads
 
+    def _now(self) -> float:
+        """Return this arm's trajectory time now."""
+        return self.clock() - self.lag
+
+    def _other_view(self, now: float, before: Optional[float] = None) -> Timeline:
+        """Return the other arm's commitments from sim time ``now``, in this arm's time.
+
+        :param before: a start in this arm's time (the priority rule's, :meth:`Heard.motion`).
+        """
+        lag = self.lag
+        view = self.other_motion.motion(now, self.other_joints,
+                                        before=None if before is None else before + lag)
+        return view.shifted(-lag) if lag else view
+
     # --- observations -------------------------------------------------------------------------
+    def on_clock(self, own: Optional[float] = None, other: Optional[float] = None) -> None:
+        """Take the bridge's trajectory clocks: this arm's lag and the other arm's, s."""
+        if own is not None:
+            self.lag = float(own)
+        if other is not None:
+            self.other_motion.on_clock(other)
+
     def on_joint_state(self, joints: ArrayLike, other_joints: ArrayLike,
                        stamp: float) -> List[PlannerCommand]:
         """Take both arms' joints measured at ``stamp``; plan a queued move whose turn came."""
@@ -340,7 +364,8 @@ class ArmPlanner:
         self.other_joints = np.asarray(other_joints, dtype=float)
         self.joints_time = float(stamp)
         if self.queued is not None and (self.committed is None
-                                        or self.joints_time >= self.committed.plan.end):
+                                        or self.joints_time - self.lag
+                                        >= self.committed.plan.end):
             queued, self.queued = self.queued, None
             self._plan_and_schedule(queued)
         return self.out.take()
@@ -397,7 +422,7 @@ class ArmPlanner:
             blocked = self.blocked
             self._plan_and_schedule(blocked._replace(wanted=0.0), wanted=blocked.wanted)
         elif (not self.leader and self.committed is not None
-              and self.time.ahead(self.committed.plan.start, now)):
+              and self.time.ahead(self.committed.plan.start, now - self.lag)):
             self._make_way(now)
         return self.out.take()
 
@@ -460,7 +485,7 @@ class ArmPlanner:
                 self.out.report('superseded', held.request, f'replaced by request {request}')
         self.blocked = self.queued = None
         asked = MoveRequest(target, frame, stamp, offer, request)
-        if self.committed is not None and self.committed.plan.end > self.clock():
+        if self.committed is not None and self.committed.plan.end > self._now():
             # the bridge replaces a running trajectory: hold this one until ours has ended
             self.queued = asked
             self.out.report('queued', request, 'behind the running move (ends '
@@ -474,7 +499,7 @@ class ArmPlanner:
         :param wanted: when it was first wanted (a retried move); None: its start now.
         """
         s = self.settings
-        now = self.clock()
+        now = self._now()
         start = self.time.wanted(asked.wanted, now)
         wanted = start if wanted is None else wanted
         if (asked.offer is not None and s.mode == 'line_or_joint'
@@ -488,14 +513,16 @@ class ArmPlanner:
                 self.out.report('refused', asked.request, str(exc))
                 return
         now = self.clock()
-        start = self.time.sendable(start, now)  # planning took (sim) time too
+        start = self.time.sendable(start, now - self.lag)  # planning took (sim) time too
         # from now on (the past is past), by the priority rule at the start found, as the
-        # door applies it (a follower move waiting to start at or after it yields)
+        # door applies it (a follower move waiting to start at or after it yields); all in
+        # this arm's trajectory time
         heard = self.other_motion
+        waiting = heard.waiting_start
         plan = schedule_for_door(
             self.arm, traj, start, self.other_arm,
-            lambda before: heard.motion(now, self.other_joints, before=before),
-            heard.waiting_start, s.margin,
+            lambda before: self._other_view(now, before),
+            None if waiting is None else waiting - self.lag, s.margin,
             self.leader, s.max_delay, heard.dt)
         asked = asked._replace(wanted=wanted)
         if plan is None:
@@ -514,8 +541,7 @@ class ArmPlanner:
         """
         s, move = self.settings, self.committed
         plan = schedule(self.arm, move.plan.traj, move.plan.start, self.other_arm,
-                        self.other_motion.motion(now, self.other_joints), s.margin,
-                        leader=False, max_delay=s.max_delay)
+                        self._other_view(now), s.margin, leader=False, max_delay=s.max_delay)
         if plan is None:
             self.committed = None
             self.out.send(HoldArm(self.joints.copy()))
@@ -527,7 +553,7 @@ class ArmPlanner:
     def _wait(self, asked: MoveRequest) -> None:
         """Wait for the other arm: it blocks ``asked`` even after its committed motion."""
         s = self.settings
-        waited = self.clock() - asked.wanted
+        waited = self._now() - asked.wanted
         if waited > s.max_wait:
             self.blocked = None
             self.out.report('refused', asked.request, f'{self.other_arm.name} has blocked the '

@@ -195,6 +195,11 @@ class SortingJob:
             request = None  # not an open move of the job's (an old one)
         self.belt.on_trajectory(robot, move_id, request, stamp, t, q, self.protocol.now, self.q)
 
+    def on_clock(self, robot: str, lag: float) -> None:
+        """Take ``robot``'s trajectory clock: ``lag`` s behind sim time (speed scaling)."""
+        self.protocol.lags[robot] = float(lag)
+        self.belt.on_clock(robot, lag)
+
     def on_arm_status(self, robot: str, state: str, move_id: str,
                       start: Optional[float] = None) -> None:
         """Take the bridge's status of any move of ``robot`` (what the arm is committed to)."""

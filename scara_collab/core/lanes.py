@@ -312,6 +312,9 @@ class LaneProtocol:
         self.grips = Grips(settings, log)
         #: the start rule, with how late the bridge started the job's moves (sim s)
         self.time = MoveTime(settings.leads)
+        #: s: each arm's trajectory clock behind sim time (speed scaling): the times its
+        #: moves' requests and statuses carry are its trajectory time
+        self.lags: Dict[str, float] = {}
 
     @property
     def retries(self) -> int:
@@ -394,7 +397,8 @@ class LaneProtocol:
         lane's arm), which the planner takes instead of planning it again.
         """
         lane.phase, lane.target = Phase(phase), np.asarray(target, dtype=float)
-        lane.request = self._request(lane.robots, self.time.requested(start, now))
+        lag = self.lags.get(lane.robot, 0.0)
+        lane.request = self._request(lane.robots, self.time.requested(start - lag, now - lag))
         lane.moves = {r: MoveTrack() for r in lane.robots}
         lane.since = lane.sent = now
         lane.sends = 1
@@ -409,7 +413,8 @@ class LaneProtocol:
     def open_once(self, robot: str, target, start: float, purpose: str) -> MoveCommand:
         """Return a move of ``robot`` that no lane follows up (an unused arm's park)."""
         return MoveCommand(robot, np.asarray(target, dtype=float),
-                           self._request([robot], start), False, purpose)
+                           self._request([robot], start - self.lags.get(robot, 0.0)), False,
+                           purpose)
 
     def _command(self, lane: Lane) -> MoveCommand:
         return MoveCommand(lane.robot, lane.target, lane.request, lane.mirrored,
@@ -449,11 +454,12 @@ class LaneProtocol:
         for robot, track in lane.moves.items():
             if track.arrived:
                 continue
+            at = now - self.lags.get(robot, 0.0)  # the arm's trajectory time: its moves'
             if track.state in FAILED_MOVE:
                 return out, LaneEvent('failed', lane,
                                       f'{robot} move {track.state}: {track.reason}')
             if track.state == 'finished' or (track.state == 'accepted'
-                                             and now >= track.end - END_SLACK):
+                                             and at >= track.end - END_SLACK):
                 # the bridge says finished at the first instant at or after the end of a move
                 # it accepted: decided at that instant, not when its word comes in (a tick
                 # later or not, by how the messages were delivered)
@@ -476,9 +482,9 @@ class LaneProtocol:
                     return out, LaneEvent('failed', lane, f'no plan from the {robot} planner in '
                                           f'{limit:g} s', waited=track.state)
                 continue
-            if now >= track.end and self._at_target(lane, robot):
+            if at >= track.end and self._at_target(lane, robot):
                 track.arrived = True
-            elif now > track.end + s.arrive_timeout:
+            elif at > track.end + s.arrive_timeout:
                 return out, LaneEvent('failed', lane, f'{robot} did not arrive within '
                                       f'{s.arrive_timeout:g} s of its end ({track.state})')
         if all(t.arrived for t in lane.moves.values()):

@@ -93,6 +93,9 @@ class SoloBelt:
                   now: float, q: Joints) -> None:
         """Book nothing."""
 
+    def on_clock(self, robot: str, lag: float) -> None:
+        """Book nothing."""
+
     def unhindered(self, lane: Lane, item: sorting.SeenItem, hit: sorting.Intercept,
                    now: float, q: Joints, lead: float) -> Optional[sorting.Intercept]:
         """Return ``hit``: no other arm to wait for."""
@@ -178,6 +181,10 @@ class SharedBelt:
                   now: float, q: Joints) -> None:
         """Take the bridge's status of any move of ``robot`` (:meth:`.motion.Heard.status`)."""
         self.heard[robot].status(state, move_id, now, start, q.get(robot))
+
+    def on_clock(self, robot: str, lag: float) -> None:
+        """Take ``robot``'s trajectory clock (:meth:`.motion.Heard.on_clock`)."""
+        self.heard[robot].on_clock(lag)
 
     def book(self, lane: Lane) -> None:
         """Book the move ``lane`` just asked for as the job planned it (``lane.plan``).

@@ -57,9 +57,9 @@ factor is the smallest over the points and persons.
 
 This is a simulation of a safety function, not a certified one.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
-from typing import Sequence
+from typing import Sequence, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -355,10 +355,47 @@ def assess_arm(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[Per
     """
     q = np.asarray(q, dtype=float)
     qd = np.asarray(qd, dtype=float)
-    t_s = safety.stopping_time(arm, qd)
     if not persons:
-        return ArmSeparation(arm.name, math.inf, math.inf, 1.0, 1.0, False, '', t_s)
+        return ArmSeparation(arm.name, math.inf, math.inf, 1.0, 1.0, False, '',
+                             safety.stopping_time(arm, qd))
     bottom, top, v_person, r_person = _columns(persons)
+    return _assess(arm, q, qd, bottom, top, v_person, r_person, params,
+                   [f'person {p.id} at ({p.position[0]:.2f}, {p.position[1]:.2f})'
+                    for p in persons])
+
+
+def true_margin(arm: ArmModel, q: ArrayLike, qd: ArrayLike, starts: ArrayLike, ends: ArrayLike,
+                radii: ArrayLike, params: SsmParams) -> Tuple[float, float]:
+    """Return an arm's true separation from a body of capsules and its margin over ``S_p``, m.
+
+    The ground truth a simulation knows and a scanner does not: the body's own capsules (an
+    arm reaching out included), so neither the intrusion distance ``C`` nor the sensor's
+    tolerance ``Z_d`` comes into ``S_p``; the person's speed towards the arm is the standard's
+    (walking, or reaching within ``reach_limit``), the arm's its own (``qd``: its measured
+    joint velocities). A non-negative margin means: had the person come straight at the arm
+    at the standard's speed, the arm would have stopped before they met.
+
+    :param q, qd: ``(3,)`` the arm's joints and joint velocities.
+    :param starts, ends: ``(B, 3)`` the body's capsule axes, world, m; :param radii: ``(B,)``.
+    :return: ``(separation, margin)``.
+    """
+    truth = replace(params, intrusion=0.0, sensor_tolerance=0.0)
+    starts, ends = np.asarray(starts, dtype=float), np.asarray(ends, dtype=float)
+    out = _assess(arm, np.asarray(q, dtype=float), np.asarray(qd, dtype=float), starts, ends,
+                  np.zeros((len(starts), 2)), np.asarray(radii, dtype=float), truth,
+                  ['the body'] * len(starts))
+    return out.separation, out.margin
+
+
+def _assess(arm: ArmModel, q: np.ndarray, qd: np.ndarray, bottom: np.ndarray, top: np.ndarray,
+            v_person: np.ndarray, r_person: np.ndarray, params: SsmParams,
+            labels: Sequence[str]) -> ArmSeparation:
+    """Assess ``arm`` against bodies given as capsule axes ``bottom`` .. ``top`` (P rows).
+
+    :param v_person: ``(P, 2)`` each body's velocity on the floor, m/s; :param r_person:
+        ``(P,)`` radii, m; :param labels: each body in words (for the cause).
+    """
+    t_s = safety.stopping_time(arm, qd)
     # the arm's capsules now and while it stops, from the one capsule model: (1 + M, 3, 3)
     start, end, radii = collision.arm_capsules(arm, q)
     # one segment distance for the capsules (their closest points) and the fixed samples
@@ -396,9 +433,8 @@ def assess_arm(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[Per
     s = float(scale[worst])
     cause = ''
     if s < 1.0:
-        p = persons[worst[0]]
-        where = (f'person {p.id} at ({p.position[0]:.2f}, {p.position[1]:.2f}) is '
-                 f'{float(sep[worst]):.2f} m from {arm.name} {LINK_NAMES[caps[worst[1]]]}')
+        where = (f'{labels[worst[0]]} is {float(sep[worst]):.2f} m from {arm.name} '
+                 f'{LINK_NAMES[caps[worst[1]]]}')
         if s <= 0.0:
             cause = (f'{where}, within S_p {float(v_h[worst] * t_r + c):.2f} m at standstill: '
                      'protective stop')

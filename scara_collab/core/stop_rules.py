@@ -140,6 +140,13 @@ class BreachForecast:
         self.heard[robot].trajectory(move_id, stamp, t, q, now, q_now)
         self.again = True
 
+    def on_clock(self, robot: str, lag: float) -> None:
+        """Take ``robot``'s trajectory clock: ``lag`` s behind sim time (speed scaling)."""
+        heard = self.heard.get(robot)
+        if heard is not None and heard.arm.lag != lag:
+            heard.on_clock(lag)
+            self.again = True
+
     def on_status(self, robot: str, state: str, move_id: str, now: float,
                   start: Optional[float], q_now: Optional[ArrayLike]) -> None:
         """Take the bridge's status of a move of ``robot`` (an unknown arm is ignored)."""

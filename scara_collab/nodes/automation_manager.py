@@ -125,6 +125,9 @@ class AutomationManager(Node):
                 self.create_subscription(JointTrajectory, f'{a.name}/joint_trajectory',
                                          guarded(self, lambda msg, n=a.name:
                                                  self._on_trajectory(n, msg)), 10))
+            # published only while the cell scales speeds (a person in it): not waited for
+            self.create_subscription(DiagnosticStatus, f'{a.name}/trajectory_clock',
+                                     guarded(self, self._on_clock), 50)
         # every state and item list, each in turn: with a depth of 1, the callback of one
         # takes the newest (one published after the next /clock, if the node is behind), and
         # the tick sees it or not by timing (docs/realtime.md, *Repeatable runs*)
@@ -204,6 +207,11 @@ class AutomationManager(Node):
             request = None  # (the bridge runs it on this arm all the same)
         stamp, t, q, _, _ = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
         self.job.on_trajectory(robot, msg.header.frame_id, request, stamp, t, q)
+
+    def _on_clock(self, msg: DiagnosticStatus) -> None:
+        clock = proto.TrajectoryClock.from_msg(msg)
+        if clock.robot in self.job.sorted_by:
+            self.job.on_clock(clock.robot, clock.lag)
 
     def _on_estop(self, kind: str, msg: Bool) -> None:
         was = any(self._stops.values())

@@ -2,12 +2,13 @@
 
 ``/clock`` (``clock_rate``), ``joint_states`` (``state_rate``),
 ``conveyor/items`` (``markers_rate``) and the bridge's diagnostics (1 Hz), each on its own grid
-of sim time: :meth:`BridgeOutputs.publish_due` publishes whatever has fallen due, in that
-order, and :meth:`BridgeOutputs.steps_to_next` tells the bridge how far it may step before the
-next one (so no publication is stepped over).
+of sim time, then what a part of the bridge adds (:meth:`BridgeOutputs.add`: a person's
+scans and ground truth): :meth:`BridgeOutputs.publish_due` publishes whatever has fallen due,
+in that order, and :meth:`BridgeOutputs.steps_to_next` tells the bridge how far it may step
+before the next one (so no publication is stepped over).
 """
 import math
-from typing import Callable, Dict
+from typing import Callable, Dict, List, Tuple
 
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -47,6 +48,14 @@ class BridgeOutputs:
         self.state_pub = node.create_publisher(JointState, 'joint_states', STATE_QOS)
         self.items_pub = node.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
         self.diagnostics = Diagnostics(node)
+        self._added: List[Tuple[str, Callable[[], None]]] = []
+
+    def add(self, key: str, rate: float, publish: Callable[[], None]) -> None:
+        """Publish with ``publish()`` at ``rate`` (Hz of sim time), after the others, from now."""
+        self.periods[key] = 1.0 / rate
+        self.next[key] = self._origin[key] = self.sim.time
+        self._count[key] = 0
+        self._added.append((key, publish))
 
     def steps_to_next(self, dt: float) -> int:
         """Return the physics steps (of ``dt`` s) until the next publication falls due (>= 1)."""
@@ -71,6 +80,10 @@ class BridgeOutputs:
         if t >= self.next['diagnostics']:
             self.diagnostics.publish(self._status())
             self._step('diagnostics')
+        for key, publish in self._added:
+            if t >= self.next[key]:
+                publish()
+                self._step(key)
 
     def _step(self, key: str) -> None:
         """Move ``key``'s next publication one period on its grid."""

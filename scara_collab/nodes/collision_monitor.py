@@ -128,6 +128,9 @@ class CollisionMonitor(Node):
             self.create_subscription(
                 DiagnosticStatus, f'{arm.name}/execution_status',
                 guarded(self, self._on_execution), 50)
+            self.create_subscription(
+                DiagnosticStatus, f'{arm.name}/trajectory_clock',
+                guarded(self, self._on_clock), EVENTS)
         every(self, self.stale_after / 2, self._watch)  # on the sim clock
         every(self, 1.0, self._publish_status)
         self.estop_pub.publish(Bool(data=False))
@@ -189,6 +192,10 @@ class CollisionMonitor(Node):
         st = proto.ExecutionStatus.from_msg(msg)
         self.forecast.on_status(st.robot, st.state, st.move, conv.now(self), st.start,
                                 self._q.get(st.robot))
+
+    def _on_clock(self, msg: DiagnosticStatus) -> None:
+        clock = proto.TrajectoryClock.from_msg(msg)
+        self.forecast.on_clock(clock.robot, clock.lag)
 
     # --- the watch ---------------------------------------------------------------------------
     def _on_state(self, msg: JointState) -> None:

@@ -7,10 +7,11 @@ import math
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 from builtin_interfaces.msg import Duration, Time
-from geometry_msgs.msg import Point, PointStamped, Pose, PoseStamped, TransformStamped
+from geometry_msgs.msg import (Point, PointStamped, Pose, PoseArray, PoseStamped,
+                               TransformStamped)
 from nav_msgs.msg import Path
 import numpy as np
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import JointState, LaserScan
 from std_msgs.msg import ColorRGBA, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
@@ -388,3 +389,76 @@ def path_points(msg: Path) -> np.ndarray:
 def finite(xyz) -> bool:
     """Return ``True`` if every coordinate is finite."""
     return all(math.isfinite(float(v)) for v in xyz)
+
+
+# --- a person in the cell ----------------------------------------------------------------------
+def laser_scan(geometry, ranges: np.ndarray, stamp: float, period: float) -> LaserScan:
+    """Return a scanner's ranges as a ``sensor_msgs/LaserScan`` (its ``frame_id``: its name).
+
+    :param geometry: the scanner (:class:`~scara_collab.core.scan_tracking.ScanGeometry`).
+    :param ranges: ``(count,)`` m, ``inf`` for no return (REP 117).
+    :param stamp: sim time of the scan, s; :param period: s between scans.
+    """
+    msg = LaserScan(header=Header(stamp=to_time(stamp), frame_id=geometry.name))
+    msg.angle_min = float(geometry.angle_min)
+    msg.angle_increment = float(geometry.angle_increment)
+    msg.angle_max = float(geometry.angle_min + geometry.angle_increment * (geometry.count - 1))
+    msg.scan_time = float(period)
+    msg.range_min, msg.range_max = float(geometry.range_min), float(geometry.range_max)
+    msg.ranges = np.asarray(ranges, dtype=np.float32).tolist()
+    return msg
+
+
+def scan_ranges(msg: LaserScan) -> Tuple[str, float, np.ndarray]:
+    """``LaserScan`` -> ``(frame id, stamp s, (N,) ranges)``: the inverse of :func:`laser_scan`."""
+    return msg.header.frame_id, to_sec(msg.header.stamp), np.asarray(msg.ranges, dtype=float)
+
+
+def pose_array(poses: np.ndarray, stamp: float, frame_id: str = 'world') -> PoseArray:
+    """``(N, 7)`` positions and quaternions (x, y, z, w) -> ``geometry_msgs/PoseArray``."""
+    msg = PoseArray(header=Header(stamp=to_time(stamp), frame_id=frame_id))
+    for row in np.asarray(poses, dtype=float).reshape(-1, 7).tolist():
+        pose = Pose()
+        pose.position = Point(x=row[0], y=row[1], z=row[2])
+        (pose.orientation.x, pose.orientation.y, pose.orientation.z,
+         pose.orientation.w) = row[3:]
+        msg.poses.append(pose)
+    return msg
+
+
+def capsule_markers(poses: np.ndarray, lengths: np.ndarray, radii: np.ndarray, stamp: float,
+                    ns: str = 'person', frame_id: str = 'world') -> MarkerArray:
+    """Return a body of capsules as markers: a DELETEALL, then cylinders and sphere ends.
+
+    :param poses: ``(N, 7)`` each capsule's centre and the rotation of z onto its axis.
+    :param lengths: ``(N,)`` axis lengths (0: a sphere), m; :param radii: ``(N,)`` m.
+    """
+    header = Header(stamp=to_time(stamp), frame_id=frame_id)
+    out = MarkerArray()
+    out.markers.append(Marker(header=header, action=Marker.DELETEALL))
+    colour = ColorRGBA(r=0.95, g=0.8, b=0.6, a=1.0)
+    k = 0
+    for row, length, radius in zip(np.asarray(poses, dtype=float).reshape(-1, 7).tolist(),
+                                   np.asarray(lengths, dtype=float).tolist(),
+                                   np.asarray(radii, dtype=float).tolist()):
+        centre, quat = np.array(row[:3]), row[3:]
+        axis = _z_turned(quat)
+        shapes = [(Marker.CYLINDER, centre, length)] if length > 0.0 else []
+        shapes += [(Marker.SPHERE, centre + sign * 0.5 * length * axis, 0.0)
+                   for sign in ((-1.0, 1.0) if length > 0.0 else (0.0,))]
+        for kind, at, height in shapes:
+            m = Marker(header=header, ns=ns, id=k, type=kind, action=Marker.ADD, color=colour)
+            m.pose.position = Point(x=float(at[0]), y=float(at[1]), z=float(at[2]))
+            (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
+             m.pose.orientation.w) = quat
+            m.scale.x = m.scale.y = 2.0 * radius
+            m.scale.z = height if kind == Marker.CYLINDER else 2.0 * radius
+            out.markers.append(m)
+            k += 1
+    return out
+
+
+def _z_turned(quat: Sequence[float]) -> np.ndarray:
+    """Return the z axis turned by the quaternion ``(x, y, z, w)``."""
+    x, y, z, w = quat
+    return np.array([2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)])

@@ -63,7 +63,7 @@ class Execution:
             stamp, t, q, qd, qdd = conv.trajectory_arrays(msg, self.cell.arm(robot).joint_names)
         except conv.MessageError as exc:
             return self._refuse(robot, move, f'{exc}; {KEEPS}')
-        now = self.sim.time
+        now = self.sim.motion[robot].clock(self.sim.time)  # the arm's trajectory time
         try:
             start = move_time.start_time(stamp, float(t[-1]), now, self.sim.dt)
         except move_time.Refused as exc:

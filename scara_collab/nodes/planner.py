@@ -60,7 +60,9 @@ class Planner(Node):
                 (JointTrajectory, f'{r}/target_trajectory', self._on_offer, 10),
                 (JointTrajectory, f'{o}/joint_trajectory', self._on_other, 10),
                 (DiagnosticStatus, f'{o}/execution_status', self._on_other_execution, EVENTS),
-                (DiagnosticStatus, f'{r}/execution_status', self._on_own_execution, EVENTS)):
+                (DiagnosticStatus, f'{r}/execution_status', self._on_own_execution, EVENTS),
+                (DiagnosticStatus, f'{r}/trajectory_clock', self._on_clock, EVENTS),
+                (DiagnosticStatus, f'{o}/trajectory_clock', self._on_clock, EVENTS)):
             self.create_subscription(kind, topic, guarded(self, callback), depth)
         lockstep.join(self)  # sim time waits while this node computes
         self.get_logger().info(f'{r} planner ready ({params["mode"]} moves, ' + (
@@ -106,6 +108,13 @@ class Planner(Node):
         st = proto.ExecutionStatus.from_msg(msg)
         if (request := moves.request_of(self.arm.name, st.move)) is not None:  # not a hold
             self._send(self.planner.on_own_execution(st.state, request, st.start, st.stamp))
+
+    def _on_clock(self, msg: DiagnosticStatus) -> None:
+        clock = proto.TrajectoryClock.from_msg(msg)
+        if clock.robot == self.arm.name:
+            self.planner.on_clock(own=clock.lag)
+        elif clock.robot == self.other.name:
+            self.planner.on_clock(other=clock.lag)
 
 
 def main_left(args=None) -> None:

@@ -58,6 +58,7 @@ from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.model import load_cell
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.bridge_outputs import BridgeOutputs
+from scara_collab.nodes.bridge_people import BridgePeople, SCALING_MODES
 from scara_collab.nodes.execution import Execution, Holds
 from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.line_link import LineLink
@@ -81,12 +82,20 @@ PARAMETERS = {
     'line_upstream': False,               # a cell upstream hands items on (line/upstream)
     'line_downstream': False,             # hand on what passes the belt's end (line/handoff)
     'line_timeout': 5.0,                  # wall s of upstream silence taken for its death
+    'person': '',                         # a person in the cell: a scenario or a YAML file
+    'person_seed': -1,                    # its seed (random); -1: config/people.yaml's
+    'speed_scaling': 'cell',              # one factor for both arms (cell) or each its own
+    'scaling_timeout': 0.05,              # sim s a speed factor stays valid once heard
 }
 RULES = (Rule('profile', 'text'), Rule('markers_rate', 'positive'),
          Rule('step_chunk', 'positive'), Rule('home', 'vec3'),
          Rule('lockstep_window', 'nonneg'), Rule('lockstep_timeout', 'positive'),
          Rule('line_cell', 'int'), Rule('line_upstream', 'bool'),
-         Rule('line_downstream', 'bool'), Rule('line_timeout', 'positive'))
+         Rule('line_downstream', 'bool'), Rule('line_timeout', 'positive'),
+         Rule('person', 'text'), Rule('person_seed', 'int'),
+         Rule('speed_scaling', 'str', lambda v: v in SCALING_MODES,
+              f'must be one of {list(SCALING_MODES)}'),
+         Rule('scaling_timeout', 'positive'))
 
 
 class Pacer:
@@ -156,6 +165,7 @@ class PyBulletBridge(Node):
         self.gate: Optional[LockstepGate] = None
         self.actions: Optional[TrajectoryActions] = None
         self.line: Optional[LineLink] = None
+        self.people: Optional[BridgePeople] = None
         try:
             self._setup()
         except BaseException:
@@ -164,7 +174,7 @@ class PyBulletBridge(Node):
 
     def _setup(self) -> None:
         """Build what :meth:`__init__` says, one part after the other (the builders below)."""
-        cfg = declare_config(self, ('simulation', 'controllers'),
+        cfg = declare_config(self, ('simulation', 'controllers', 'people'),
                              dynamic=('real_time_factor', 'feed_interval'),
                              on_change=self._on_config)
         params = declare_checked(self, PARAMETERS, RULES)
@@ -178,6 +188,7 @@ class PyBulletBridge(Node):
         self._build_simulator(sim_cfg, ctl_cfg, params)
         self._build_outputs(sim_cfg, params)
         self._build_execution()
+        self._build_people(cfg['people'], params)
         window = self._build_gate(params)
         self._build_line(params)
         self._build_control()
@@ -235,6 +246,24 @@ class PyBulletBridge(Node):
         for kind in self.holds.stops:
             self.create_subscription(Bool, f'{kind}_stop', guarded(
                 self, lambda msg, k=kind: self.holds.on_stop(k, msg.data)), LATCHED)
+
+    def _build_people(self, cfg: dict, params: dict) -> None:
+        """Put a person and the safety scanners in the cell, if ``person`` names a scenario.
+
+        Its outputs go on the publications' grids (:class:`BridgePeople`); a cell without a
+        person has none of this.
+        """
+        if params['person'] in ('', 'none'):
+            return
+        seed = params['person_seed'] if params['person_seed'] >= 0 else None
+        self.people = BridgePeople(
+            self, self.cell, self.sim, cfg, params['person'], seed,
+            {'state': 1.0 / self.outputs.periods['state']}, self.execution.hold,
+            params['speed_scaling'], params['scaling_timeout'])
+        self.outputs.add('scan', self.people.rate, self.people.scan)
+        self.outputs.add('person', float(params['markers_rate']), self.people.ground_truth)
+        self.outputs.add('person_state', 1.0 / self.outputs.periods['state'],
+                         self.people.state)
 
     def _build_gate(self, params: dict) -> float:
         """Build the lockstep gate; return its window (sim s, 0 = off).
@@ -380,7 +409,12 @@ class PyBulletBridge(Node):
             ', '.join(self.gate.absent))
 
     def _publish_due(self, every: bool = False) -> None:
-        """Publish what is due (``every``: everything, now), the item events; poll the moves."""
+        """Publish what is due (``every``: everything, now), the item events; poll the moves.
+
+        With a person in the cell, it is posed for now and the speed factors applied first.
+        """
+        if self.people is not None:
+            self.people.step()
         (self.outputs.publish_all if every else self.outputs.publish_due)()
         for ev in self.sim.conveyor.pop_events():
             self.line.on_event(ev.kind, ev.item, ev.time)

@@ -261,6 +261,11 @@ class CellSim:
                                  float(self.sim_cfg['grasp_tolerance']))
 
     @property
+    def body(self) -> int:
+        """Return the cell's multibody in :attr:`client`'s world (the arms; the rest merged)."""
+        return self._body
+
+    @property
     def client(self) -> BulletClient:
         """Return the PyBullet connection of the simulator, for rendering; only step() steps it."""
         return self._pb

@@ -93,6 +93,13 @@ class Servo:
         self.clocks: Dict[str, ScaledClock] = {}
         #: arms whose path-keeping stop fell behind braking at the last tick (their owner brakes)
         self.held_back: List[str] = []
+        #: ``(arms, 3)`` each slowed arm's trajectory velocity at its trajectory time, unscaled
+        self.planned = np.zeros_like(self.ref_q)
+
+    def speed(self, robot: str) -> float:
+        """Return the factor ``robot``'s trajectory runs at now (1: full speed, or no clock)."""
+        clock = self.clocks.get(robot)
+        return 1.0 if clock is None else clock.scale
 
     def scale(self, robot: str, factor: float) -> None:
         """Ask ``robot``'s trajectories to run at ``factor`` of their speed, in [0, 1]."""
@@ -119,6 +126,7 @@ class Servo:
                 self.ref_q[a], self.ref_qd[a], self.ref_qdd[a] = move.ref.sample(now)
             else:  # the chain rule: the path at tau, run at s
                 pos, vel, acc = move.ref.sample(at)
+                self.planned[a] = vel
                 s, rate = clock.scale, clock.rate
                 self.ref_q[a], self.ref_qd[a] = pos, vel * s
                 self.ref_qdd[a] = acc * s * s + vel * rate
@@ -133,7 +141,8 @@ class Servo:
 
         An arm gets its clock when it is first asked to run below full speed. Its factor moves
         towards the one asked as fast as its running trajectory allows (a brake runs at full
-        speed, at once); an arm that holds has nothing to keep, so its factor follows at once.
+        speed, at once); an arm that holds has nothing to keep, so its factor follows at once
+        and its clock keeps its lag: an arm with nothing to do is not set back by a slowdown.
         """
         self.held_back = []
         for robot in self.names:
@@ -154,6 +163,9 @@ class Servo:
             else:
                 sample = _holding
             cmd = clock.tick(now, self.factors[robot], sample)
+            if running is None and motion.waiting is None:
+                clock.tau = now - motion.lag  # nothing committed: nothing to fall behind on
+                self.planned[self.names.index(robot)] = 0.0
             motion.lag = clock.lag
             if cmd.held_back:
                 self.held_back.append(robot)

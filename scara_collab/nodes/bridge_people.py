@@ -1,0 +1,197 @@
+"""A person in the simulated cell: the bridge's part (the person, the safety scanner, scaling).
+
+Built by the bridge only when its ``person`` parameter names a scenario
+(:func:`scara_collab.sim.person_scenarios.scenario`: ``pass-by``, ``inlet``, ``middle``,
+``random`` or a YAML file): a cell without one has none of this and runs as before.
+
+In the simulator's world it puts the person (:class:`scara_collab.sim.person.PersonSim`, posed
+at every publication step) and the floor scanners
+(:class:`scara_collab.sim.scanner.SafetyScanner`).
+It publishes, on sim time:
+
+- ``safety_scanner/scan`` (``sensor_msgs/LaserScan``, one message per scanner, its name as
+  ``frame_id``), at the scanners' rate (``config/people.yaml``, 25 Hz): what the separation
+  monitor decides on;
+- ``person/poses`` (``geometry_msgs/PoseArray``, one pose per capsule centre) and
+  ``person/markers`` (``visualization_msgs/MarkerArray``), at the markers' rate, and
+  ``person/truth`` (:class:`~scara_collab.nodes.protocol.PersonTruth`: each arm's true
+  separation and margin, whether it moves, a contact) at the state rate: ground truth, for
+  the record, viewers and tests only;
+- ``<robot>/trajectory_clock`` (:class:`~scara_collab.nodes.protocol.TrajectoryClock`) at the
+  state rate: each arm's trajectory clock, so every node predicts the arm on it.
+
+It takes each arm's speed factor from ``<robot>/speed_scaling`` (``std_msgs/Float64``,
+transient local: the separation monitor's) and runs the arm's trajectories at it
+(:meth:`scara_collab.sim.servo.Servo.scale`). With ``speed_scaling`` ``cell`` (the default)
+both arms run at the smaller of the two factors: their moves were scheduled against each other
+in time, and one factor keeps every such schedule (the arms' 0.10 m margin) as it was, only
+slower. A factor not heard for ``scaling_timeout`` sim s counts as 0 (a silent monitor is a
+protective stop). An arm whose path-keeping stop cannot keep up with braking
+(:attr:`scara_collab.sim.servo.Servo.held_back`) is braked, and with one factor the other arm
+too.
+"""
+import math
+from typing import Callable, Dict, Optional
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import PoseArray
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import LaserScan
+from std_msgs.msg import Float64
+from visualization_msgs.msg import MarkerArray
+
+from scara_collab.core import ssm
+from scara_collab.core.model import CellModel
+from scara_collab.core.scan_tracking import scanners_from_config
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.guarded import guarded
+from scara_collab.nodes.qos import EVENTS, LATCHED
+from scara_collab.sim.cell_sim import CellSim
+from scara_collab.sim.person import arm_link_names, BodyModel, PersonSim
+from scara_collab.sim.person_scenarios import Motion, PersonPath, scenario
+from scara_collab.sim.scanner import SafetyScanner
+
+#: how the factors of the two arms are applied: one for both (the smaller), or each its own
+SCALING_MODES = ('cell', 'arm')
+#: rad/s | m/s: an arm with a joint faster than this moves (the truth's "while it moved")
+MOVING = 1e-3
+#: m: beyond this lower bound on the separation, an arm's truth is not computed exactly
+#: (no protective separation of this cell comes near it)
+FAR = 6.0
+
+
+class BridgePeople:
+    """The person, the scanner and the speed scaling of the bridge (module docstring).
+
+    :param node: the bridge; :param cell: the cell model; :param sim: the simulator.
+    :param cfg: the ``people`` config; :param spec: the scenario; :param seed: its seed.
+    :param rates: Hz of sim time: ``state``, ``markers``.
+    :param hold: ``hold(robot, reason)`` brakes an arm and reports it held.
+    :param mode: one of :data:`SCALING_MODES`; :param timeout: sim s a factor stays valid.
+    """
+
+    def __init__(self, node: Node, cell: CellModel, sim: CellSim, cfg: dict, spec: str,
+                 seed: int, rates: Dict[str, float], hold: Callable[[str, str], None],
+                 mode: str = 'cell', timeout: float = 0.05):
+        """Put the person and the scanners in the world; create the topics."""
+        if mode not in SCALING_MODES:
+            raise ValueError(f'speed_scaling must be one of {SCALING_MODES}, got {mode!r}')
+        self.node, self.cell, self.sim, self.hold = node, cell, sim, hold
+        self.mode, self.timeout = mode, float(timeout)
+        self.scenario = scenario(spec, cell, cfg, seed)
+        if self.scenario is None:
+            raise ValueError(f'person {spec!r} names no scenario')
+        self.body = BodyModel.from_config(cfg)
+        self.person = PersonSim(sim.client, self.body, PersonPath(self.scenario,
+                                                                  Motion.from_config(cfg)),
+                                sim.body, arm_link_names(sim.client, sim.body, cell.arms))
+        self.scanner = SafetyScanner.from_config(sim.client, cfg)
+        self.geometry = scanners_from_config(cfg)
+        self.params = ssm.SsmParams.from_config(cfg)
+        self.rate = float(cfg['scanner']['rate'])
+        self.rates = rates
+        self.scan_pub = node.create_publisher(LaserScan, 'safety_scanner/scan', 10)
+        self.poses_pub = node.create_publisher(PoseArray, 'person/poses', 10)
+        self.markers_pub = node.create_publisher(MarkerArray, 'person/markers', 10)
+        self.truth_pub = node.create_publisher(DiagnosticStatus, 'person/truth', 10)
+        self.clock_pub = {a.name: node.create_publisher(DiagnosticStatus,
+                                                        f'{a.name}/trajectory_clock', EVENTS)
+                          for a in cell.arms}
+        #: each arm's factor as heard, and when (sim s; None: never)
+        self.asked: Dict[str, float] = {a.name: 0.0 for a in cell.arms}
+        self.heard: Dict[str, Optional[float]] = {a.name: None for a in cell.arms}
+        for a in cell.arms:
+            node.create_subscription(Float64, f'{a.name}/speed_scaling', guarded(
+                node, lambda msg, r=a.name: self._on_factor(r, msg)), LATCHED)
+        self.started = sim.time
+        node.get_logger().info(
+            f'a person in the cell: {self.scenario.name}, {len(self.geometry)} safety scanners '
+            f'at {self.rate:g} Hz, speed scaling per {mode}')
+
+    # --- inputs -----------------------------------------------------------------------------
+    def _on_factor(self, robot: str, msg: Float64) -> None:
+        value = float(msg.data)
+        if not math.isfinite(value):
+            self.node.get_logger().warning(f'{robot}: speed_scaling {value}: taken as 0',
+                                           throttle_duration_sec=5.0)
+            value = 0.0
+        self.asked[robot] = min(max(value, 0.0), 1.0)
+        self.heard[robot] = self.sim.time
+
+    def factor(self, robot: str) -> float:
+        """Return the factor ``robot`` may run at now: as heard, 0 once not heard for a while."""
+        heard = self.heard[robot]
+        if heard is None:  # none yet: allowed for the first timeout, as the monitor starts
+            return 1.0 if self.sim.time - self.started <= self.timeout else 0.0
+        return self.asked[robot] if self.sim.time - heard <= self.timeout + 1e-9 else 0.0
+
+    # --- every publication step -----------------------------------------------------------
+    def step(self) -> None:
+        """Pose the person for now, apply the factors, brake an arm that cannot keep up."""
+        self.person.update(self.sim.time)
+        factors = {r: self.factor(r) for r in self.asked}
+        if self.mode == 'cell':
+            low = min(factors.values())
+            factors = {r: low for r in factors}
+        for robot, f in factors.items():
+            self.sim.servo.scale(robot, f)
+        late = list(self.sim.servo.held_back)
+        if late:
+            braked = set(self.asked) if self.mode == 'cell' else set(late)
+            for robot in sorted(braked):
+                self.hold(robot, 'protective stop: its path-keeping slowdown fell behind '
+                          f'braking ({", ".join(late)}): braked')
+            self.sim.servo.held_back = []
+
+    def scan(self) -> None:
+        """Cast the scanners' rays now and publish each scan."""
+        t = self.sim.time
+        for geometry, ranges in zip(self.geometry, self.scanner.scan()):
+            self.scan_pub.publish(conv.laser_scan(geometry, ranges, t, 1.0 / self.rate))
+
+    def ground_truth(self) -> None:
+        """Publish the person's capsules as poses and markers (ground truth)."""
+        t = self.sim.time
+        poses = self.person.poses()
+        self.poses_pub.publish(conv.pose_array(poses, t))
+        self.markers_pub.publish(conv.capsule_markers(poses, self.body.lengths[:len(poses)],
+                                                      self.body.radii[:len(poses)], t))
+
+    def state(self) -> None:
+        """Publish every arm's trajectory clock and the person against each arm (truth)."""
+        t = self.sim.time
+        _, q, qd, _ = self.sim.joint_state()
+        q, qd = q.reshape(-1, 3), qd.reshape(-1, 3)
+        servo = self.sim.servo
+        for a, arm in enumerate(self.cell.arms):
+            clock = servo.clocks.get(arm.name)
+            planned = servo.planned[a] if clock is not None else servo.ref_qd[a]
+            self.clock_pub[arm.name].publish(proto.TrajectoryClock(
+                arm.name, round(t, 6), float(self.sim.motion[arm.name].lag),
+                servo.speed(arm.name), float(servo.factors[arm.name]),
+                dict(zip(arm.joint_names, (float(v) for v in planned)))).to_msg())
+        self.truth_pub.publish(self._truth(t, q, qd).to_msg())
+
+    def _truth(self, t: float, q: np.ndarray, qd: np.ndarray) -> proto.PersonTruth:
+        caps = self.person.capsules()
+        arms = self.cell.arms
+        moving = {a.name: bool(np.max(np.abs(qd[k])) > MOVING) for k, a in enumerate(arms)}
+        if caps is None:
+            return proto.PersonTruth(round(t, 6), False, {a.name: math.inf for a in arms},
+                                     {a.name: math.inf for a in arms}, moving,
+                                     {a.name: False for a in arms})
+        touching = {a.name for c in self.person.contacts() for a in arms
+                    if c.link.startswith(a.name + '_')}
+        separation, margin = {}, {}
+        for k, arm in enumerate(arms):
+            reach = arm.l1 + arm.l2 + arm.link_radius
+            floor = float(np.min(np.hypot(*(caps.start[:, :2] - arm.base[:2, 3]).T))) - reach
+            if floor > FAR:  # a lower bound: nothing near, exactness would cost for nothing
+                separation[arm.name] = margin[arm.name] = floor
+                continue
+            separation[arm.name], margin[arm.name] = ssm.true_margin(
+                arm, q[k], qd[k], caps.start, caps.end, caps.radius, self.params)
+        return proto.PersonTruth(round(t, 6), True, separation, margin, moving,
+                                 {a.name: a.name in touching for a in arms})
