@@ -247,7 +247,7 @@ NODES: Tuple[NodeSpec, ...] = (
              Readiness('service', 'collision_monitor/clear', 'std_srvs/srv/Trigger'),
              lockstep=True),
     NodeSpec('automation_manager', _n('automation_manager:main'),
-             _n('automation_manager:AutomationManager'), ('automation', 'controllers'),
+             _n('automation_manager:AutomationManager'), ('automation', 'controllers', 'people'),
              Readiness('service', 'automation_manager/start', 'std_srvs/srv/Trigger'),
              lockstep=True),
     NodeSpec('separation_monitor', _n('separation_monitor:main'),

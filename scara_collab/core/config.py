@@ -167,6 +167,7 @@ SCHEMAS = {
         Rule('line_cells', 'int', lambda v: v >= 1, 'must be >= 1'),
         Rule('line_cell', 'int', lambda v: v >= 0, 'must be >= 0'),
         Rule('line_capacity', 'positive'),
+        Rule('person_speed', 'number', lambda v: 0.0 <= v <= 1.0, 'must be in [0, 1]'),
     ],
     'people': [
         Rule('person.scenario', 'str'),

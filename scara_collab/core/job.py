@@ -43,7 +43,7 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from scara_collab.core import line, sorting
+from scara_collab.core import line, sorting, ssm
 from scara_collab.core.job_decisions import ItemBoard, LaneDecisions
 from scara_collab.core.job_moves import JobMoves
 from scara_collab.core.job_settings import JobSettings
@@ -81,7 +81,8 @@ class SortingJob:
     """
 
     def __init__(self, cell: CellModel, settings: JobSettings, plan: PlanFn,
-                 log: Callable[[str, str], None] = lambda level, text: None):
+                 log: Callable[[str, str], None] = lambda level, text: None,
+                 people: Optional[ssm.SsmParams] = None):
         """Set up one lane per arm that moves on its own (one for a mirrored pair); not started."""
         self.cell, self.settings, self.log = cell, settings, log
         lead, foll = cell.leader, cell.follower
@@ -97,7 +98,7 @@ class SortingJob:
         self.protocol = LaneProtocol(cell, settings, self.plan, log)
         self.belt = (SharedBelt if settings.mode == 'collaborative' else SoloBelt)(
             cell, settings, self.plan)
-        self.moves = JobMoves(cell, settings, self.protocol, self.belt, self.plan)
+        self.moves = JobMoves(cell, settings, self.protocol, self.belt, self.plan, people)
         #: in a line of cells, the items this cell leaves for the ones downstream
         self.share = (line.Share(settings.line_cell, settings.line_cells, settings.line_capacity)
                       if settings.line_cells > 1 else None)
@@ -110,6 +111,8 @@ class SortingJob:
         self.start_time: Optional[float] = None
         self.counts: Dict[str, int] = {}
         self.sorted_by: Dict[str, int] = {a.name: 0 for a in cell.arms}
+        #: missed items the job last left for a person (their last note says so)
+        self.missed_due_to_person = 0
 
     # --- what it knows --------------------------------------------------------------------
     @property
@@ -148,6 +151,10 @@ class SortingJob:
         self.board.items = {it.id: it for it in items}
         if self.share is not None and self.board.items:
             self.share.see(self.board.items, max(it.stamp for it in items))
+
+    def on_persons(self, persons: Sequence[ssm.Person]) -> None:
+        """Take the persons the separation monitor sees now: meetings are chosen away from them."""
+        self.moves.persons = tuple(persons)
 
     def on_estop(self, on: bool) -> None:
         """Take the emergency stop: while set, nothing new is commanded."""
@@ -219,6 +226,7 @@ class SortingJob:
             last = self.decisions.notes.close(item)
             if kind == 'missed':
                 self.log('warn', f'item {item} missed; last: {last}')
+                self.missed_due_to_person += 'clear of a person' in last
         self.protocol.grips.confirm(self.lanes, kind, robot)
 
     # --- the clock ------------------------------------------------------------------------

@@ -207,7 +207,9 @@ class LaneDecisions:
         for item in [it for _, it in order[:2]]:
             out = self.moves.meet(lane, item, now)
             if not out:
-                self.notes.note(item.id, now, f'{lane.robot} could not meet it (or not yet)')
+                self.notes.note(item.id, now, f'{lane.robot} kept clear of a person' if
+                                self.moves.declined == 'person'
+                                else f'{lane.robot} could not meet it (or not yet)')
                 continue
             self.notes.note(item.id, now, f'{lane.robot} chased it')
             board.claimed[item.id] = lane.robot

@@ -9,16 +9,20 @@ leaves its move; it times the move that meets an item
 sends a mirrored pair round a waypoint when its arms would come within the planners' margin
 (:mod:`scara_collab.core.pairing`). No ROS here.
 """
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
-from scara_collab.core import pairing, sorting
+from scara_collab.core import pairing, sorting, ssm
 from scara_collab.core.job_settings import JobSettings
 from scara_collab.core.lanes import (GripCommand, Lane, LaneProtocol, MoveCommand, Phase,
                                      PlanMemo)
 from scara_collab.core.model import CellModel
 from scara_collab.core.trajectory import Trajectory
+
+
+#: s a meeting the arm could not make at speed near a person is put off by, each time
+PUT_OFF = 0.5
 
 
 class JobMoves:
@@ -29,10 +33,19 @@ class JobMoves:
     """
 
     def __init__(self, cell: CellModel, settings: JobSettings, protocol: LaneProtocol, belt,
-                 plan: PlanMemo):
-        """Nothing asked yet."""
+                 plan: PlanMemo, people: Optional[ssm.SsmParams] = None):
+        """Nothing asked yet.
+
+        :param people: the protective separation's numbers of a cell with a safety scanner
+            (the meeting with an item is then chosen where the arm can work at speed).
+        """
         self.cell, self.settings, self.protocol, self.belt, self.plan = (
             cell, settings, protocol, belt, plan)
+        self.people = people
+        #: the persons the separation monitor sees, as it last said (none without a scanner)
+        self.persons: Sequence[ssm.Person] = ()
+        #: why the last :meth:`meet` asked nothing: ``'person'`` if only a person was in the way
+        self.declined = ''
 
     def go(self, lane: Lane, phase: Phase, target, start: float, now: float,
            traj: Optional[Trajectory] = None) -> MoveCommand:
@@ -62,6 +75,9 @@ class JobMoves:
         lead = self.protocol.grips.lead
         hit = sorting.intercept(self.cell, arm, q[lane.robot], aim, start, s.pick_z,
                                 lambda q0, p: self.plan(lane.robot, q0, p), lead=lead)
+        self.declined = ''
+        if hit is not None and self.persons and self.people is not None:
+            hit = self._at_speed(lane, aim, hit, lead)
         if hit is not None:
             hit = self.belt.unhindered(lane, aim, hit, now, q, lead)
         if hit is None:
@@ -76,6 +92,27 @@ class JobMoves:
                 lane.route = [(Phase.VIA, p) for p in route[1:]]
                 return [cmd]
         return [self.go(lane, Phase.TO_ITEM, hit.target, hit.start, now, hit.traj)]
+
+    def _at_speed(self, lane: Lane, item: sorting.SeenItem, hit: sorting.Intercept,
+                  lead: float) -> Optional[sorting.Intercept]:
+        """Return ``hit``, or a later meeting the arm can make at speed, away from the persons.
+
+        A meeting the separation monitor would slow below ``person_speed`` (checked on the
+        planned move, :func:`scara_collab.core.ssm.allowed_along`) is put off: the item met
+        further down the belt, later, while it stays in reach (None: it leaves first, and
+        :attr:`declined` says it was left for the person).
+        """
+        s, arm = self.settings, self.cell.arm(lane.robot)
+        q0 = self.protocol.q[lane.robot]
+        while hit is not None:
+            samples = np.linspace(0, len(hit.traj.t) - 1, 5)[1:].round().astype(int)
+            if ssm.allowed_along(arm, hit.traj.q[samples], hit.traj.qd[samples], self.persons,
+                                 self.people) >= s.person_speed:
+                return hit
+            hit = sorting.intercept(self.cell, arm, q0, item, hit.start + PUT_OFF, s.pick_z,
+                                    lambda a, p: self.plan(lane.robot, a, p), lead=lead)
+        self.declined = 'person'
+        return None
 
     def to_bin(self, lane: Lane, now: float) -> List[MoveCommand]:
         """Return the move that carries the item ``lane`` holds to the bin of its class.

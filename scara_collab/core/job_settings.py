@@ -41,6 +41,8 @@ class JobSettings:
     line_cell: int = 0
     line_cells: int = 1
     line_capacity: float = 40.0
+    #: the least speed factor a meeting with an item is chosen at, near a person
+    person_speed: float = 0.9
 
     @staticmethod
     def from_config(cell: CellModel, cfg: dict, mode: Optional[str] = None,
@@ -79,4 +81,5 @@ class JobSettings:
             pair_margin=cell.safety_margin + float(controllers['planning_buffer']),
             leads=Leads.of(cfg, controllers),
             line_cell=int(cfg['line_cell']), line_cells=int(cfg['line_cells']),
-            line_capacity=float(cfg['line_capacity']))
+            line_capacity=float(cfg['line_capacity']),
+            person_speed=float(cfg['person_speed']))

@@ -445,6 +445,22 @@ def _assess(arm: ArmModel, q: np.ndarray, qd: np.ndarray, bottom: np.ndarray, to
                          float(relaxed.min()), s <= 0.0, cause, t_s)
 
 
+def allowed_along(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[Person],
+                  params: SsmParams) -> float:
+    """Return the least speed factor a planned move is allowed at the given samples of it.
+
+    For a planner or a job that would rather choose work an arm can do at speed than work the
+    monitor will slow: :func:`assess_arm` at each sample, the smallest factor (1 without
+    persons).
+
+    :param q, qd: ``(M, 3)`` the move's joints and planned joint velocities at M samples.
+    """
+    if not persons:
+        return 1.0
+    return min(assess_arm(arm, a, b, persons, params).scale
+               for a, b in zip(np.asarray(q, dtype=float), np.asarray(qd, dtype=float)))
+
+
 def braking_rate(arm: ArmModel, qd: ArrayLike) -> float:
     """Return how fast the factor may fall: ``1 / T_s`` of the planned joint velocities, 1/s.
 

@@ -38,6 +38,7 @@ from typing import Callable, List
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
+import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
@@ -51,6 +52,7 @@ from scara_collab.core.job import GripCommand, JobSettings, MoveCommand, Sorting
 from scara_collab.core.kinematics import IKError
 from scara_collab.core.model import load_cell
 from scara_collab.core.planning import path_options, plan_path
+from scara_collab.core.ssm import Person, SsmParams
 from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
@@ -84,7 +86,7 @@ class AutomationManager(Node):
         """
         super().__init__('automation_manager', **kwargs)
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
-        cfg = declare_config(self, ('automation', 'controllers'))
+        cfg = declare_config(self, ('automation', 'controllers', 'people'))
         params = declare_checked(
             self, {'profile': '', 'auto_start': False, 'tick': 0.02, 'state_sync': True},
             (Rule('profile', 'text'), Rule('auto_start', 'bool'), Rule('tick', 'positive'),
@@ -102,7 +104,9 @@ class AutomationManager(Node):
             except IKError as exc:
                 raise ValueError(str(exc)) from None
 
-        self.job = SortingJob(self.cell, self.settings, plan, log_to(self.get_logger()))
+        self.job = SortingJob(self.cell, self.settings, plan, log_to(self.get_logger()),
+                              people=SsmParams.from_config(cfg['people']))
+        self.column = float(cfg['people']['monitor']['column_height'])  # a person seen, m
         self.target_pub = {a.name: self.create_publisher(PointStamped, f'{a.name}/target', 10)
                            for a in self.cell.arms}
         self.plan_pub = {a.name: self.create_publisher(JointTrajectory,
@@ -138,6 +142,9 @@ class AutomationManager(Node):
                                      guarded(self, self._on_event), 100),
             self.create_subscription(JointState, 'joint_states', guarded(self, self._on_state),
                                      DEFAULT))
+        # with a person in the cell: the persons the separation monitor sees (not waited for)
+        self.create_subscription(DiagnosticStatus, 'separation_monitor/status',
+                                 guarded(self, self._on_separation), DEFAULT)
         self._stops = {'emergency': False, 'protective': False}  # the job pauses under either
         for kind in self._stops:
             self.create_subscription(Bool, f'{kind}_stop', guarded(
@@ -212,6 +219,11 @@ class AutomationManager(Node):
         clock = proto.TrajectoryClock.from_msg(msg)
         if clock.robot in self.job.sorted_by:
             self.job.on_clock(clock.robot, clock.lag)
+
+    def _on_separation(self, msg: DiagnosticStatus) -> None:
+        st = proto.SeparationStatus.from_msg(msg)
+        self.job.on_persons([Person(np.array([p.x, p.y]), np.array([p.vx, p.vy]), p.radius,
+                                    self.column, p.id) for p in st.persons])
 
     def _on_estop(self, kind: str, msg: Bool) -> None:
         was = any(self._stops.values())
@@ -329,7 +341,8 @@ class AutomationManager(Node):
             counts={k: job.counts.get(k, 0) for k in proto.COUNTED},
             sorted_by=dict(job.sorted_by), items_per_minute=round(job.rate(now), 3),
             give_ups=job.decisions.give_ups, retries=job.protocol.retries, phases=job.phases(),
-            last_give_up=job.decisions.last_give_up)
+            last_give_up=job.decisions.last_give_up,
+            missed_due_to_person=job.missed_due_to_person)
 
     def _publish_stats(self) -> None:
         self.diagnostics.publish(self.stats().to_msg())
