@@ -501,3 +501,21 @@ def test_a_new_trajectory_takes_over_at_its_start(cell):
         assert ref_b[0] > ref_a[0] + 1e-3 and ref_b[1] == pytest.approx(q0[1], abs=1e-9)
         sim.step(int(round((0.02 + second.duration) / sim.dt)))  # the second one's end, held
         npt.assert_allclose(sim.reference(LEFT)[0], second.q[-1], atol=1e-9)
+
+
+@pytest.mark.parametrize('over, state', [('belt', 'belt'), ('floor', 'dropped')])
+def test_an_item_that_slips_lands_where_it_falls(still_cell, over, state):
+    """A slip (``--fault drop@T``): on the belt the item is an item again; off it, dropped."""
+    with _make(still_cell) as sim:
+        item = _pick(sim, LEFT, 'red', (2.5, -0.2))
+        if over == 'floor':
+            _move(sim, LEFT, [3.3, -1.0, 0.5], kind='joint')
+        assert sim.grippers.slip(LEFT) == item and sim.grippers.held_item(LEFT) is None
+        assert sim.grippers.slip(LEFT) is None  # nothing left to slip
+        kinds = [e.kind for e in sim.conveyor.pop_events()]
+        assert kinds[-2:] == ['released', 'slipped']
+        sim.step(800)
+        if state == 'belt':
+            assert [it.state for it in sim.conveyor.items()] == ['belt']
+        else:
+            assert [e.kind for e in sim.conveyor.pop_events()] == ['dropped']

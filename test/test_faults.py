@@ -395,3 +395,19 @@ def test_the_supervisor_kills_the_process_when_sim_time_reaches_the_crash(tmp_pa
         proc.kill()
         proc.wait()
         console.close()
+
+
+def test_a_slip_is_the_worlds_fault_for_the_bridge_not_a_nodes():
+    """``drop@T`` and ``drop@rate:R`` reach the bridge as parameters, no node applies them."""
+    from scara_collab.run import stages as plan
+    from scara_collab.run.faults import node_entries, slips
+    from scara_collab.run.options import parse_options
+    specs = ['drop@30', 'drop@12.5', 'drop@rate:0.1', 'drop:/scara_left/gripper:1']
+    assert slips(specs) == ([12.5, 30.0], 0.1)
+    assert node_entries(specs) == ['drop:/scara_left/gripper:1']
+    bridge = plan.stages(parse_options(['--duration', '60'] + [
+        a for s in specs for a in ('--fault', s)]), True)[0].params
+    assert bridge['slip_at'] == '12.5,30.0' and bridge['slip_rate'] == '0.1'
+    for bad in ('drop@-1', 'drop@soon', 'drop@rate:x'):
+        with pytest.raises(ValueError, match='expected drop@'):
+            slips([bad])

@@ -853,3 +853,15 @@ def test_one_arms_moves_carry_the_jobs_plan_so_the_planner_need_not_plan_again(c
     assert pick.mirrored and pick.robot == cell.leader.name
     np.testing.assert_allclose(pick.plan.q[0], HOME, atol=1e-9)
     np.testing.assert_allclose(pick.plan.p[-1], pick.target, atol=1e-9)
+
+
+def test_an_item_that_slips_is_no_longer_its_lanes_and_free_for_either_arm(cell):
+    """A slipped item: its claim goes, the lane carries nothing on, the note says why."""
+    job, pick, t = at_the_item(cell)
+    lane = job.lane(pick.robot)
+    job.on_grip(grips(job.tick(t))[0].token, True, 'grasped')
+    job.tick(t + 0.02)
+    assert lane.holding and job.board.claimed == {1: pick.robot}
+    job.on_item_event('slipped', 1, pick.robot)
+    assert not lane.holding and job.board.claimed == {}
+    assert job.decisions.notes.close(1).startswith(f'it slipped from the {pick.robot} gripper')

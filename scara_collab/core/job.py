@@ -217,8 +217,20 @@ class SortingJob:
         self.protocol.grips.on_response(self.lanes, token, ok, message, self.protocol.now)
 
     def on_item_event(self, kind: str, item: int, robot: str) -> None:
-        """Count a bridge item event; it also confirms grasps and releases."""
+        """Count a bridge item event; it also confirms grasps and releases.
+
+        An item that ``slipped`` from a gripper is no longer its lane's: the lane carries
+        nothing on, and the item, wherever it lands, is free for either arm (on the belt it
+        is an item like any other).
+        """
         self.counts[kind] = self.counts.get(kind, 0) + 1
+        if kind == 'slipped':
+            self.board.claimed.pop(item, None)
+            self.decisions.notes.note(item, self.protocol.now,
+                                      f'it slipped from the {robot} gripper')
+            for lane in self.lanes:
+                if lane.item is not None and lane.item.id == item:
+                    lane.holding = False
         if kind == 'sorted' and robot in self.sorted_by:
             self.sorted_by[robot] += 1
         if kind in sorting.GONE:

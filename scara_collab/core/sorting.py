@@ -22,8 +22,8 @@ from scara_collab.core.trajectory import Trajectory
 #: ``received`` and ``handed_on`` are a line's (:mod:`scara_collab.core.line`): an item put on
 #: this section's belt by the cell upstream, and one carried past its end to the cell
 #: downstream (the last cell of a line, and a cell on its own, miss it instead).
-ITEM_EVENTS = ('spawned', 'received', 'grasped', 'released', 'sorted', 'wrong_bin', 'missed',
-               'handed_on', 'dropped')
+ITEM_EVENTS = ('spawned', 'received', 'grasped', 'released', 'slipped', 'sorted', 'wrong_bin',
+               'missed', 'handed_on', 'dropped')
 #: the kinds a run counts (its summary has one number for each)
 COUNTED = ('spawned', 'received', 'sorted', 'missed', 'handed_on', 'wrong_bin', 'dropped')
 #: after these the item has left the cell

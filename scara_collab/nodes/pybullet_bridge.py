@@ -86,6 +86,8 @@ PARAMETERS = {
     'person_seed': -1,                    # its seed (random); -1: config/people.yaml's
     'speed_scaling': 'cell',              # one factor for both arms (cell) or each its own
     'scaling_timeout': 0.05,              # sim s a speed factor stays valid once heard
+    'slip_at': '',                        # sim s at which a held item slips ('12.5,30')
+    'slip_rate': 0.0,                     # slips per second of carrying (seeded)
 }
 RULES = (Rule('profile', 'text'), Rule('markers_rate', 'positive'),
          Rule('step_chunk', 'positive'), Rule('home', 'vec3'),
@@ -95,7 +97,8 @@ RULES = (Rule('profile', 'text'), Rule('markers_rate', 'positive'),
          Rule('person', 'text'), Rule('person_seed', 'int'),
          Rule('speed_scaling', 'str', lambda v: v in SCALING_MODES,
               f'must be one of {list(SCALING_MODES)}'),
-         Rule('scaling_timeout', 'positive'))
+         Rule('scaling_timeout', 'positive'), Rule('slip_at', 'text'),
+         Rule('slip_rate', 'nonneg'))
 
 
 class Pacer:
@@ -189,6 +192,7 @@ class PyBulletBridge(Node):
         self._build_outputs(sim_cfg, params)
         self._build_execution()
         self._build_people(cfg['people'], params)
+        self._build_slips(params, int(sim_cfg['item_seed']))
         window = self._build_gate(params)
         self._build_line(params)
         self._build_control()
@@ -264,6 +268,34 @@ class PyBulletBridge(Node):
         self.outputs.add('person', float(params['markers_rate']), self.people.ground_truth)
         self.outputs.add('person_state', 1.0 / self.outputs.periods['state'],
                          self.people.state)
+
+    def _build_slips(self, params: dict, seed: int) -> None:
+        """Arm the slips of items from the grippers (``--fault drop@...``), if any.
+
+        :raises ValueError: a ``slip_at`` that is not a list of sim times.
+        """
+        try:
+            self.slip_at = sorted(float(t) for t in params['slip_at'].split(',') if t.strip())
+        except ValueError:
+            raise ValueError(f"slip_at must be sim times like '12.5,30', got "
+                             f"{params['slip_at']!r}") from None
+        self.slip_rate = float(params['slip_rate'])
+        self._slip_rng = np.random.default_rng(seed + 101)
+
+    def _slips(self) -> None:
+        """Let held items slip whose time has come (or by chance, at ``slip_rate``)."""
+        now = self.sim.time
+        due = bool(self.slip_at) and now >= self.slip_at[0] - 1e-9
+        while self.slip_at and now >= self.slip_at[0] - 1e-9:
+            self.slip_at.pop(0)
+        for robot in self.sim.robots:
+            if self.sim.grippers.held_item(robot) is None:
+                continue
+            chance = self.slip_rate * self.outputs.periods['state']
+            if due or (chance > 0 and self._slip_rng.random() < chance):
+                item = self.sim.grippers.slip(robot)
+                self.get_logger().warning(f'fault injection: item {item} slips from the '
+                                          f'{robot} gripper at t={now:.3f} s')
 
     def _build_gate(self, params: dict) -> float:
         """Build the lockstep gate; return its window (sim s, 0 = off).
@@ -415,6 +447,8 @@ class PyBulletBridge(Node):
         """
         if self.people is not None:
             self.people.step()
+        if self.slip_at or self.slip_rate:
+            self._slips()
         (self.outputs.publish_all if every else self.outputs.publish_due)()
         for ev in self.sim.conveyor.pop_events():
             self.line.on_event(ev.kind, ev.item, ev.time)

@@ -38,6 +38,13 @@ SPEC`` (repeatable), each one of:
     bridge also has the bridge pause there (:func:`scara_collab.run.stages.crashes`), so it
     dies at that sim time to the physics step.
 
+``drop@<sim s>``, ``drop@rate:<per s>``
+    an item slips from a gripper: at that sim time whatever an arm holds falls free, or each
+    carried item slips at a rate of so many per second of carrying (seeded: the same slips
+    every run) (:class:`Slip`). Not a message's fault but the world's: the launcher passes it
+    to the bridge (``slip_at``, ``slip_rate``), which drops the item in its simulated world;
+    where it lands is the conveyor's to track (on the belt it is an item like any other).
+
 Names are fully qualified (``/scara_left/gripper``, ``/scara_left/planner_status``).
 
 Nothing in the nodes knows of this module. The graph builds each node of a run with
@@ -70,7 +77,8 @@ from scara_collab.nodes.sim_timer import SimTimer
 
 FORMS = ('drop:/<name>:<N>, delay:/<name>:<N>:<seconds>, '
          'latency:/<name>:<mean seconds>:<jitter seconds>, loss:/<name>:<p>, '
-         'repeat:/<name>:<p> or crash:/<node>:<sim seconds>')
+         'repeat:/<name>:<p>, crash:/<node>:<sim seconds>, drop@<sim seconds> or '
+         'drop@rate:<per second>')
 #: wall s between looks at a latency queue on wall time (sim time: every /clock instead)
 LATENCY_PERIOD = 1e-3
 #: wall s between looks at whether a node's sim clock stands still (paused): what is in
@@ -122,9 +130,17 @@ class Crash:
     at: float
 
 
-Fault = Union[Drop, Delay, Latency, Loss, Repeat, Crash]
+@dataclass(frozen=True)
+class Slip:
+    """An item slips from a gripper: at sim time ``at`` (s), or at ``rate`` per carried second."""
+
+    at: Optional[float] = None
+    rate: float = 0.0
+
+
+Fault = Union[Drop, Delay, Latency, Loss, Repeat, Crash, Slip]
 _KIND = {Drop: 'drop', Delay: 'delay', Latency: 'latency', Loss: 'loss', Repeat: 'repeat',
-         Crash: 'crash'}
+         Crash: 'crash', Slip: 'drop@'}
 _ARITY = {'drop': 3, 'delay': 4, 'latency': 4, 'loss': 3, 'repeat': 3, 'crash': 3}
 
 
@@ -141,6 +157,8 @@ def parse_fault(spec: str) -> Tuple[str, Fault]:
 
     :raises ValueError: with the reason.
     """
+    if spec.startswith('drop@'):  # the world's: named for the bridge
+        return WORLD, _slip(spec)
     parts = spec.split(':')
     name, arity = parts[1] if len(parts) > 1 else '', _ARITY.get(parts[0])
     if arity is None or len(parts) != arity or not name.startswith('/'):
@@ -200,6 +218,45 @@ def parse_faults(specs: Sequence[str]) -> Dict[str, List[Fault]]:
     return out
 
 
+#: the name the world's faults go under (:class:`Slip`: the bridge's simulated world)
+WORLD = ''
+
+
+def _slip(spec: str) -> Slip:
+    """Return the slip of ``drop@<sim s>`` or ``drop@rate:<per s>``.
+
+    >>> _slip('drop@12.5'), _slip('drop@rate:0.05')
+    (Slip(at=12.5, rate=0.0), Slip(at=None, rate=0.05))
+
+    :raises ValueError: with the reason.
+    """
+    text = spec[len('drop@'):]
+    try:
+        if text.startswith('rate:'):
+            rate = float(text[len('rate:'):])
+            if 0.0 <= rate < float('inf'):
+                return Slip(rate=rate)
+        else:
+            at = float(text)
+            if 0.0 <= at < float('inf'):
+                return Slip(at=at)
+    except ValueError:
+        pass
+    raise ValueError(f'fault {spec!r}: expected drop@<sim seconds >= 0> or '
+                     'drop@rate:<slips per second of carrying >= 0>')
+
+
+def slips(specs: Sequence[str]) -> Tuple[List[float], float]:
+    """Return the slips of ``specs``: their sim times, sorted, and the rate (the largest).
+
+    >>> slips(['drop@30', 'drop@12.5', 'drop@rate:0.1', 'drop:/a/gripper:1'])
+    ([12.5, 30.0], 0.1)
+    """
+    found = [f for f in parse_faults(specs).get(WORLD, ()) if isinstance(f, Slip)]
+    return sorted(f.at for f in found if f.at is not None), max((f.rate for f in found),
+                                                                default=0.0)
+
+
 def crashes(specs: Sequence[str]) -> Dict[str, float]:
     """Return the crashes of ``specs``: ``{fully qualified node name: sim s}`` (the first each).
 
@@ -217,7 +274,7 @@ def node_entries(specs: Sequence[str]) -> List[str]:
     >>> node_entries(['crash:/pybullet_bridge:3', 'drop:/a/gripper:1', ''])
     ['drop:/a/gripper:1']
     """
-    return [s for s in specs if s and not isinstance(parse_fault(s)[1], Crash)]
+    return [s for s in specs if s and not isinstance(parse_fault(s)[1], (Crash, Slip))]
 
 
 class LatencyLine:

@@ -70,8 +70,13 @@ def stages(opts: LaunchOptions, with_automation: bool) -> List[Stage]:
     upstream = tuple(graph.line_upstream(opts.cell, opts.cells))
     faults: Tuple[str, ...] = ()
     if opts.faults:  # every node applies the entries naming its endpoints
-        from scara_collab.run.faults import node_entries
+        from scara_collab.run.faults import node_entries, slips
         faults = tuple(node_entries(opts.faults))
+        slip_at, slip_rate = slips(opts.faults)  # the world's: the bridge drops the item
+        if slip_at:
+            bridge['slip_at'] = ','.join(repr(float(t)) for t in slip_at)
+        if slip_rate > 0:
+            bridge['slip_rate'] = repr(float(slip_rate))
         at = crashes(opts).get('pybullet_bridge')
         if at is not None and 0 < at < float(opts.duration):
             bridge['pause_at'] = repr(float(at))  # where the supervisor kills it

@@ -139,6 +139,18 @@ class Grippers:
         self.conveyor.event('released', rec, robot)
         return True, f'{robot} released item {rec.id} ({rec.cls})'
 
+    def slip(self, robot: str) -> Optional[int]:
+        """Let the item ``robot`` holds slip out of its gripper (an event ``slipped``).
+
+        :return: the item's id, or None if the gripper holds nothing.
+        """
+        item_id = self.held_item(robot)
+        if item_id is None:
+            return None
+        self.release(robot)
+        self.conveyor.event('slipped', self.conveyor.records[item_id], robot)
+        return item_id
+
     def attach_payload(self, robot: str, mass: float, size: Optional[float] = None) -> int:
         """Hang a test body of ``mass`` kg (a cube, class ``'payload'``) on ``robot``'s tool.
 
