@@ -16,7 +16,11 @@ for nobody, as on hardware or in Gazebo: the bridge's ``lockstep_window`` 0), ``
 none), ``cells`` (N > 1: a line of N cells along one belt, cell k under ``/cell_k`` with its
 bridge's line parameters and its upstream cells' handoff remaps, only cell 0 fed;
 :mod:`scara_collab.core.line`; with ``namespace`` the line goes under it, ``<ns>/cell_k``),
-``cell`` (with ``cells``: only cell K of the line, for one machine per cell; default all).
+``cell`` (with ``cells``: only cell K of the line, for one machine per cell; default all),
+``person`` (a person in every cell: a built-in scenario, ``pass-by``, ``inlet``, ``middle`` or
+``random``, or a YAML file's path; the bridge simulates it and the safety scanners, and the
+separation monitor scales the arms' speeds: :func:`scara_collab.graph.person_params`; default
+none), ``person_seed`` (the person's seed; default the bridge's).
 """
 import os
 
@@ -31,11 +35,13 @@ from scara_collab import graph
 PACKAGE = 'scara_collab'
 ARGUMENTS = {'mode': 'collaborative', 'tf': 'false', 'viewer': 'false', 'rviz': 'false',
              'auto_start': 'true', 'lockstep': 'true', 'namespace': '', 'cells': '1',
-             'cell': ''}
+             'cell': '', 'person': '', 'person_seed': ''}
 
 
 def _typed(value: str):
     """Return a job-mode parameter (a ``-p`` string) as its typed value."""
+    if value.startswith('[') and value.endswith(']'):  # graph.param_value's string array
+        return [v.strip().strip("'") for v in value[1:-1].split(',') if v.strip()]
     for number in (int, float):
         try:
             return number(value)
@@ -66,6 +72,15 @@ def nodes(context):
             raise ValueError(f"cell must be one of 0..{cells - 1}, got {arg['cell']!r}")
         which = [int(arg['cell'])]
     base = graph.namespace_of(arg['namespace'])
+    person = arg['person'] if arg['person'] not in ('', 'none') else None
+    seed = None
+    if arg['person_seed'] != '':
+        try:
+            seed = int(arg['person_seed'])
+        except ValueError:
+            raise ValueError(
+                f"person_seed must be an integer, got {arg['person_seed']!r}") from None
+    people = graph.person_params(person, seed)
     out = []
     for k in which:
         namespace = base + graph.cell_namespace(k, cells)
@@ -75,9 +90,11 @@ def nodes(context):
             graph.remaps(namespace, upstream).items())} if namespace else {}
         for spec in graph.job_nodes(automation=arg['mode'] != 'idle',
                                     viewer=arg['viewer'].lower() == 'true' and k == 0,
-                                    transforms=rviz or arg['tf'].lower() == 'true'):
+                                    transforms=rviz or arg['tf'].lower() == 'true',
+                                    people=person is not None):
             files = [os.path.join(share, 'config', f'{c}.yaml') for c in spec.configs]
-            own = dict(params.get(spec.name, {}), **line.get(spec.name, {}))
+            own = dict(params.get(spec.name, {}), **line.get(spec.name, {}),
+                       **people.get(spec.name, {}))
             values = {key: _typed(v) for key, v in own.items()}
             out.append(Node(package=PACKAGE, executable=spec.name, name=spec.name,
                             output='screen',

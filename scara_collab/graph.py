@@ -30,6 +30,7 @@ the tests' graphs (``test/ros_harness.py``). In launch order::
     replication_manager  collab/target(_trajectory) -> both arms, mirrored   ready: service
     collision_monitor    arm-to-arm distance, e-stop                         ready: service
     automation_manager   the sorting job                                     ready: service
+    separation_monitor   scans -> each arm's speed factor (with a person)    ready: subscribed
     cell_viewer          live 3D view (optional)                             ready: page answers
 
 >>> [n.name for n in job_nodes()][:3]
@@ -208,6 +209,7 @@ class NodeSpec:
     fixed: Mapping[str, str] = field(default_factory=dict)  # the class's own keywords
     optional: bool = False     # started only when asked for (the viewer, transforms)
     lockstep: bool = False     # answers clock on sim/lockstep (scara_collab.nodes.lockstep)
+    guard: bool = False        # the arms hold while it is silent (bridge lockstep_guards)
 
     def node_class(self) -> type:
         """Return the class that builds the node (imported on call)."""
@@ -245,14 +247,15 @@ NODES: Tuple[NodeSpec, ...] = (
     NodeSpec('collision_monitor', _n('collision_monitor:main'),
              _n('collision_monitor:CollisionMonitor'), (),
              Readiness('service', 'collision_monitor/clear', 'std_srvs/srv/Trigger'),
-             lockstep=True),
+             lockstep=True, guard=True),
     NodeSpec('automation_manager', _n('automation_manager:main'),
              _n('automation_manager:AutomationManager'), ('automation', 'controllers', 'people'),
              Readiness('service', 'automation_manager/start', 'std_srvs/srv/Trigger'),
              lockstep=True),
     NodeSpec('separation_monitor', _n('separation_monitor:main'),
              _n('separation_monitor:SeparationMonitorNode'), ('people',),
-             Readiness('subscribed', 'safety_scanner/scan'), optional=True, lockstep=True),
+             Readiness('subscribed', 'safety_scanner/scan'), optional=True, lockstep=True,
+             guard=True),
     NodeSpec('cell_viewer', _n('cell_viewer:main'), _n('cell_viewer:CellViewer'), (),
              Readiness('page', 'joint_states'), optional=True),
     NodeSpec('state_publisher', _n('state_publisher:main'),
@@ -330,6 +333,7 @@ TOPICS: Tuple[Topic, ...] = (
     Topic('person/markers', 'visualization_msgs/msg/MarkerArray'),  # for records and views
     Topic('person/truth', _STATUS),                                # ... against each arm
     Topic('separation_monitor/status', _STATUS),                   # separation_monitor
+    Topic('separation_monitor/markers', 'visualization_msgs/msg/MarkerArray'),  # ... for RViz
     Topic('/rosout', 'rcl_interfaces/msg/Log', 'events'),  # rcl's (records.bag.ROSOUT_QOS)
 )
 #: the topics of each robot, ``{robot}`` standing for its namespace
@@ -417,6 +421,39 @@ def lockstep_expect(nodes: Sequence[NodeSpec]) -> List[str]:
     ['left_planner', 'right_planner']
     """
     return [n.name for n in nodes if n.lockstep]
+
+
+def lockstep_guards(nodes: Sequence[NodeSpec]) -> List[str]:
+    """Return the bridge's ``lockstep_guards`` for a run of ``nodes``: the arms hold without them.
+
+    >>> lockstep_guards(job_nodes()), lockstep_guards(job_nodes(people=True))
+    (['collision_monitor'], ['collision_monitor', 'separation_monitor'])
+    """
+    return [n.name for n in nodes if n.guard]
+
+
+def person_params(person: Optional[str], seed: Optional[int]) -> Dict[str, Dict[str, str]]:
+    """Return the parameters of a run with a person, per node (none without one).
+
+    The bridge simulates the person ``person`` (a scenario's name or a YAML file's path,
+    :func:`scara_collab.sim.person_scenarios.scenario`) seeded by ``seed``, with the safety
+    scanners, and holds the arms while the separation monitor is silent, as while the
+    collision monitor is (:func:`lockstep_guards`).
+
+    >>> person_params(None, 7)
+    {}
+    >>> person_params('inlet', 7)['pybullet_bridge']['person_seed']
+    '7'
+    >>> person_params('inlet', 7)['pybullet_bridge']['lockstep_guards']
+    "['collision_monitor','separation_monitor']"
+    """
+    if person is None:
+        return {}
+    bridge = {'person': person,
+              'lockstep_guards': param_value(lockstep_guards(job_nodes(people=True)))}
+    if seed is not None:
+        bridge['person_seed'] = str(int(seed))
+    return {'pybullet_bridge': bridge}
 
 
 #: s, the planners' ``send_margin`` in real time: the planning lead, as in lockstep. A

@@ -181,3 +181,30 @@ def test_joint_state_arrays_equals_the_numpy_reference_on_good_and_bad_states():
         assert all(np.array_equal(g, w) and g.dtype == w.dtype for g, w in zip(got, want))
         outcomes.add('ok')
     assert outcomes == {'ok', 'lacks', 'position', 'non-finite'}
+
+
+def test_a_scan_reads_back_only_with_its_scanners_geometry():
+    """The ranges as floats, NaN and inf kept; another count, angle or limit is refused."""
+    from sensor_msgs.msg import LaserScan
+
+    from scara_collab.core.config import load_config
+    from scara_collab.core.scan_tracking import scanners_from_config
+    geometry = scanners_from_config(load_config('people'))[0]
+    ranges = np.full(geometry.count, np.inf)
+    ranges[:2] = [np.nan, 1.5]
+
+    def scan(**changes):
+        fields = dict(angle_min=geometry.angle_min, angle_increment=geometry.angle_increment,
+                      range_min=geometry.range_min, range_max=geometry.range_max,
+                      ranges=ranges.tolist())
+        fields.update(changes)
+        return LaserScan(**fields)
+    out = conv.scan_ranges(scan(), geometry)
+    assert out.dtype == float and np.isnan(out[0]) and out[1] == np.float32(1.5)
+    assert np.all(np.isinf(out[2:]))
+    for changes, text in (({'ranges': [1.0] * 3}, '3 rays'),
+                          ({'angle_min': 0.0}, 'angle_min'),
+                          ({'angle_increment': geometry.angle_increment * 2}, 'angle_increment'),
+                          ({'range_max': 10.0}, 'range_max')):
+        with pytest.raises(conv.MessageError, match=text):
+            conv.scan_ranges(scan(**changes), geometry)

@@ -155,3 +155,29 @@ def test_cells_3_starts_a_line_of_cells_in_their_namespaces(monkeypatch):
         'parameters'][-1] == own[1]
     with pytest.raises(ValueError, match='cell must be one of 0..2'):
         opaque.kwargs['function'](dict(module.ARGUMENTS, cells='3', cell='3'))
+
+
+def test_a_person_starts_the_separation_monitor_and_gives_the_bridge_the_scenario(monkeypatch):
+    """``person:=inlet``: the monitor after the bridge, which simulates it and is guarded by it.
+
+    Without ``person`` the cell is today's: no monitor, no new bridge parameter.
+    """
+    module = load(monkeypatch)
+    opaque = module.generate_launch_description().args[0][-1]
+    assert module.ARGUMENTS['person'] == ''
+    nodes = opaque.kwargs['function'](dict(module.ARGUMENTS, person='inlet', person_seed='4'))
+    names = [n.kwargs['name'] for n in nodes]
+    assert names == [n.name for n in graph.job_nodes(people=True)]
+    bridge = nodes[0].kwargs['parameters'][-1]
+    assert (bridge['person'], bridge['person_seed']) == ('inlet', 4)
+    assert bridge['lockstep_guards'] == ['collision_monitor', 'separation_monitor']
+    monitor = nodes[names.index('separation_monitor')].kwargs['parameters']
+    assert [Path(f).stem for f in monitor[:-1]] == ['people']
+    plain = opaque.kwargs['function'](dict(module.ARGUMENTS))
+    assert [n.kwargs['name'] for n in plain] == [n.name for n in graph.job_nodes()]
+    assert not {'person', 'person_seed', 'lockstep_guards'} & set(
+        plain[0].kwargs['parameters'][-1])
+    none = opaque.kwargs['function'](dict(module.ARGUMENTS, person='none'))
+    assert len(none) == len(plain)
+    with pytest.raises(ValueError, match='person_seed must be an integer'):
+        opaque.kwargs['function'](dict(module.ARGUMENTS, person='inlet', person_seed='x'))

@@ -444,6 +444,34 @@ def test_the_lockstep_flag_sets_the_bridges_window():
     assert exc.value.code == 2
 
 
+def test_a_person_starts_the_separation_monitor_and_sets_the_bridges_person():
+    """``--person``: the monitor in the plan, the bridge's scenario, seed and guards.
+
+    Without it the plan is today's: no monitor and none of those parameters. In a line,
+    ``--person-cell K`` keeps the person (and the monitor) to cell K.
+    """
+    from scara_collab import graph
+    from scara_collab.run.options import parse_options
+    from scara_collab.run.stages import stages
+
+    def plan(argv):
+        return {s.name: s for s in stages(parse_options(argv), True)}
+    plain = plan([])
+    assert 'separation_monitor' not in plain
+    assert not {'person', 'person_seed', 'lockstep_guards'} & set(
+        plain['pybullet_bridge'].params)
+    person = plan(['--person', 'inlet', '--seed', '3'])
+    assert list(person) == [n.name for n in graph.job_nodes(people=True)]
+    bridge = person['pybullet_bridge'].params
+    assert (bridge['person'], bridge['person_seed']) == ('inlet', '3')
+    assert bridge['lockstep_guards'] == "['collision_monitor','separation_monitor']"
+    assert 'separation_monitor' in bridge['lockstep_expect']
+    assert person['separation_monitor'].configs == ('people',)
+    line = ['--person', 'inlet', '--cells', '2', '--person-cell', '1', '--line-cell']
+    assert 'separation_monitor' not in plan(line + ['0'])
+    assert plan(line + ['1'])['pybullet_bridge'].params['person'] == 'inlet'
+
+
 @pytest.mark.skipif(not HAVE_AUTOMATION, reason='needs the automation manager')
 def test_a_real_time_run_with_late_joint_states_ends_cleanly(launch, tmp_path):
     """``--lockstep off --rtf 1`` with every joint state 20 +- 10 ms late: a clean run.

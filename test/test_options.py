@@ -64,6 +64,10 @@ def test_the_fields_are_typed_values():
     (['--silent-timeout', '0'], '--silent-timeout must be > 0'),
     (['--viewer', '0'], '--viewer PORT must be in 1..65535'),
     (['--mode', 'dancing'], "invalid choice: 'dancing'"),
+    (['--person', 'nowhere'], "--person: 'nowhere' is neither a built-in scenario (pass-by, "),
+    (['--person-cell', '0'], '--person-cell needs --person'),
+    (['--person', 'inlet', '--cells', '2', '--person-cell', '2'],
+     '--person-cell 2 is not a cell of a line of 2'),
 ])
 def test_a_bad_argument_is_a_usage_error(argv, message, capsys):
     """Each bad value or combination exits 2 with a message naming the option."""
@@ -71,3 +75,41 @@ def test_a_bad_argument_is_a_usage_error(argv, message, capsys):
         parse_options(argv)
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_person_is_a_built_in_scenario_or_a_yaml_file_seeded_like_the_feed(tmp_path):
+    """``--person``: a built-in name or a file's absolute path, the feed's seed; none by default.
+
+    In a line, every cell has the person, or only ``--person-cell K``.
+    """
+    none = parse_options([])
+    assert (none.person, none.cell_person, none.person_seed) == (None, None, None)
+    assert parse_options(['--person', 'none']).person is None
+    inlet = parse_options(['--person', 'inlet'])
+    assert (inlet.cell_person, inlet.person_seed) == (
+        'inlet', load_config('simulation')['item_seed'])
+    assert parse_options(['--person', 'random', '--seed', '3']).person_seed == 3
+    walk = tmp_path / 'walk.yaml'
+    walk.write_text('visits:\n  - start: 2.0\n    speed: 1.2\n    waypoints: [[-6.0, -3.0], '
+                    '[-6.0, 3.0]]\n')
+    assert parse_options(['--person', str(walk)]).person == str(walk.resolve())
+    line = ['--person', 'middle', '--cells', '2', '--line-cell']
+    assert parse_options(line + ['1']).cell_person == 'middle'
+    assert parse_options(line + ['1', '--person-cell', '0']).cell_person is None
+    assert parse_options(line + ['0', '--person-cell', '0']).cell_person == 'middle'
+
+
+@pytest.mark.parametrize('text, message', [
+    ('visits: [', 'not valid YAML'),
+    ('visits: []\n', 'a scenario is {visits: [...]}'),
+    ('visits:\n  - start: 0.0\n    waypoints: [[0, 0]]\n', 'start must be >= 1.0 s'),
+])
+def test_a_person_file_that_is_not_a_scenario_is_a_usage_error(tmp_path, capsys, text, message):
+    """A file that does not parse as a scenario exits 2, saying what is wrong with it."""
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(text)
+    with pytest.raises(SystemExit) as exc:
+        parse_options(['--person', str(bad)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert '--person: ' in err and message in err

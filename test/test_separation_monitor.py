@@ -11,7 +11,8 @@ from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk
 from scara_collab.core.scan_tracking import scanners_from_config
 from scara_collab.core.separation_monitor import (
-    MonitorSettings, ScaleGovernor, SeparationMonitor)
+    MonitorSettings, nearest_person, ScaleGovernor, SeparationMonitor)
+from scara_collab.core.ssm import assess_arm, Person, SsmParams
 
 PERIOD = 1.0 / 25.0  # the scanners' period
 TICK = 0.01  # the decisions' period (100 Hz)
@@ -181,6 +182,21 @@ def test_the_monitor_reads_scans_not_where_the_person_is(cell, cfg):
     found = sorted(tuple(np.round(p.position, 1)) for p in persons)
     assert found[0] == pytest.approx((-2.0, -5.0), abs=0.15)
     assert found[1] == pytest.approx((6.0, 5.0), abs=0.15)
+
+
+def test_the_nearest_person_is_the_one_with_the_smallest_separation(cell, cfg):
+    """Of several columns, the one nearest to the arm's capsules, as ``assess_arm`` measures S."""
+    arm = cell.leader
+    q = np.array([0.3, 1.0, 0.1])
+    params = SsmParams.from_config(cfg)
+    rng = np.random.default_rng(1)
+    assert nearest_person(arm, q, ()) is None
+    for _ in range(20):
+        persons = tuple(Person(rng.uniform(-4.0, 6.0, 2), np.zeros(2), rng.uniform(0.1, 0.5),
+                               2.0, k) for k in range(3))
+        near = nearest_person(arm, q, persons)
+        seps = [assess_arm(arm, q, np.zeros(3), [p], params).separation for p in persons]
+        assert near.id == int(np.argmin(seps))
 
 
 def test_ghost_points_do_not_slow_the_arms(cell, cfg):

@@ -39,8 +39,9 @@ from typing import List, Mapping, NamedTuple, Optional, Sequence, Tuple
 import numpy as np
 from numpy.typing import ArrayLike
 
+from scara_collab.core.collision import arm_capsules, segment_distance
 from scara_collab.core.kinematics import fk
-from scara_collab.core.model import CellModel
+from scara_collab.core.model import ArmModel, CellModel
 from scara_collab.core.scan_tracking import (
     cell_mute_boxes, clusters, foreground, inside_boxes, near_points, range_faults,
     ScanGeometry, teach_contour, Tracker)
@@ -206,6 +207,27 @@ class ScaleGovernor:
         self._time = now
         self._rising_since = None
         return 0.0
+
+
+def nearest_person(arm: ArmModel, q: ArrayLike, persons: Sequence[Person]
+                   ) -> Optional[Person]:
+    """Return the person whose column comes nearest to the arm's capsules (None for none).
+
+    Surface to surface, as :func:`~scara_collab.core.ssm.assess_arm` measures ``S``; for the
+    viewers, which draw each arm's ``S_p`` around the person it is nearest to.
+
+    :param arm: the arm; :param q: ``(3,)`` its joints.
+    :param persons: the persons, as columns.
+    """
+    if not persons:
+        return None
+    start, end, radii = arm_capsules(arm, q)
+    pos = np.array([p.position for p in persons], dtype=float).reshape(-1, 2)
+    bottom = np.column_stack([pos, np.zeros(len(pos))])
+    top = np.column_stack([pos, [p.height for p in persons]])
+    axis, _, _ = segment_distance(start[None], end[None], bottom[:, None], top[:, None])
+    gap = axis - radii[None, :] - np.array([p.radius for p in persons])[:, None]
+    return persons[int(np.argmin(gap.min(axis=1)))]
 
 
 class SeparationMonitor:

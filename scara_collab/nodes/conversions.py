@@ -96,6 +96,32 @@ def joint_state_arrays(msg: JointState, names: Sequence[str]) -> Tuple[np.ndarra
     return np.array(pos), np.array(vel)
 
 
+#: rad or m: how far a scan's angles and limits may be from its scanner's (float32 fields)
+SCAN_TOLERANCE = 1e-4
+
+
+def scan_ranges(msg: LaserScan, geometry) -> np.ndarray:
+    """Return a ``LaserScan``'s ranges ``(N,)`` as floats, after checking it is ``geometry``'s.
+
+    NaN, ``inf`` and short ranges are kept as they are: what they mean is the monitor's
+    (:func:`scara_collab.core.scan_tracking.range_faults`).
+
+    :param geometry: the scanner it claims to come from
+        (:class:`~scara_collab.core.scan_tracking.ScanGeometry`).
+    :raises MessageError: another number of rays, other angles or other range limits.
+    """
+    if len(msg.ranges) != geometry.count:
+        raise MessageError(f'{geometry.name}: {len(msg.ranges)} rays, expected '
+                           f'{geometry.count}')
+    for key, want in (('angle_min', geometry.angle_min),
+                      ('angle_increment', geometry.angle_increment),
+                      ('range_min', geometry.range_min), ('range_max', geometry.range_max)):
+        got = float(getattr(msg, key))
+        if not abs(got - want) <= SCAN_TOLERANCE:
+            raise MessageError(f'{geometry.name}: {key} {got:.6g}, expected {want:.6g}')
+    return np.asarray(msg.ranges, dtype=float)
+
+
 #: s: a joint state stamped further than this from the sim clock is refused (the bridge
 #: stamps its states with the step it publishes on /clock; a stamp elsewhere is not its)
 STAMP_TOLERANCE = 1.0

@@ -53,11 +53,22 @@ class LaunchOptions:
     plots: bool                      # the PNG plots of the run folder
     record: bool                     # run.mcap
     animation: bool                  # run.gif after the run
+    person: Optional[str] = None     # a person's scenario: a built-in name or a YAML file's
+    #                                  absolute path (None: no person, no scanner, no monitor)
+    person_cell: Optional[int] = None  # with cells > 1: the one cell with the person (None: all)
+    person_seed: Optional[int] = None  # the person's seed (--seed, else the item feed's)
 
     @property
     def cell(self) -> int:
         """Return this cell's place in its line (0 for a lone cell)."""
         return 0 if self.line_cell is None else self.line_cell
+
+    @property
+    def cell_person(self) -> Optional[str]:
+        """Return the person's scenario in this cell (:attr:`cell`), or None for none."""
+        if self.person_cell is not None and self.person_cell != self.cell:
+            return None
+        return self.person
 
     @property
     def lockstep_name(self) -> str:
@@ -144,6 +155,14 @@ def parser() -> argparse.ArgumentParser:
                    help='sim seconds between items once the job runs (default: '
                    'config/simulation.yaml feed_interval); below ~1.5 s the feed is faster '
                    'than the arms can take (capacity runs)')
+    p.add_argument('--person', default=None, metavar='SCENARIO|FILE',
+                   help='a person walks through the cell: a built-in scenario (pass-by, inlet, '
+                   'middle, random) or a YAML file of waypoints (docs/people.md); the bridge '
+                   'simulates the person and the safety scanners, the separation monitor scales '
+                   "the arms' speeds; seeded by --seed (default: none, no person)")
+    p.add_argument('--person-cell', type=int, default=None, metavar='K',
+                   help='with --cells N and --person: the person in cell K only (default: in '
+                   'every cell)')
     p.add_argument('--fault', action='append', default=[], metavar='SPEC',
                    help='inject a fault, e.g. drop:/scara_left/gripper:2 (lose the first 2 '
                    'gripper responses), delay:/scara_right/planner_status:3:0.5, '
@@ -209,6 +228,7 @@ def parse_options(argv: Optional[Sequence[str]] = None) -> LaunchOptions:
             graph.cell_namespace(a.line_cell, a.cells) if a.line_cell is not None else '')
     except ValueError as exc:
         p.error(f'--namespace: {exc}')
+    person, person_seed = _person(p, a)
     if a.step_chunk is not None and not a.step_chunk > 0:
         p.error('--step-chunk must be > 0')
     if not a.silent_timeout > 0:
@@ -232,4 +252,37 @@ def parse_options(argv: Optional[Sequence[str]] = None) -> LaunchOptions:
         feed_interval=a.feed_interval, faults=tuple(a.fault), quiet=a.quiet,
         ready_timeout=a.ready_timeout, stall_timeout=a.stall_timeout,
         silent_timeout=a.silent_timeout, plots=not a.no_plots, record=a.record,
-        animation=a.animation)
+        animation=a.animation, person=person, person_cell=a.person_cell,
+        person_seed=person_seed)
+
+
+def _person(p: argparse.ArgumentParser, a: argparse.Namespace
+            ) -> Tuple[Optional[str], Optional[int]]:
+    """Return ``--person`` checked (a built-in name or a file's absolute path) and its seed.
+
+    A file must exist and hold a scenario (:func:`scara_collab.sim.person_scenarios.scenario`
+    builds it, as the bridge will); ``none`` is no person. A bad value exits with status 2.
+    """
+    if a.person_cell is not None:
+        if a.person is None or a.person == 'none':
+            p.error('--person-cell needs --person')
+        if not 0 <= a.person_cell < a.cells:
+            p.error(f'--person-cell {a.person_cell} is not a cell of a line of {a.cells}')
+    if a.person is None or a.person == 'none':
+        return None, None
+    from scara_collab.core.config import ConfigError
+    from scara_collab.core.model import load_cell
+    from scara_collab.sim.person_scenarios import BUILTIN, scenario
+    spec = a.person
+    if spec not in BUILTIN:
+        path = Path(spec).expanduser()
+        if not path.is_file():
+            p.error(f'--person: {spec!r} is neither a built-in scenario ({", ".join(BUILTIN)}) '
+                    'nor a YAML file')
+        spec = str(path.resolve())
+    seed = int(load_config('simulation')['item_seed'] if a.seed is None else a.seed)
+    try:
+        scenario(spec, load_cell(a.profile), load_config('people'), seed)
+    except (ConfigError, OSError, UnicodeDecodeError) as exc:
+        p.error(f'--person: {exc}')
+    return spec, seed

@@ -1,0 +1,331 @@
+"""Separation monitor node (``separation_monitor``): speed and separation monitoring, a thin shell.
+
+:class:`scara_collab.core.separation_monitor.SeparationMonitor` makes every decision; the node
+turns the scans and the arms' states into its observations and publishes what it decides. It
+runs only in a cell with a person (``graph.job_nodes(people=True)``), where the bridge
+simulates the person and the safety scanners.
+
+- ``safety_scanner/scan`` (``sensor_msgs/LaserScan``): one message per scanner per scan, the
+  scanner named by ``header.frame_id`` (``config/people.yaml``, ``scanner.names``); a frame it
+  does not know, or a scan whose rays, angles or limits are not that scanner's, is refused
+  with a throttled warning (a scanner whose scans are all refused falls silent, and every arm
+  stops). The first ``monitor.teach_scans`` usable scans of every scanner are taught as the
+  empty cell's contour. The scans of one instant (one ``header.stamp``) are observed together,
+  with the arms' joints at that instant, once every scanner's has come, or without the missing
+  ones at the first decision half a scan period after that instant; a scan of an instant
+  already observed is refused (its scanner looks silent for it).
+- ``joint_states``: the arms' joints and measured velocities; a state refused by its stamp
+  (:func:`scara_collab.nodes.conversions.admit_state`) is ignored, a non-finite one stops the
+  arm it is of until a finite one comes.
+- ``<robot>/trajectory_clock`` (:class:`~scara_collab.nodes.protocol.TrajectoryClock`): the
+  planned, unscaled joint velocity of each arm's trajectory. Until the first one comes (and
+  for a joint it does not name) the measured velocity stands for it: at ``s = 1`` they agree.
+
+At the state rate, on sim time (:func:`scara_collab.nodes.sim_timer.every`), it decides and
+publishes each arm's factor on ``<robot>/speed_scaling`` (``std_msgs/Float64``, latched, at
+start 0 and then whenever it changes), the decision on ``~/status``
+(:class:`~scara_collab.nodes.protocol.SeparationStatus`, every decision) and once a sim second
+on ``/diagnostics``, and, while something subscribes, RViz markers on ``~/markers``: each
+tracked person's column as a cylinder and per arm a ring of ``S_p`` around the column of the
+person nearest to it. It fails closed as the core does (no scan yet, a silent scanner, a ray
+that measured nothing: every arm ``s = 0`` with the reason), and logs each stop's begin and end
+(throttled). It is a lockstep participant, and the bridge's guard: while it is silent the
+arms hold.
+
+Parameters: every key of ``config/people.yaml`` (read only), and its own ``profile`` and
+``marker_rate`` (Hz of sim time, may change while it runs). ``docs/interface.md``,
+``docs/people.md``.
+"""
+from collections import deque
+from typing import Deque, Dict, List, Optional, Tuple
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import Point
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import JointState, LaserScan
+from std_msgs.msg import ColorRGBA, Float64, Header
+from visualization_msgs.msg import Marker, MarkerArray
+
+from scara_collab.core.collision import arm_capsules
+from scara_collab.core.config import load_config, Rule
+from scara_collab.core.model import load_cell
+from scara_collab.core.scan_tracking import range_faults, scanners_from_config
+from scara_collab.core.separation_monitor import (Decision, MonitorSettings, nearest_person,
+                                                  PersonSeen, SeparationMonitor)
+from scara_collab.nodes import conversions as conv, lockstep, protocol as proto
+from scara_collab.nodes.diagnostics import Diagnostics
+from scara_collab.nodes.guarded import guarded
+from scara_collab.nodes.params import declare_checked, declare_config
+from scara_collab.nodes.qos import DEFAULT, LATCHED, LATEST
+from scara_collab.nodes.runner import run_node
+from scara_collab.nodes.sim_timer import every
+
+#: the monitor's own parameters and their defaults (the rest is config/people.yaml)
+PARAMETERS = {
+    'profile': '',
+    'marker_rate': 10.0,  # Hz of sim time, at most, for ~/markers
+}
+RULES = (Rule('profile', 'text'), Rule('marker_rate', 'positive'))
+DYNAMIC = ('marker_rate',)
+#: ring colour per arm, by its index in ``cell.arms`` (the viewer's planned-path colours)
+ARM_COLOURS = ((0.9, 0.47, 0.08), (0.08, 0.63, 0.78))
+#: s of joint states kept, to mute the quills where they were when a scan was taken
+STATE_HISTORY = 1.0
+#: s between two throttled warnings of one kind
+THROTTLE = 5.0
+RING_POINTS = 48
+
+
+def _ns(stamp) -> int:
+    """``builtin_interfaces/Time`` -> integer nanoseconds (the scans of one instant, exactly)."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+class SeparationMonitorNode(Node):
+    """The speed and separation monitor: scans and states in, each arm's speed factor out."""
+
+    def __init__(self, **kwargs):
+        """Declare and check the parameters, load the cell, create the topics.
+
+        :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``cli_args``, ...).
+        :raises ConfigError: an invalid ``config/people.yaml`` value or own parameter.
+        """
+        super().__init__('separation_monitor', **kwargs)
+        self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
+        cfg = declare_config(self, ('people',))['people']
+        params = declare_checked(self, PARAMETERS, RULES, dynamic=DYNAMIC,
+                                 on_change=self._set_params)
+        self._set_params(params)
+        self.cell = load_cell(params['profile'] or None)
+        self.settings = MonitorSettings.from_config(cfg)
+        self.scanners = scanners_from_config(cfg)
+        self.monitor = SeparationMonitor(self.cell, self.settings, self.scanners)
+        self._index = {g.name: i for i, g in enumerate(self.scanners)}
+        self._teach: List[List[np.ndarray]] = [[] for _ in self.scanners]
+        self._groups: Dict[int, List[Optional[np.ndarray]]] = {}  # stamp (ns) -> scans
+        self.observed: Optional[int] = None  # the newest instant observed, ns
+        self._half_period = int(round(self.settings.scan_period * 0.5e9))
+        rate = float(load_config('simulation')['state_rate'])
+        # (stamp, {robot: joints or None}) of the recent states, newest last
+        self._history: Deque[Tuple[float, Dict[str, Optional[np.ndarray]]]] = deque(
+            maxlen=max(2, int(STATE_HISTORY * rate)))
+        self._state: Dict[str, Optional[Tuple[np.ndarray, np.ndarray]]] = {}
+        self._clocks: Dict[str, proto.TrajectoryClock] = {}
+        self.decision: Optional[Decision] = None
+        self.status: Optional[proto.SeparationStatus] = None
+        self._scales: Dict[str, float] = {}
+        self._stopped: Dict[str, bool] = {}
+        self._fault = ''
+        self._next_marker = 0.0
+        # one logger per arm, kept: a throttled message is throttled per logger and call site
+        self._logs = {a.name: self.get_logger().get_child(a.name) for a in self.cell.arms}
+        self.scale_pubs = {a.name: self.create_publisher(Float64, f'{a.name}/speed_scaling',
+                                                         LATCHED) for a in self.cell.arms}
+        self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', DEFAULT)
+        self.diagnostics = Diagnostics(self)
+        self.marker_pub = self.create_publisher(MarkerArray, '~/markers', DEFAULT)
+        # every scan and every state, in turn (two scanners' scans come at each instant)
+        self.create_subscription(LaserScan, 'safety_scanner/scan',
+                                 guarded(self, self._on_scan), DEFAULT)
+        self.create_subscription(JointState, 'joint_states', guarded(self, self._on_state),
+                                 DEFAULT)
+        for arm in self.cell.arms:  # only the newest planned velocity matters
+            self.create_subscription(DiagnosticStatus, f'{arm.name}/trajectory_clock',
+                                     guarded(self, self._on_clock), LATEST)
+        for arm in self.cell.arms:  # held until the first decision
+            self._publish_scale(arm.name, 0.0)
+        every(self, 1.0 / rate, self._decide)  # on the sim clock, before the lockstep answer
+        every(self, 1.0, self._publish_diagnostics)
+        lockstep.join(self)  # sim time waits while this node decides
+        self.get_logger().info(
+            f'watching {", ".join(a.name for a in self.cell.arms)} with '
+            f'{", ".join(g.name for g in self.scanners)}; teaching the empty cell from '
+            f'{self.settings.teach_scans} scans each')
+
+    def _set_params(self, params: dict) -> None:
+        """Take the values of the dynamic parameters (at start and on a change)."""
+        self.marker_period = 1.0 / float(params['marker_rate'])
+
+    # --- what the monitor observes -----------------------------------------------------------
+    def _on_scan(self, msg: LaserScan) -> None:
+        index = self._index.get(msg.header.frame_id)
+        if index is None:
+            self.get_logger().warning(
+                f'ignoring a scan of frame {msg.header.frame_id!r}: not a scanner of '
+                f'config/people.yaml ({", ".join(self._index)})', throttle_duration_sec=THROTTLE)
+            return
+        try:
+            ranges = conv.scan_ranges(msg, self.scanners[index])
+        except conv.MessageError as exc:
+            self.get_logger().warning(f'ignoring a scan: {exc}', throttle_duration_sec=THROTTLE)
+            return
+        stamp = _ns(msg.header.stamp)
+        if self.observed is not None and stamp <= self.observed:
+            self.get_logger().warning(
+                f'ignoring a late scan of {msg.header.frame_id} at t={stamp * 1e-9:.3f} s: its '
+                f'instant is observed already', throttle_duration_sec=THROTTLE)
+            return
+        self._learn(index, ranges)
+        group = self._groups.setdefault(stamp, [None] * len(self.scanners))
+        group[index] = ranges
+        if all(r is not None for r in group):
+            self._observe_until(stamp)
+
+    def _learn(self, index: int, ranges: np.ndarray) -> None:
+        """Keep a usable scan for the contour until every scanner has ``teach_scans``."""
+        if self.monitor.taught or range_faults(ranges, self.scanners[index]):
+            return
+        if len(self._teach[index]) < self.settings.teach_scans:
+            self._teach[index].append(ranges)
+        if all(len(k) >= self.settings.teach_scans for k in self._teach):
+            self.monitor.teach(self._teach)
+            self._teach = [[] for _ in self.scanners]
+            self.get_logger().info(f'taught the empty cell from {self.settings.teach_scans} '
+                                   'scans of each scanner')
+
+    def _observe_until(self, stamp: int) -> None:
+        """Observe every instant up to ``stamp`` (ns) whose scans are waiting, oldest first."""
+        for t in sorted(k for k in self._groups if k <= stamp):
+            scans = self._groups.pop(t)
+            self.monitor.observe(t * 1e-9, scans, self._joints_at(t * 1e-9))
+            self.observed = t
+
+    def _joints_at(self, t: float) -> Dict[str, np.ndarray]:
+        """Return the arms' finite joints of the newest state at or before ``t`` (s)."""
+        chosen = None
+        for stamp, joints in reversed(self._history):
+            chosen = joints
+            if stamp <= t:
+                break
+        return {r: q for r, q in (chosen or {}).items() if q is not None}
+
+    def _on_state(self, msg: JointState) -> None:
+        if not conv.admit_state(self, self.stamps, msg):
+            return
+        for arm in self.cell.arms:
+            try:
+                self._state[arm.name] = conv.joint_state_arrays(msg, arm.joint_names)
+            except conv.MessageError as exc:  # fail closed: the arm stops until a finite one
+                self._state[arm.name] = None
+                self._logs[arm.name].warning(
+                    f'refusing its joint state ({exc}); it stops', throttle_duration_sec=THROTTLE)
+        self._history.append((conv.to_sec(msg.header.stamp),
+                              {r: None if s is None else s[0] for r, s in self._state.items()}))
+
+    def _on_clock(self, msg: DiagnosticStatus) -> None:
+        try:
+            clock = proto.TrajectoryClock.from_msg(msg)
+        except proto.ProtocolError as exc:
+            self.get_logger().warning(f'ignoring a trajectory clock: {exc}',
+                                      throttle_duration_sec=THROTTLE)
+            return
+        self._clocks[clock.robot] = clock
+
+    # --- the decision ------------------------------------------------------------------------
+    def planned(self) -> Dict[str, Tuple[np.ndarray, np.ndarray]]:
+        """Return ``{robot: (q, planned qd)}`` of the arms with a finite state (others stop)."""
+        out = {}
+        for arm in self.cell.arms:
+            state = self._state.get(arm.name)
+            if state is None:
+                continue
+            q, measured = state
+            clock = self._clocks.get(arm.name)
+            qd = measured if clock is None else np.array(
+                [clock.planned.get(j, m) for j, m in zip(arm.joint_names, measured)],
+                dtype=float)
+            out[arm.name] = (q, qd)
+        return out
+
+    def _decide(self) -> None:
+        now = conv.now(self)
+        # the instants whose missing scans are half a period late: without them
+        self._observe_until(int(round(now * 1e9)) - self._half_period)
+        decision = self.monitor.decide(now, self.planned())
+        self.decision = decision
+        for arm in decision.arms:
+            self._publish_scale(arm.robot, arm.scale)
+        self._log(decision)
+        self.status = proto.SeparationStatus(
+            round(now, 6), scale={a.robot: a.scale for a in decision.arms},
+            stop={a.robot: a.stop for a in decision.arms},
+            cause={a.robot: a.cause for a in decision.arms},
+            separation={a.robot: a.separation for a in decision.arms},
+            margin={a.robot: a.margin for a in decision.arms},
+            persons=tuple(PersonSeen.of(p) for p in decision.persons), fault=decision.fault)
+        self.status_pub.publish(self.status.to_msg())
+        if now >= self._next_marker and self.marker_pub.get_subscription_count():
+            self._next_marker = now + self.marker_period  # markers only for a listener
+            self.marker_pub.publish(self._markers(decision))
+
+    def _publish_scale(self, robot: str, scale: float) -> None:
+        """Publish ``robot``'s factor if it changed (latched: the last one stands)."""
+        if self._scales.get(robot) != scale:
+            self._scales[robot] = scale
+            self.scale_pubs[robot].publish(Float64(data=float(scale)))
+
+    def _log(self, decision: Decision) -> None:
+        """Log each stop's begin and end (throttled while it stands)."""
+        log = self.get_logger()
+        if decision.fault:
+            log.warning(f'every arm stopped: {decision.fault}', throttle_duration_sec=THROTTLE)
+        elif self._fault:
+            log.info(f'fault cleared ({self._fault})')
+        self._fault = decision.fault
+        for arm in decision.arms:
+            if decision.fault:
+                self._stopped[arm.robot] = True
+                continue
+            arm_log = self._logs[arm.robot]
+            if arm.stop:
+                arm_log.warning(f'protective stop: {arm.cause}', throttle_duration_sec=THROTTLE)
+            elif self._stopped.get(arm.robot) and arm.scale > 0.0:
+                arm_log.info(f'resuming at {arm.scale:.2f} of its speed')
+            self._stopped[arm.robot] = arm.stop or arm.scale <= 0.0
+
+    def _publish_diagnostics(self) -> None:
+        if self.status is not None:
+            self.diagnostics.publish(self.status.to_msg())
+
+    def _markers(self, decision: Decision) -> MarkerArray:
+        """Return the persons' columns and each arm's ``S_p`` ring around its nearest person."""
+        header = Header(stamp=conv.to_time(decision.time), frame_id='world')
+        out = MarkerArray()
+        out.markers.append(Marker(header=header, action=Marker.DELETEALL))
+        for p in decision.persons:
+            m = Marker(header=header, ns='persons', id=int(p.id), type=Marker.CYLINDER,
+                       action=Marker.ADD, color=ColorRGBA(r=0.9, g=0.2, b=0.2, a=0.35))
+            m.pose.position = Point(x=float(p.position[0]), y=float(p.position[1]),
+                                    z=p.height / 2.0)
+            m.pose.orientation.w = 1.0
+            m.scale.x = m.scale.y = 2.0 * p.radius
+            m.scale.z = p.height
+            out.markers.append(m)
+        for k, arm_decision in enumerate(decision.arms):
+            arm = self.cell.arm(arm_decision.robot)
+            state = self._state.get(arm.name)
+            s_p = arm_decision.separation - arm_decision.margin
+            if state is None or not np.isfinite(s_p):
+                continue
+            person = nearest_person(arm, state[0], decision.persons)
+            if person is None:
+                continue
+            r, g, b = ARM_COLOURS[k % len(ARM_COLOURS)]
+            m = Marker(header=header, ns=f'{arm.name}/protective_separation', id=0,
+                       type=Marker.LINE_STRIP, action=Marker.ADD,
+                       color=ColorRGBA(r=r, g=g, b=b, a=0.9))
+            m.scale.x = 0.03
+            m.pose.orientation.w = 1.0
+            radius = person.radius + s_p  # S_p from the column's surface
+            z = float(arm_capsules(arm, state[0])[0][1, 2])  # at link 2's height
+            a = np.linspace(0.0, 2.0 * np.pi, RING_POINTS + 1)
+            m.points = [Point(x=float(person.position[0] + radius * np.cos(t)),
+                              y=float(person.position[1] + radius * np.sin(t)), z=z) for t in a]
+            out.markers.append(m)
+        return out
+
+
+def main(args=None) -> None:
+    """Run the separation monitor: ``ros2 run scara_collab separation_monitor``."""
+    run_node(SeparationMonitorNode, args)

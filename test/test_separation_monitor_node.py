@@ -1,0 +1,283 @@
+"""The separation monitor node: scans, states and trajectory clocks in, speed factors out.
+
+In-process on sim time: the test publishes ``/clock``, ``/joint_states``, exact synthetic
+``LaserScan`` messages of the empty cell (its pillars) and of a person's legs, and each arm's
+``trajectory_clock``, one sim step at a time, each step waited for with a timeout.
+"""
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+import numpy as np
+import pytest
+from ros_harness import Graph, params_args
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState, LaserScan
+from std_msgs.msg import Float64
+from synthetic_scans import legs, pillars, scan_circles
+from visualization_msgs.msg import Marker, MarkerArray
+
+from scara_collab import graph
+from scara_collab.core.config import ConfigError, load_config
+from scara_collab.core.scan_tracking import scanners_from_config
+from scara_collab.nodes import conversions as conv
+from scara_collab.nodes.protocol import SeparationStatus, TrajectoryClock
+from scara_collab.nodes.qos import LATCHED
+from scara_collab.nodes.separation_monitor import SeparationMonitorNode
+
+PERIOD = 1.0 / 25.0  # the scanners' period
+TICK = 0.01  # a sim step: a joint state and a decision
+LEFT, RIGHT = 'scara_left', 'scara_right'
+#: the left arm swings as planned; a person at NEAR slows it (0.74 at this speed), not at rest
+SWING = np.array([1.5, -1.0, 0.0])
+NEAR = (3.5, -4.0)
+
+
+class Cell:
+    """The monitor node and a probe that plays the bridge: clock, states, scans, clocks."""
+
+    def __init__(self, cell, **overrides):
+        """Build the node on sim time (no lockstep) and wait for the probe's connections."""
+        self.cell = cell
+        self.g = Graph()
+        self.node = self.g.add(SeparationMonitorNode(context=self.g.context, cli_args=params_args(
+            'people', overrides={'use_sim_time': 'true', 'lockstep': 'false', **overrides})))
+        self.scanners = scanners_from_config(load_config('people'))
+        probe = self.g.probe
+        self.clock = probe.create_publisher(Clock, '/clock', 10)
+        self.states = probe.create_publisher(JointState, '/joint_states', 10)
+        self.scans = probe.create_publisher(LaserScan, '/safety_scanner/scan', 10)
+        self.clocks = {a.name: probe.create_publisher(DiagnosticStatus,
+                                                      f'/{a.name}/trajectory_clock', 10)
+                       for a in cell.arms}
+        self.scaling = {a.name: self.g.collect(Float64, f'/{a.name}/speed_scaling', LATCHED)
+                        for a in cell.arms}
+        self.status = self.g.collect(DiagnosticStatus, '/separation_monitor/status', 100)
+        pubs = [self.clock, self.states, self.scans, *self.clocks.values()]
+        assert self.g.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs))
+        self.q = {a.name: np.array([0.0, 1.2 if a.name == LEFT else -1.2, 0.1])
+                  for a in cell.arms}
+        self.qd = {a.name: np.zeros(3) for a in cell.arms}
+        self.time = 0.0
+        self.rng = np.random.default_rng(3)
+
+    def close(self):
+        """Tear the graph down."""
+        self.g.close()
+
+    def scan(self, geometry, t, circles=(), nan=0):
+        """Publish one scanner's scan at ``t``: the pillars and ``circles``, ``nan`` rays NaN."""
+        ranges = scan_circles(geometry, pillars(self.cell) + list(circles), 0.01, self.rng)
+        ranges[100:100 + nan] = np.nan
+        msg = LaserScan(angle_min=geometry.angle_min, angle_max=geometry.angle_min
+                        + geometry.angle_increment * (geometry.count - 1),
+                        angle_increment=geometry.angle_increment, range_min=geometry.range_min,
+                        range_max=geometry.range_max, ranges=ranges.tolist())
+        msg.header.stamp = conv.to_time(t)
+        msg.header.frame_id = geometry.name
+        self.scans.publish(msg)
+
+    def planned(self, robot, qd):
+        """Publish ``robot``'s trajectory clock with the planned velocity ``qd``."""
+        arm = self.cell.arm(robot)
+        self.clocks[robot].publish(TrajectoryClock(
+            robot, self.time, 0.0, 1.0, 1.0, dict(zip(arm.joint_names, map(float, qd)))).to_msg())
+        assert self.g.spin_until(lambda: robot in self.node._clocks
+                                 and self.node._clocks[robot].time == self.time)
+
+    def step(self, circles=(), scanners=None, nan=0, state=True):
+        """Advance one sim step: a state, the scans due, then ``/clock``; wait for the decision.
+
+        :param scanners: the names of the scanners that scan (default: every one).
+        """
+        t = self.time = round(self.time + TICK, 9)
+        if state:
+            names = [j for a in self.cell.arms for j in a.joint_names]
+            self.states.publish(conv.joint_state(
+                t, names, np.concatenate([self.q[a.name] for a in self.cell.arms]),
+                np.concatenate([self.qd[a.name] for a in self.cell.arms]), [0.0] * 6))
+            assert self.g.spin_until(lambda: self.node._history
+                                     and abs(self.node._history[-1][0] - t) < 1e-9)
+        due = [g for g in self.scanners if scanners is None or g.name in scanners]
+        if due and abs(t / PERIOD - round(t / PERIOD)) < 1e-6:
+            for geometry in due:
+                self.scan(geometry, t, circles, nan)
+            stamp = int(round(t * 1e9))
+            assert self.g.spin_until(lambda: self.node.observed == stamp or (
+                stamp in self.node._groups and sum(r is not None for r in
+                                                   self.node._groups[stamp]) == len(due)))
+        self.clock.publish(Clock(clock=conv.to_time(t)))
+        assert self.g.spin_until(lambda: self.node.decision is not None
+                                 and self.node.decision.time == pytest.approx(t, abs=1e-9))
+        return self.node.decision
+
+    def run(self, seconds, **kwargs):
+        """Run ``seconds`` of sim time; return the decisions."""
+        return [self.step(**kwargs) for _ in range(int(round(seconds / TICK)))]
+
+    def last(self, robot):
+        """Return the last factor ``robot``'s ``speed_scaling`` said (waiting for it)."""
+        want = self.node.decision.arm(robot).scale
+        assert self.g.spin_until(lambda: self.scaling[robot]
+                                 and self.scaling[robot][-1].data == want)
+        return self.scaling[robot][-1].data
+
+
+@pytest.fixture
+def sim(cell):
+    """Yield the monitor, taught and at full speed in the empty cell."""
+    c = Cell(cell)
+    c.run(2.0)
+    assert c.last(LEFT) == 1.0 and c.last(RIGHT) == 1.0
+    yield c
+    c.close()
+
+
+def test_it_holds_the_arms_until_the_empty_cell_is_taught_then_releases_them(cell):
+    """Held (0, latched) from the start, taught from the first scans, then full speed."""
+    c = Cell(cell)
+    try:
+        assert c.g.spin_until(lambda: all(c.scaling[r] for r in (LEFT, RIGHT)))
+        assert [c.scaling[r][-1].data for r in (LEFT, RIGHT)] == [0.0, 0.0]
+        first = c.step()
+        assert first.fault in ("the empty cell's contour is not taught", 'scanner_a: no scan yet')
+        assert all(a.scale == 0.0 and a.stop for a in first.arms)
+        s = [d.arm(LEFT).scale for d in c.run(2.0)]
+        assert c.node.monitor.taught and s[-1] == 1.0 and np.all(np.diff(s) >= 0.0)
+        assert c.last(LEFT) == 1.0
+        st = SeparationStatus.from_msg(c.status[-1])
+        assert st.scale == {LEFT: 1.0, RIGHT: 1.0} and not st.fault and st.persons == ()
+    finally:
+        c.close()
+
+
+def test_a_person_near_an_arm_slows_it_says_why_and_leaving_restores_it(sim, cell):
+    """A person stands near the left arm, which swings as planned: it slows, the right does not.
+
+    At rest the same separation allows full speed. The speed weighed is the measured one until
+    a trajectory clock comes, then the planned one (the clock's) whatever the arm measures.
+    The status names the person and the arm; the markers show the person's column and each
+    arm's ring. Gone, the arm is back at full speed after the track's hold, the dwell and the
+    rise, and not sooner than the dwell.
+    """
+    person = legs(*NEAR)
+    at_rest = sim.run(0.5, circles=person)[-1]
+    assert at_rest.arm(LEFT).scale == 1.0 and len(at_rest.persons) == 1
+    sim.qd[LEFT] = SWING  # no trajectory clock yet: the measured velocity stands for it
+    assert sim.run(0.5, circles=person)[-1].arm(LEFT).scale < 0.8
+    sim.qd[LEFT] = np.zeros(3)  # from now on the planned velocity counts, not the measured
+    sim.planned(LEFT, SWING)
+    markers = sim.g.collect(MarkerArray, '/separation_monitor/markers')
+    slowed = sim.run(1.0, circles=person)[-1]
+    left = slowed.arm(LEFT)
+    assert 0.0 < left.scale < 1.0 and not left.stop
+    assert sim.last(LEFT) == left.scale and sim.last(RIGHT) == 1.0
+    st = SeparationStatus.from_msg(sim.status[-1])
+    assert st.scale[LEFT] == left.scale and st.scale[RIGHT] == 1.0
+    assert 'person 1' in st.cause[LEFT] and 'scara_left' in st.cause[LEFT]
+    assert 'speed x' in st.cause[LEFT] and st.cause[RIGHT] == ''
+    assert st.margin[LEFT] < 0.0 < st.separation[LEFT]
+    (seen,) = st.persons
+    assert np.hypot(seen.x - NEAR[0], seen.y - NEAR[1]) < 0.1
+    assert sim.g.spin_until(lambda: markers)
+    shown = {(m.ns, m.type) for m in markers[-1].markers if m.action == Marker.ADD}
+    assert ('persons', Marker.CYLINDER) in shown
+    assert {(f'{r}/protective_separation', Marker.LINE_STRIP) for r in (LEFT, RIGHT)} <= shown
+    ring = next(m for m in markers[-1].markers if m.ns == f'{LEFT}/protective_separation')
+    then = next(s for s in map(SeparationStatus.from_msg, sim.status)
+                if s.time == pytest.approx(conv.to_sec(ring.header.stamp), abs=1e-9))
+    (seen,) = then.persons
+    radius = np.hypot(ring.points[0].x - seen.x, ring.points[0].y - seen.y)
+    assert radius == pytest.approx(seen.radius + then.separation[LEFT] - then.margin[LEFT],
+                                   rel=1e-6)
+    # the person leaves
+    cfg = load_config('people')['monitor']
+    after = [d.arm(LEFT).scale for d in sim.run(4.0)]
+    assert all(s < 1.0 for s in after[:int(round(cfg['dwell'] / TICK))])
+    full = next(k for k, s in enumerate(after) if s == 1.0) * TICK
+    assert full <= cfg['track_hold'] + cfg['dwell'] + 1.0 / cfg['resume_rate'] + 2 * PERIOD
+    assert sim.last(LEFT) == 1.0
+
+
+def test_a_silent_scanner_stops_every_arm_within_two_scan_periods(sim):
+    """Scanner b stops: every arm s = 0 within two scan periods of its last scan, named."""
+    last_b = sim.time
+    assert round(last_b / PERIOD, 6).is_integer()  # the fixture ended on a scan
+    decisions = sim.run(0.2, scanners={'scanner_a'})
+    zero = next(d for d in decisions if all(a.scale == 0.0 for a in d.arms))
+    assert zero.time - last_b <= 2 * PERIOD + 1e-9
+    assert zero.fault.startswith('scanner_b: no scan for')
+    assert all(a.stop and a.cause == zero.fault for a in zero.arms)
+    assert sim.last(LEFT) == 0.0 and sim.last(RIGHT) == 0.0
+    st = SeparationStatus.from_msg(sim.status[-1])
+    assert st.fault.startswith('scanner_b') and st.scale == {LEFT: 0.0, RIGHT: 0.0}
+    arrays = sim.g.collect(DiagnosticArray, '/diagnostics')
+    sim.run(1.0, scanners={'scanner_a'})  # the once-a-second /diagnostics says so too
+    assert sim.g.spin_until(lambda: arrays)
+    assert [(s.name, s.level) for s in arrays[-1].status] == [
+        ('separation_monitor', DiagnosticStatus.ERROR)]
+    back = [d.arm(LEFT).scale for d in sim.run(2.0)]  # it scans again: the arms resume
+    assert back[-1] == 1.0
+
+
+def test_nan_ranges_stop_every_arm(sim):
+    """A scan with NaN rays stops every arm at once, with the reason; good scans resume."""
+    bad = sim.run(PERIOD, nan=3)[-1]
+    assert bad.fault == 'scanner_a: 3 rays measured nothing usable'
+    assert all(a.scale == 0.0 and a.stop for a in bad.arms)
+    assert sim.last(LEFT) == 0.0
+    assert sim.run(2.0)[-1].arm(LEFT).scale == 1.0
+
+
+def test_a_scan_it_cannot_place_is_refused(sim, cell):
+    """An unknown frame or another scanner's geometry is not observed: the arms stop for it."""
+    geometry = sim.scanners[0]
+    stranger = LaserScan(angle_increment=geometry.angle_increment, ranges=[1.0] * 5)
+    stranger.header.frame_id = 'scanner_x'
+    stranger.header.stamp = conv.to_time(sim.time + 0.005)
+    wrong = LaserScan(angle_min=geometry.angle_min, angle_increment=geometry.angle_increment,
+                      range_min=geometry.range_min, range_max=geometry.range_max,
+                      ranges=[1.0] * (geometry.count - 1))
+    wrong.header.frame_id = geometry.name
+    wrong.header.stamp = stranger.header.stamp
+    sim.scans.publish(stranger)
+    sim.scans.publish(wrong)
+    sim.g.spin_until(lambda: False, timeout=0.3)
+    assert not sim.node._groups
+    # only such scans from now on: the scanners fall silent
+    decisions = sim.run(0.1, scanners=())
+    assert decisions[-1].fault.startswith('scanner_a: no scan for')
+
+
+def test_an_arm_with_a_non_finite_joint_state_stops_alone(sim, cell):
+    """A NaN joint of the right arm stops it; the left keeps its speed; a finite state resumes."""
+    sim.q[RIGHT] = np.array([np.nan, 0.0, 0.1])
+    d = sim.run(0.05)[-1]
+    assert d.arm(RIGHT).scale == 0.0 and 'no finite joint state' in d.arm(RIGHT).cause
+    assert d.arm(LEFT).scale == 1.0
+    sim.q[RIGHT] = np.array([0.0, -1.2, 0.1])
+    assert sim.run(2.0)[-1].arm(RIGHT).scale == 1.0
+
+
+def test_bad_parameters_are_refused(cell):
+    """A people.yaml value out of range or a bad own parameter stops the node with the reason."""
+    g = Graph()
+    try:
+        for overrides, text in (({'monitor.teach_scans': 0}, 'teach_scans'),
+                                ({'marker_rate': 0.0}, 'marker_rate')):
+            with pytest.raises(ConfigError, match=text):
+                SeparationMonitorNode(context=g.context, cli_args=params_args(
+                    'people', overrides={'use_sim_time': 'true', **overrides}))
+    finally:
+        g.close()
+
+
+def test_the_graph_starts_it_with_a_person_and_the_bridge_guards_it():
+    """``job_nodes(people=True)`` starts the monitor after the bridge; it answers lockstep."""
+    names = [n.name for n in graph.job_nodes(people=True)]
+    assert 'separation_monitor' in names
+    assert names.index('separation_monitor') > names.index('pybullet_bridge')
+    assert 'separation_monitor' not in [n.name for n in graph.job_nodes()]
+    spec = graph.node('separation_monitor')
+    assert spec.node_class() is SeparationMonitorNode and spec.configs == ('people',)
+    assert 'separation_monitor' in graph.lockstep_expect(graph.job_nodes(people=True))
+    assert graph.lockstep_guards(graph.job_nodes(people=True)) == [
+        'collision_monitor', 'separation_monitor']
+    assert graph.topic('separation_monitor/markers').type == 'visualization_msgs/msg/MarkerArray'
