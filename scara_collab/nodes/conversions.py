@@ -435,11 +435,6 @@ def laser_scan(geometry, ranges: np.ndarray, stamp: float, period: float) -> Las
     return msg
 
 
-def scan_ranges(msg: LaserScan) -> Tuple[str, float, np.ndarray]:
-    """``LaserScan`` -> ``(frame id, stamp s, (N,) ranges)``: the inverse of :func:`laser_scan`."""
-    return msg.header.frame_id, to_sec(msg.header.stamp), np.asarray(msg.ranges, dtype=float)
-
-
 def pose_array(poses: np.ndarray, stamp: float, frame_id: str = 'world') -> PoseArray:
     """``(N, 7)`` positions and quaternions (x, y, z, w) -> ``geometry_msgs/PoseArray``."""
     msg = PoseArray(header=Header(stamp=to_time(stamp), frame_id=frame_id))
