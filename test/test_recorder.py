@@ -474,3 +474,50 @@ def test_a_second_graph_on_the_domain_is_named(make_recorder, context):
     assert summary['second_graphs'][-1]['nodes'] == {'/pybullet_bridge': 2, '/run_recorder': 2}
     assert summary['exit_code'] == 6
     assert summary['exit_reason'].startswith('a second graph on the domain at sim t=0.00 s: ')
+
+
+def test_a_person_runs_topics_become_the_person_block(make_recorder, cell):
+    """With ``person``: the truth, the monitor, the clocks and the job's count make the block.
+
+    Without it the recorder subscribes none of the person's topics and the summary has no
+    block.
+    """
+    left, right = cell.leader.name, cell.follower.name
+    rec = make_recorder('collaborative', person='inlet')
+    topics = {s.topic_name for s in rec.subscriptions}
+    assert {'/person/truth', '/separation_monitor/status', f'/{left}/trajectory_clock',
+            f'/{right}/trajectory_clock'} <= topics
+    q = np.array([0.0, 1.5708, 0.0])
+    feed(rec, state_msg(cell, 0.0, q, mirror_joints(q)))
+    rec.start_job(0.0)
+    full = {left: 1.0, right: 1.0}
+    rec.on_separation(proto.SeparationStatus(0.0, full).to_msg())
+    rec.on_truth(proto.PersonTruth(1.0, True, {left: 0.4, right: 2.0}, {left: 0.1, right: 1.0},
+                                   {left: True, right: True}, {left: False}).to_msg())
+    rec.on_separation(proto.SeparationStatus(
+        1.0, {left: 0.0, right: 1.0}, {left: True}, {left: 'person 1 ...: protective stop'},
+        {left: 0.5, right: 2.1}, {left: -0.6, right: 0.4}).to_msg())
+    rec.on_clock(proto.TrajectoryClock(left, 1.5, 0.25, 0.0, 0.0, held_back=True).to_msg())
+    rec.on_truth(proto.PersonTruth(1.5, True, {left: 0.0}, {left: -0.2}, {left: True},
+                                   {left: True}).to_msg())
+    rec.on_separation(proto.SeparationStatus(2.5, full).to_msg())
+    rec.on_truth(proto.PersonTruth(3.0, False).to_msg())
+    rec.on_stats(proto.JobStats('collaborative', True, 3.0, 0.0, missed_due_to_person=2).to_msg())
+    rec.on_separation(DiagnosticStatus(name='separation_monitor', message='garbled'))  # ignored
+    feed(rec, state_msg(cell, 4.0, q, mirror_joints(q)))
+    summary = rec.finish('duration reached', False)
+    block = summary['person']
+    assert block['scenario'] == 'inlet' and block['intrusions'] == 1
+    assert block['protective_stops'] == 1 and block['stop_seconds'] == pytest.approx(1.5)
+    assert block['min_separation_m'] == 0.0 and block['min_ssm_margin_m'] == -0.2
+    assert block['contacts_while_moving'] == 1 and block['missed_due_to_person'] == 2
+    assert block['arms'][left]['lag_max_s'] == 0.25 and block['arms'][left]['held_back'] == 1
+    assert summary['exit_code'] == 8 and summary['exit_reason'].startswith(
+        'a person touched a moving arm: 1 contact(s), the first with scara_left at sim t=1.50 s')
+    assert 'separation.png' in summary['plots']
+    assert_png(rec.directory / 'separation.png')
+    assert 'person         inlet: 1 intrusion(s)' in report.format_report(summary)
+    plain = make_recorder('collaborative', sub='plain')
+    assert not {'/person/truth', '/separation_monitor/status'} & {
+        s.topic_name for s in plain.subscriptions}
+    assert plain.person is None

@@ -60,6 +60,21 @@ TABLE = [
         'min_separation_m': 0.05, 'foreign_clocks': [GHOST_CLOCK],
         'emergency_stops': [stop(50.0, 'margin broken', 130.0, True)]}, 6,
      'a second /clock publisher'),
+    ('a person touched a moving arm', {'person': {
+        'contacts_while_moving': 1, 'first_contact_while_moving': {'time': 61.0,
+                                                                   'robot': 'scara_left'}}},
+     8, 'a person touched a moving arm: 1 contact(s), the first with scara_left at sim '
+     't=61.00 s'),
+    ("a moving arm within the person's protective separation", {'person': {
+        'min_ssm_margin_m': -0.004, 'min_ssm_margin_robot': 'scara_right',
+        'min_ssm_margin_time': 12.0, 'contacts_while_moving': 0}}, 8,
+     'protective separation broken: S - S_p -0.004 m < 0 for scara_right'),
+    ('a scanner dead to the end', {'person': {'fault_at_end': 'scanner_a: no scan for 9.000 s',
+                                              'fault_since': 231.0}}, 4,
+     'protective stop standing at the end of the run, since sim t=231.00 s: separation '
+     'monitor: scanner_a: no scan for 9.000 s'),
+    ('the arms before the person', {'min_separation_m': 0.05, 'person': {
+        'contacts_while_moving': 1}}, 3, 'margin broken'),
     ('a silence before the stop it left', {
         'silences': [silence('collision_monitor', 30.0, 7.0, dropped=True, ended=False)],
         'protective_stops': [stop(30.1, 'no valid joint state', 150.0, True)]}, 5,
@@ -75,7 +90,7 @@ def test_a_summary_gives_its_exit_code_and_reason(name, changes, code, reason):
     assert result.code == code, result
     assert result.reason.startswith(reason), result.reason
     assert [p['code'] for p in result.problems] == sorted(
-        [p['code'] for p in result.problems], key=[6, 3, 5, 4].index)
+        [p['code'] for p in result.problems], key=[6, 3, 8, 5, 4].index)
     apply(summary)
     assert summary['exit_code'] == code and summary['exit_reason'] == result.reason
     assert summary['end_reason'] == 'duration reached'

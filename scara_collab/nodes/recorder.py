@@ -9,11 +9,13 @@ records it also looks at the graph once a wall second (the clock's publishers, t
 names: :meth:`RunRecorder.look`) and notes each backward jump of its sim clock, for the
 summary's foreign clocks and second graphs. Its names are relative: in a cell's ``namespace``
 it records that cell (:func:`scara_collab.graph.node_args`) and looks at that cell's clock and
-node names only. The node is the subscriptions, the looks and the
-message conversions; what it hears is kept by the record it also is
-(:class:`scara_collab.records.record.RunRecord`: the files, the job window, the summary, the
-plots, the verdict). The handlers ``on_*`` are public so a test can feed them messages
-directly.
+node names only. With a person scenario (``person``) it also subscribes ``/person/truth``,
+``/separation_monitor/status`` and each arm's ``trajectory_clock`` for the summary's
+``person`` block (:mod:`scara_collab.records.person`); without one it does not. The node is
+the subscriptions, the looks and the message conversions; what it hears is kept by the
+record it also is (:class:`scara_collab.records.record.RunRecord`: the files, the job window,
+the summary, the plots, the verdict). The handlers ``on_*`` are public so a test can feed
+them messages directly.
 """
 import math
 from pathlib import Path
@@ -50,12 +52,15 @@ class RunRecorder(Node, RunRecord):
     :param profile: link profile for the default cell model (and the summary).
     :param batch: joint states per CSV write (see :class:`RunLog`).
     :param namespace: the cell's namespace (default: the root).
+    :param person: the run's person scenario (its name, or its file), ``''`` for none (the
+        launcher's ``--person``): with one the node records the person's topics and the
+        summary has its ``person`` block.
     :param kwargs: passed to :class:`rclpy.node.Node` (e.g. ``context``).
     """
 
     def __init__(self, directory: Union[str, Path], mode: str = 'idle',
                  cell: Optional[CellModel] = None, profile: Optional[str] = None,
-                 batch: int = 200, namespace: str = '', **kwargs):
+                 batch: int = 200, namespace: str = '', person: str = '', **kwargs):
         """Create the node on sim time, open the record and subscribe the topics it records."""
         overrides = list(kwargs.pop('parameter_overrides', []))
         overrides.append(Parameter('use_sim_time', Parameter.Type.BOOL, True))
@@ -63,7 +68,7 @@ class RunRecorder(Node, RunRecord):
         cli_args = graph.node_args(self.namespace) + list(kwargs.pop('cli_args', None) or [])
         Node.__init__(self, 'run_recorder', parameter_overrides=overrides, cli_args=cli_args,
                       **kwargs)
-        RunRecord.__init__(self, directory, mode, cell, profile, batch)
+        RunRecord.__init__(self, directory, mode, cell, profile, batch, person)
         self.graph_watch = GraphWatch(ONE_PER_RUN, self.namespace)  # this cell's names
         self.clock_topic = graph.resolve(graph.CLOCK, self.namespace)
         self.stamps = conv.StampGate()  # states must carry the sim clock's time
@@ -77,9 +82,12 @@ class RunRecorder(Node, RunRecord):
                                ('replication_manager/status', self.on_mirror),
                                ('collision_monitor/stops', self.on_stop),
                                ('emergency_stop', self.on_estop)):
-            topic = graph.topic(name)
-            self.create_subscription(graph.message_class(topic.type), name,
-                                     guarded(self, callback), qos.recording(topic))
+            self._subscribe(name, callback)
+        if self.person is not None:
+            self._subscribe('person/truth', self.on_truth)
+            self._subscribe('separation_monitor/status', self.on_separation)
+            for arm in self.cell.arms:
+                self._subscribe(f'{arm.name}/trajectory_clock', self.on_clock)
         # who else is on the domain: looks on wall time (sim time may stand still or be
         # foreign), and the clock's backward jumps (the time source takes each /clock anyway)
         self.create_timer(LOOK_PERIOD, guarded(self, self.look),
@@ -87,6 +95,12 @@ class RunRecorder(Node, RunRecord):
         self._jump = self.get_clock().create_jump_callback(
             JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
                           on_clock_change=False), post_callback=guarded(self, self.on_jump))
+
+    def _subscribe(self, name: str, callback) -> None:
+        """Subscribe the graph's topic ``name`` (relative) with its recording QoS."""
+        topic = graph.topic(name, [a.name for a in self.cell.arms])
+        self.create_subscription(graph.message_class(topic.type), name,
+                                 guarded(self, callback), qos.recording(topic))
 
     @property
     def sim_time(self) -> float:
@@ -158,6 +172,33 @@ class RunRecorder(Node, RunRecord):
             self.add_stats({'give_ups': st.give_ups, 'retries': st.retries,
                             'last_give_up': st.last_give_up, 'phases': st.phases,
                             'running': st.running, 'time': st.time})
+            if self.person is not None:
+                self.person.add_stats(st.missed_due_to_person)
+
+    def _in_window(self, t: float) -> bool:
+        """Return True for a sim time ``t`` in the run's window: recording, or before its end."""
+        return self.recording or (self.end is not None and not self.log.closed
+                                  and t <= self.end + 1e-9)
+
+    def on_truth(self, msg: DiagnosticStatus) -> None:
+        """Take where the person really is (a ``PersonTruth``)."""
+        tr = self._read(proto.PersonTruth, msg, 'the person truth')
+        if tr is not None and math.isfinite(tr.time) and self._in_window(tr.time):
+            self.person.add_truth(tr.time, tr.present, tr.separation, tr.margin, tr.moving,
+                                  tr.contact)
+
+    def on_separation(self, msg: DiagnosticStatus) -> None:
+        """Take the separation monitor's decision (a ``SeparationStatus``)."""
+        st = self._read(proto.SeparationStatus, msg, 'a separation status')
+        if st is not None and math.isfinite(st.time) and self._in_window(st.time):
+            self.person.add_status(st.time, st.scale, st.stop, st.separation, st.margin,
+                                   st.fault)
+
+    def on_clock(self, msg: DiagnosticStatus) -> None:
+        """Take an arm's trajectory clock (a ``TrajectoryClock``)."""
+        clock = self._read(proto.TrajectoryClock, msg, 'a trajectory clock')
+        if clock is not None and math.isfinite(clock.time) and self._in_window(clock.time):
+            self.person.add_clock(clock.robot, clock.lag, clock.held_back)
 
     def on_monitor(self, msg: DiagnosticStatus) -> None:
         """Keep the collision monitor's figures (the minimum separation's source, its stop)."""

@@ -19,6 +19,9 @@ foreign_clocks, second_graphs     the graph itself, looked at once a wall second
                                   (:mod:`scara_collab.records.graph_watch`)
 silences                          the launcher's lockstep watch
                                   (:meth:`scara_collab.run.liveness.Liveness.summary`)
+person (a run with a person)      ``/person/truth``, ``/separation_monitor/status``,
+                                  ``/<robot>/trajectory_clock``, the job's stats
+                                  (:mod:`scara_collab.records.person`)
 exit_code, exit_reason, problems  all of the above (:mod:`scara_collab.records.verdict`)
 ================================  =====================================================
 
@@ -62,6 +65,7 @@ from scara_collab.core.sorting import GONE
 from scara_collab.graph import BY_NAME, LAUNCH_MODES
 from scara_collab.records import report, verdict
 from scara_collab.records.graph_watch import GraphWatch
+from scara_collab.records.person import PersonLog
 from scara_collab.records.stops import StopLog
 from scara_collab.records.telemetry import RunLog
 
@@ -103,11 +107,14 @@ class RunRecord:
     :param cell: the cell model; default ``load_cell(profile)``.
     :param profile: link profile for the default cell model (and the summary).
     :param batch: joint states per CSV write (see :class:`RunLog`).
+    :param person: the run's person scenario, ``''`` for none: with one, the record keeps
+        :attr:`person` (:class:`~scara_collab.records.person.PersonLog`, its CSV files) and the
+        summary its ``person`` block; without, neither.
     """
 
     def __init__(self, directory: Union[str, Path], mode: str = 'idle',
                  cell: Optional[CellModel] = None, profile: Optional[str] = None,
-                 batch: int = 200):
+                 batch: int = 200, person: str = ''):
         """Open the run log; nothing is heard yet and the window is not started."""
         if mode not in MODES:
             raise ValueError(f'mode must be one of {MODES}, got {mode!r}')
@@ -117,6 +124,9 @@ class RunRecord:
         period = 1.0 / float(load_config('simulation')['state_rate'])
         self.log = RunLog(directory, self.cell, batch=batch, state_period=period)
         self.directory = self.log.directory
+        #: what the person did and what the separation monitor made of it (None: no person)
+        self.person: Optional[PersonLog] = PersonLog(
+            self.directory, person, [a.name for a in self.cell.arms], batch) if person else None
         self.stats: Dict[str, object] = {}
         self.stats_time: Optional[float] = None
         self.monitor = None   # the newest MonitorStatus (scara_collab.nodes.protocol)
@@ -209,6 +219,8 @@ class RunRecord:
         if self.end is not None:
             return
         self.log.flush()
+        if self.person is not None:
+            self.person.flush()
         if t is not None:
             self.end = float(t)
         else:
@@ -291,6 +303,9 @@ class RunRecord:
             'job_time': self.stats_time,
             'output': str(self.directory),
         }
+        if self.person is not None:
+            self.person.flush()
+            summary['person'] = self.person.summary(t_end)
         summary.update(self.extra)
         return summary
 
@@ -326,6 +341,8 @@ class RunRecord:
         summary = self.build_summary(exit_reason, interrupted)
         verdict.apply(summary)
         self.log.close()
+        if self.person is not None:
+            self.person.close()
         report.write_summary(self.directory, summary)  # first, so it exists whatever happens
         if plots:
             try:

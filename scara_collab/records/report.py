@@ -8,7 +8,11 @@ pyplot state):
   with both tool paths;
 - ``arm_distance.png``: arm-to-arm capsule surface distance over time against the margin;
 - ``item_counts.png``: cumulative sorted / missed / wrong bin / dropped / spawned items;
-- ``mirror_error.png`` (mirrored mode): follower tool vs the mirror of the leader tool.
+- ``mirror_error.png`` (mirrored mode): follower tool vs the mirror of the leader tool;
+- ``separation.png`` (a run with a person): per arm the separation ``S`` from the person and
+  the protective separation ``S_p`` as the separation monitor saw them, the true separation
+  (dashed), the arm's protective stops shaded and its slowed time lightly shaded
+  (:mod:`scara_collab.records.person`).
 """
 import argparse
 import csv
@@ -22,10 +26,13 @@ from typing import Dict, List, Optional, Union
 import numpy as np
 
 from scara_collab.core.model import CellModel
+from scara_collab.records.person import SEPARATION, TRUTH
 from scara_collab.records.telemetry import ARM_DISTANCE, EVENTS, MIRROR_ERROR, TIMESERIES
 
 SUMMARY = 'summary.json'
 PLOTS = ('tool_paths.png', 'arm_distance.png', 'item_counts.png', 'mirror_error.png')
+#: the plot of a run with a person
+PERSON_PLOT = 'separation.png'
 _ARM_COLOURS = ('tab:orange', 'tab:purple')
 _COUNT_COLOURS = {'sorted': 'tab:green', 'missed': 'tab:red', 'wrong_bin': 'tab:orange',
                   'dropped': 'tab:brown', 'spawned': 'tab:gray'}
@@ -84,6 +91,30 @@ def load_timeseries(directory: Union[str, Path]) -> Dict[str, np.ndarray]:
                 continue
     data = np.asarray(rows, dtype=float).reshape(-1, len(header))
     return {name: data[:, k] for k, name in enumerate(header)}
+
+
+def load_columns(path: Union[str, Path]) -> Dict[str, np.ndarray]:
+    """Read a CSV file of numbers as ``{column: (N,) array}``; text columns, short rows skipped.
+
+    ``inf`` stays infinite; a value that is not a number is NaN.
+    """
+    with open(path, encoding='utf-8', newline='') as f:
+        reader = csv.reader(f)
+        header = next(reader, [])
+        rows = [row for row in reader if len(row) == len(header)]
+
+    def number(text: str) -> float:
+        try:
+            return float(text)
+        except ValueError:
+            return math.nan
+
+    out = {}
+    for k, name in enumerate(header):
+        values = np.array([number(row[k]) for row in rows], dtype=float)
+        if not (values.size and np.all(np.isnan(values))):
+            out[name] = values
+    return out
 
 
 def load_events(directory: Union[str, Path]) -> List[Dict[str, str]]:
@@ -211,12 +242,69 @@ def plot_mirror_error(ts: Dict[str, np.ndarray], path: Path, t0: Optional[float]
                  'Mirroring', fontsize=8)
 
 
+def _spans(t: np.ndarray, on: np.ndarray) -> List[tuple]:
+    """Return the ``(start, end)`` of each run of ``on``, each to the next sample's time."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], on.astype(int), [0]))))
+    times = np.append(t, t[-1] if t.size else 0.0)
+    return [(float(times[a]), float(times[b])) for a, b in zip(edges[::2], edges[1::2])]
+
+
+def plot_separation(directory: Union[str, Path], path: Path,
+                    t0: Optional[float] = None) -> Path:
+    """Per arm, ``S`` and ``S_p`` over time with the stops and slow-downs; saved to ``path``.
+
+    From ``separation.csv`` (the monitor's) and ``person_truth.csv`` (the true separation,
+    dashed) in ``directory``; ``inf`` (no person) is not drawn.
+    """
+    directory = Path(directory)
+    seen = load_columns(directory / SEPARATION)
+    true = load_columns(directory / TRUTH) if (directory / TRUTH).exists() else {}
+    robots = [c[:-len('_scale')] for c in seen if c.endswith('_scale')]
+    fig = _figure(8.0, 2.2 + 2.3 * max(len(robots), 1))
+    axes = fig.subplots(max(len(robots), 1), 1, sharex=True, squeeze=False)[:, 0]
+    t = seen.get('t', np.empty(0))
+    t_true = true.get('t', np.empty(0))
+
+    def finite(v: np.ndarray) -> np.ndarray:
+        return np.where(np.isfinite(v), v, np.nan)
+
+    for k, (ax, robot) in enumerate(zip(axes, robots)):
+        scale = seen.get(f'{robot}_scale', np.ones_like(t))
+        stopped = seen.get(f'{robot}_stopped', np.zeros_like(t)) > 0.5
+        for j, (a, b) in enumerate(_spans(t, stopped)):
+            ax.axvspan(a, b, color='tab:red', alpha=0.25, lw=0,
+                       label='protective stop' if j == 0 else None)
+        for j, (a, b) in enumerate(_spans(t, ~stopped & (scale < 1.0))):
+            ax.axvspan(a, b, color='tab:orange', alpha=0.12, lw=0,
+                       label='slowed' if j == 0 else None)
+        ax.plot(t, finite(seen.get(f'{robot}_S_m', np.full_like(t, np.inf))), lw=0.9,
+                color=_ARM_COLOURS[k % 2], label='S (monitor)')
+        ax.plot(t, finite(seen.get(f'{robot}_Sp_m', np.full_like(t, np.inf))), lw=0.9,
+                color='tab:blue', label='S_p (monitor, planned speed)')
+        if f'{robot}_S_m' in true:
+            ax.plot(t_true, finite(true[f'{robot}_S_m']), lw=0.8, ls='--', color='0.3',
+                    label='S (true)')
+        _job_line(ax, t0)
+        ax.set_ylim(bottom=0.0)
+        if k < len(robots) - 1:
+            ax.set_xlabel('')
+        ax.set_ylabel('m')
+        ax.set_title(robot, fontsize=9)
+        ax.grid(True, lw=0.3)
+        ax.legend(fontsize=7, loc='upper right')
+    axes[-1].set_xlabel('sim time (s)')
+    fig.suptitle('Separation from the person')
+    fig.savefig(path, dpi=110)
+    return path
+
+
 def plot_run(directory: Union[str, Path], cell: CellModel, summary: Dict) -> List[Path]:
     """Draw every plot of a run folder from its CSV files.
 
     :param directory: the run folder (``timeseries.csv``, ``events.csv``).
     :param cell: the cell model the run used.
-    :param summary: the run summary (``mode``, ``job_start_sim_time``, ``sim_time_end``).
+    :param summary: the run summary (``mode``, ``job_start_sim_time``, ``sim_time_end``,
+        ``person``).
     :return: the PNG files written.
     """
     directory = Path(directory)
@@ -229,6 +317,8 @@ def plot_run(directory: Union[str, Path], cell: CellModel, summary: Dict) -> Lis
            plot_item_counts(events, directory / PLOTS[2], t_end, t0)]
     if summary.get('mode') == 'mirrored':
         out.append(plot_mirror_error(ts, directory / PLOTS[3], t0))
+    if isinstance(summary.get('person'), dict) and (directory / SEPARATION).exists():
+        out.append(plot_separation(directory, directory / PERSON_PLOT, t0))
     return out
 
 
@@ -344,6 +434,33 @@ def _intruder_lines(s: Dict) -> List[str]:
             + _block('second graph', _more(graphs, len(graphs), 'second graphs')))
 
 
+def _person_lines(s: Dict) -> List[str]:
+    """Return the report's person lines (a run with a person only; the summary's block)."""
+    p = s.get('person')
+    if not isinstance(p, dict):
+        return []
+    n = _num
+    lines = [
+        f'{p.get("scenario")}: {n(p.get("intrusions"), "d")} intrusion(s), '
+        f'{p.get("protective_stops")} protective stop(s) ({n(p.get("stop_seconds"), ".2f")} s), '
+        f'slowed {n(p.get("slowed_seconds"), ".2f")} s, {p.get("slowdowns")} slow-down(s) '
+        f'({n(p.get("false_slowdowns"), "d")} false), full speed '
+        f'{n(p.get("resume_seconds_max"), ".2f", "-")} s at most after clear of S_p',
+        f'while moving: min separation {n(p.get("min_separation_m"), ".3f", "-")} m, '
+        f'min S - S_p {n(p.get("min_ssm_margin_m"), ".3f", "-")} m, '
+        f'{p.get("contacts_while_moving")} contact(s); '
+        f'{n(p.get("missed_due_to_person"), "d")} missed for the person']
+    faults = p.get('faults') or []
+    if p.get('fault_stops') or p.get('fault_at_end'):
+        first = faults[0] if faults else {}
+        lines.append(f'separation monitor faults {p.get("fault_stops")}'
+                     + (f', first at t={n(first.get("time"), ".2f")} s: {first.get("fault")}'
+                        if first else '')
+                     + (f'; STANDING at the end: {p.get("fault_at_end")}'
+                        if p.get('fault_at_end') else ''))
+    return _block('person', lines)
+
+
 def _problem_lines(s: Dict) -> List[str]:
     """Return the report's problems (each reason the exit code is not 0), if more than one."""
     problems = [f'exit {p.get("code")}: {p.get("text")}' for p in s.get('problems') or []]
@@ -396,7 +513,8 @@ def format_report(s: Dict) -> str:
         parts = [f'{k.replace("_", " ")} {v:.3f}' for k, v in cost.items() if k != 'total']
         lines.append(f'  CPU per sim s  {cost.get("total", 0.0):.3f} s   (' + ', '.join(parts)
                      + ')')
-    lines += _stop_lines(s) + _silence_lines(s) + _intruder_lines(s) + _problem_lines(s)
+    lines += (_person_lines(s) + _stop_lines(s) + _silence_lines(s) + _intruder_lines(s)
+              + _problem_lines(s))
     lines.append(f'  run folder     {s.get("output")}')
     return '\n'.join(lines)
 

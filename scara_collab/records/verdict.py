@@ -1,11 +1,12 @@
 """The run's verdict: its exit code and the reason, from its summary alone (no rclpy).
 
 A run exits 0 only if it tells a clean story: the margin held, no node died or went silent
-beyond the bridge's patience, no stop was left standing, and nobody else's clock or graph was
-on the domain. :func:`verdict` reads that from the summary (``summary.json``'s fields), in one
-place; :meth:`scara_collab.records.record.RunRecord.finish` writes its ``exit_code``,
-``exit_reason`` and ``problems`` into the summary, the report prints the reason first, and the
-launcher exits with the code.
+beyond the bridge's patience, no stop was left standing, nobody else's clock or graph was on
+the domain, and a person in the cell (the summary's ``person`` block) never touched a moving
+arm nor came within its protective separation. :func:`verdict` reads that from the summary
+(``summary.json``'s fields), in one place; :meth:`scara_collab.records.record.RunRecord.finish`
+writes its ``exit_code``, ``exit_reason`` and ``problems`` into the summary, the report prints
+the reason first, and the launcher exits with the code.
 
 ====  =======================================================================================
 code  meaning (:data:`EXIT_CODES`)
@@ -14,17 +15,23 @@ code  meaning (:data:`EXIT_CODES`)
 1     a node died, stopped answering (``--silent-timeout``), was not ready or refused to start
 2     bad arguments
 3     the margin was broken: the minimum separation fell below the safety margin
-4     a stop (protective or emergency) was still standing at the end of the run
+4     a stop (protective or emergency) was still standing at the end of the run, or the
+      separation monitor's fault (a silent or broken scanner: every arm stopped)
 5     a node was silent longer than the bridge's ``lockstep_timeout``: sim time went on
       without it (every silence is named, whatever its length; only these fail)
 6     a foreign clock (a second ``/clock`` publisher, sim time going backwards) or a second
       graph (a second bridge, automation manager, ... on the domain)
+8     a person unguarded: the person touched a moving arm (``contacts_while_moving``), or came
+      within a moving arm's protective separation (``min_ssm_margin_m`` below 0), from the
+      ground truth
 130   SIGINT, 143 SIGTERM
 ====  =======================================================================================
 
 The launcher's own code (1, 2, 130, 143: the run ended early) comes first; otherwise the first
-problem in the order 6, 3, 5, 4 (the cause before its consequences: a second graph's commands
-can break the margin; a silent guard leaves a stop standing) gives the code and the reason.
+problem in the order 6, 3, 8, 5, 4 (a foreign graph first, whose commands can break anything;
+the broken safety figures next, arms then person; then the causes before their consequences:
+a silent guard leaves a stop standing) gives the code and the reason. (7 is a line's: a lost
+handoff, :mod:`scara_collab.records.line_report`.)
 ``problems`` lists every one, the launcher's first.
 
 >>> clean = {'exit_code': 0, 'exit_reason': 'duration reached', 'min_separation_m': 0.13,
@@ -45,6 +52,7 @@ EXIT_MARGIN = 3
 EXIT_STOP_STANDING = 4
 EXIT_SILENT = 5
 EXIT_FOREIGN = 6
+EXIT_PERSON = 8
 EXIT_SIGINT = 130
 EXIT_SIGTERM = 143
 
@@ -57,11 +65,12 @@ EXIT_CODES: Dict[int, str] = {
     EXIT_STOP_STANDING: 'a stop left standing at the end',
     EXIT_SILENT: "a node silent longer than the bridge's lockstep_timeout",
     EXIT_FOREIGN: 'a foreign clock or a second graph on the domain',
+    EXIT_PERSON: 'a person touched a moving arm or came within its protective separation',
     EXIT_SIGINT: 'SIGINT',
     EXIT_SIGTERM: 'SIGTERM',
 }
 #: the order in which the summary's problems decide the code (a cause before its consequences)
-PRIORITY = (EXIT_FOREIGN, EXIT_MARGIN, EXIT_SILENT, EXIT_STOP_STANDING)
+PRIORITY = (EXIT_FOREIGN, EXIT_MARGIN, EXIT_PERSON, EXIT_SILENT, EXIT_STOP_STANDING)
 
 
 @dataclass(frozen=True)
@@ -116,14 +125,38 @@ def _silent(s: Dict) -> List[str]:
 
 
 def _standing(s: Dict) -> List[str]:
-    return [f'{kind} stop standing at the end of the run, since sim t={_t(x.get("time"))} s: '
-            f'{x.get("cause")}'
-            for kind in ('emergency', 'protective')
-            for x in s.get(f'{kind}_stops') or [] if isinstance(x, dict) and x.get('standing')]
+    out = [f'{kind} stop standing at the end of the run, since sim t={_t(x.get("time"))} s: '
+           f'{x.get("cause")}'
+           for kind in ('emergency', 'protective')
+           for x in s.get(f'{kind}_stops') or [] if isinstance(x, dict) and x.get('standing')]
+    person = s.get('person')
+    if isinstance(person, dict) and person.get('fault_at_end'):
+        out.append('protective stop standing at the end of the run, since sim t='
+                   f'{_t(person.get("fault_since"))} s: separation monitor: '
+                   f'{person["fault_at_end"]}')
+    return out
 
 
-CHECKS = {EXIT_FOREIGN: _foreign, EXIT_MARGIN: _margin, EXIT_SILENT: _silent,
-          EXIT_STOP_STANDING: _standing}
+def _person(s: Dict) -> List[str]:
+    p = s.get('person')
+    if not isinstance(p, dict):
+        return []
+    out = []
+    contacts = p.get('contacts_while_moving') or 0
+    if contacts > 0:
+        first = p.get('first_contact_while_moving') or {}
+        out.append(f'a person touched a moving arm: {contacts} contact(s), the first with '
+                   f'{first.get("robot")} at sim t={_t(first.get("time"))} s')
+    least = p.get('min_ssm_margin_m')
+    if least is not None and least < 0.0:
+        out.append(f'protective separation broken: S - S_p {least:.3f} m < 0 for '
+                   f'{p.get("min_ssm_margin_robot")} while it moved, at sim '
+                   f't={_t(p.get("min_ssm_margin_time"))} s (ground truth)')
+    return out
+
+
+CHECKS = {EXIT_FOREIGN: _foreign, EXIT_MARGIN: _margin, EXIT_PERSON: _person,
+          EXIT_SILENT: _silent, EXIT_STOP_STANDING: _standing}
 
 
 def verdict(summary: Dict) -> Verdict:
@@ -132,8 +165,9 @@ def verdict(summary: Dict) -> Verdict:
     :param summary: the run's summary (``summary.json``): the launcher's ``exit_code`` and
         ``exit_reason`` (how the run ended; no code counts as 0), ``min_separation_m``,
         ``safety_margin_m``, ``protective_stops``, ``emergency_stops``, ``silences``,
-        ``foreign_clocks``, ``clock_jumps_back``, ``second_graphs``; missing ones are not
-        checked.
+        ``foreign_clocks``, ``clock_jumps_back``, ``second_graphs``, ``person``
+        (``contacts_while_moving``, ``min_ssm_margin_m``, ``fault_at_end``); missing ones
+        are not checked.
     :return: the launcher's code and reason if it is not 0 (1 for a run ``interrupted``
         without one), else those of the first problem in :data:`PRIORITY` order, else 0 and
         the launcher's reason.
