@@ -299,11 +299,11 @@ def test_a_person_its_scan_and_the_rings_of_s_p_are_shown(graph):
     body = [marker(Marker.CYLINDER, 0, (1.0, -3.0, 0.45), HALF_TURN_ABOUT_Y),
             marker(Marker.SPHERE, 1, (0.75, -3.0, 0.45), scale=(0.2, 0.2, 0.2)),
             marker(Marker.SPHERE, 2, (1.25, -3.0, 0.45), scale=(0.2, 0.2, 0.2)),
-            marker(Marker.LINE_STRIP, 3, (0.0, 0.0, 0.0),
+            marker(Marker.LINE_STRIP, 3, (0.0, 0.0, 0.0), ns='',
                    points=[(1.0, -3.0, 0.0), (1.0, -3.0, 1.8)]),
             marker(Marker.TEXT_VIEW_FACING, 4, (1.0, -3.0, 2.0))]
     pub = publish(graph, MarkerArray, '/person/markers', marker_array(*body))
-    keys = {('person', k) for k in range(4)}
+    keys = {('person', 0), ('person', 1), ('person', 2), ('', 3)}
     assert graph.spin_until(lambda: set(scene.person) == keys, 5)
     leg = scene.person[('person', 0)][0]
     axis = vtf.SO3(np.asarray(leg.wxyz)).apply(np.array([0.0, 0.0, 0.25]))
@@ -312,6 +312,8 @@ def test_a_person_its_scan_and_the_rings_of_s_p_are_shown(graph):
     assert tuple(leg.scale) == pytest.approx((0.2, 0.2, 0.5))
     assert leg.radius == 0.5 and leg.height == 1.0  # the scale is the size, as in RViz
     np.testing.assert_allclose(scene.person[('person', 2)][0].position, [1.25, -3.0, 0.45])
+    np.testing.assert_allclose(scene.person[('', 3)][0].points,
+                               [[[1.0, -3.0, 0.0], [1.0, -3.0, 1.8]]], atol=1e-6)
     moved = [marker(Marker.CYLINDER, 0, (2.0, -3.0, 0.45), HALF_TURN_ABOUT_Y)]
     pub.publish(marker_array(*moved))
     assert graph.spin_until(lambda: set(scene.person) == {('person', 0)}, 5)

@@ -475,7 +475,8 @@ class ViserScene:
             else:
                 if handle is not None:
                     handle.remove()
-                handle = _add_shape(self.server.scene, f'{root}/{key[0]}/{key[1]}', shape)
+                ns = key[0] or '_'  # a scene name has no empty part
+                handle = _add_shape(self.server.scene, f'{root}/{ns}/{key[1]}', shape)
             self.person[key] = (handle, shape)
 
     def set_scan(self, scanner: str, points: np.ndarray) -> None:
