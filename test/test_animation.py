@@ -4,7 +4,8 @@ The run is recorded in-process (test_mcap_log.record_run: the bridge, the run re
 MCAP log; the left arm makes a joint move, items are fed). Where the arms and the items are in
 a frame is found independently: the same scene posed from ``timeseries.csv`` and rendered
 with PyBullet's segmentation mask; the "empty scene" is that scene with the arm links made
-transparent and no items.
+transparent and no items. A person is a recording of ``/person/markers`` written beside the
+same run's files, found the same way.
 """
 from pathlib import Path
 import shutil
@@ -15,12 +16,16 @@ import numpy as np
 from PIL import Image
 import pybullet
 import pytest
+from rclpy.serialization import serialize_message
 from test_mcap_log import record_run
+from visualization_msgs.msg import Marker, MarkerArray
 
+from scara_collab.graph import Topic
 from scara_collab.records import report
+from scara_collab.records.mcap_log import McapWriter
 from scara_collab.run.animation import (
-    CAPTION_HEIGHT, decode_items, frame_times, load_items, render_after_run, render_gif,
-    RenderScene)
+    CAPTION_HEIGHT, decode_items, decode_person, frame_times, load_items, PERSON_TOPIC,
+    render_after_run, render_gif, RenderScene)
 
 ROOT = Path(__file__).resolve().parents[1]
 FPS = 3.0
@@ -155,3 +160,73 @@ def test_render_run_script_and_the_launcher_hook(run_dir, tmp_path):
     assert stopped == copy / 'run.gif' and any('stopped after 2 of' in s for s in said)
     with Image.open(stopped) as im:
         assert im.n_frames == 2
+
+
+def body_markers(x: float, y: float) -> MarkerArray:
+    """Return a standing person at ``(x, y)`` as the bridge draws one.
+
+    A DELETEALL, a torso cylinder with its sphere ends and a leg, and a text marker the GIF
+    leaves out.
+    """
+    out = MarkerArray(markers=[Marker(action=Marker.DELETEALL)])
+    parts = [(Marker.CYLINDER, 1.2, 0.34, 0.55), (Marker.SPHERE, 0.925, 0.34, 0.34),
+             (Marker.SPHERE, 1.475, 0.34, 0.34), (Marker.CYLINDER, 0.45, 0.14, 0.9),
+             (Marker.TEXT_VIEW_FACING, 2.0, 0.1, 0.1)]
+    for k, (kind, z, width, height) in enumerate(parts):
+        m = Marker(ns='person', id=k, type=kind, action=Marker.ADD)
+        m.header.frame_id = 'world'
+        m.pose.position.x, m.pose.position.y, m.pose.position.z = x, y, z
+        m.pose.orientation.w = 1.0
+        m.scale.x = m.scale.y = width
+        m.scale.z = height
+        m.color.r, m.color.g, m.color.b, m.color.a = 0.95, 0.8, 0.6, 1.0
+        out.markers.append(m)
+    return out
+
+
+def test_person_markers_decode_to_the_shapes_the_scene_draws():
+    """Cylinders and spheres added in ``world`` are kept, by scale, colour and pose."""
+    shapes = decode_person(serialize_message(body_markers(1.0, -2.0)))
+    assert [s.kind for s in shapes] == ['cylinder', 'sphere', 'sphere', 'cylinder']
+    assert shapes[0].size == (0.34, 0.34, 0.55) and shapes[0].rgba == (0.95, 0.8, 0.6, 1.0)
+    assert shapes[1].position == (1.0, -2.0, 0.925) and shapes[1].quat == (0.0, 0.0, 0.0, 1.0)
+    assert decode_person(serialize_message(MarkerArray(markers=[
+        Marker(action=Marker.DELETEALL)]))) == []
+
+
+def test_a_recorded_person_is_in_the_gif(run_dir, cell, tmp_path):
+    """With ``/person/markers`` in run.mcap the GIF shows the person where the markers say.
+
+    Found independently: the scene posed as the first frame, the person's bodies picked out of
+    the segmentation mask; the GIF differs from the scene without the person there only.
+    """
+    copy = tmp_path / 'run'
+    copy.mkdir()
+    for name in ('timeseries.csv', 'summary.json', 'events.csv'):
+        shutil.copy(run_dir / name, copy / name)
+    summary = report.read_summary(copy)
+    t0 = summary['job_start_sim_time']
+    markers = body_markers(1.0, -2.2)
+    topic = Topic(PERSON_TOPIC, 'visualization_msgs/msg/MarkerArray')
+    writer = McapWriter(copy / 'run.mcap', [topic])
+    writer.write([(int(t0 * 1e9), 0, serialize_message(markers))])
+    writer.close()
+    said = []
+    frames, _ = gif_frames(render_gif(copy, fps=FPS, max_seconds=10.0, progress=said.append))
+    assert any('a person from /person/markers' in line for line in said)
+    ts = report.load_timeseries(copy)
+    q = np.stack([ts[n] for arm in cell.arms for n in arm.joint_names], axis=1)
+    row = max(0, int(np.searchsorted(ts['t'], t0, side='right')) - 1)
+    with RenderScene(cell) as scene:
+        scene.pose(q[row, :3], q[row, 3:])
+        scene.set_person(decode_person(serialize_message(markers)))
+        assert len(scene.person) == 4
+        seg = segmentation(scene)
+        person = np.isin(seg & ((1 << 24) - 1), [body for _, body in scene.person])
+        scene.set_person([])
+        empty = scene.render().astype(int)
+    differs = np.abs(frames[0][:scene.height] - empty).sum(axis=-1) > 40
+    print(f'\n{person.sum()} person pixels, {differs[person].mean():.1%} differ from the '
+          f'empty scene; elsewhere {differs[~person].mean():.2%}')
+    assert person.sum() > 500, 'the person is in view'
+    assert differs[person].mean() > 0.9 and differs[~person].mean() < 0.01

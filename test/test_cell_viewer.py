@@ -3,7 +3,9 @@
 The unit tests build the ``cell_viewer`` node in-process (a real viser server on a free port),
 publish the messages of the ROS contract from a probe node and read the scene back: arm poses
 against the independent FK of :mod:`scara_collab.core.kinematics`, capsules against
-:mod:`scara_collab.core.collision`, items, paths, e-stop and stats.
+:mod:`scara_collab.core.collision`, items, paths, e-stop and stats; with a person, its markers,
+the scan's returns against the ray geometry written out in the test, each arm's ``S_p`` ring
+and speed factor; without one, a scene with nothing of them.
 
 The acceptance test runs the bridge and the viewer in-process, loads the page in headless
 Chromium (Debian's ``chromium``; swiftshader WebGL, driven over the DevTools protocol), takes
@@ -30,15 +32,22 @@ import numpy as np
 from PIL import Image
 import pytest
 from ros_harness import Graph, params_args
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import JointState, LaserScan
 from std_msgs.msg import Bool, Float64
 from viser import transforms as vtf
-from visualization_msgs.msg import MarkerArray
+from visualization_msgs.msg import Marker, MarkerArray
 
 from scara_collab.core import collision, kinematics as kin
+from scara_collab.core.config import load_config
+from scara_collab.core.model import load_cell
+from scara_collab.core.scan_tracking import scanners_from_config
+from scara_collab.core.separation_monitor import PersonSeen
+from scara_collab.core.ssm import Person
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
-from scara_collab.nodes.cell_viewer import CellViewer, LATCHED, margin_colour, MARGIN_COLOURS
+from scara_collab.nodes.cell_viewer import (
+    CellViewer, LATCHED, margin_colour, MARGIN_COLOURS, marker_shape, nearest_person,
+    PATH_COLOURS)
 
 CHROMIUM = shutil.which('chromium')
 DIRECT = urllib.request.build_opener(urllib.request.ProxyHandler({}))  # no proxy for loopback
@@ -196,6 +205,198 @@ def test_bad_messages_are_ignored_and_the_viewer_keeps_going(graph):
     graph.spin_until(lambda: False, 0.5)
     assert viewer.frames == 0 and not viewer.scene.paths
     drawn(graph, (0.1, 0.2, 0.0), (0.0, 0.0, 0.0))  # and a good message still works
+
+
+# --- a person in the cell --------------------------------------------------------------------
+def marker(kind, key, position, quat=(0.0, 0.0, 0.0, 1.0), scale=(0.2, 0.2, 0.5),
+           colour=(0.95, 0.8, 0.6, 1.0), points=(), frame='world', ns='person'):
+    """Return a ``Marker`` (ADD) of ``kind`` with id ``key``; ``quat`` is (x, y, z, w)."""
+    m = Marker(type=kind, id=key, ns=ns, action=Marker.ADD)
+    m.header.frame_id = frame
+    (m.pose.position.x, m.pose.position.y, m.pose.position.z) = position
+    (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
+     m.pose.orientation.w) = quat
+    m.scale.x, m.scale.y, m.scale.z = scale
+    m.color.r, m.color.g, m.color.b, m.color.a = colour
+    for x, y, z in points:
+        m.points.append(conv.make_point_stamped((x, y, z)).point)
+    return m
+
+
+def marker_array(*markers) -> MarkerArray:
+    """Return a DELETEALL, then ``markers``: as the bridge publishes a body."""
+    return MarkerArray(markers=[Marker(action=Marker.DELETEALL)] + list(markers))
+
+
+def person_status(persons, s_p, scale, stop=None, fault='') -> proto.SeparationStatus:
+    """Return a separation status: per arm ``S_p`` and factor; the separation 1.5 m."""
+    return proto.SeparationStatus(
+        time=2.0, scale=dict(scale), stop=dict(stop or {r: False for r in scale}),
+        cause={r: ('' if v == 1.0 else f'{r}: speed x {v:.2f}') for r, v in scale.items()},
+        separation={r: 1.5 for r in s_p}, margin={r: 1.5 - v for r, v in s_p.items()},
+        persons=tuple(persons), fault=fault)
+
+
+HALF_TURN_ABOUT_Y = (0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4))  # z onto x
+
+
+def test_marker_shapes_follow_rviz():
+    """Markers become shapes by type, pose, scale and colour; what cannot be drawn is None."""
+    cyl = marker_shape(marker(Marker.CYLINDER, 1, (1.0, 2.0, 0.9), HALF_TURN_ABOUT_Y,
+                              colour=(1.0, 0.5, 0.0, 0.4)))
+    assert cyl.kind == 'cylinder' and cyl.size == (0.2, 0.2, 0.5)
+    np.testing.assert_allclose(vtf.SO3(np.array(cyl.wxyz)).apply(np.array([0.0, 0.0, 1.0])),
+                               [1.0, 0.0, 0.0], atol=1e-12)
+    assert cyl.colour == (255, 128, 0) and cyl.opacity == pytest.approx(0.4)
+    unrotated = marker_shape(marker(Marker.SPHERE, 2, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0)))
+    assert unrotated.kind == 'sphere' and unrotated.wxyz == (1.0, 0.0, 0.0, 0.0)
+    pts = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 1.0, 0.0)]
+    strip = marker_shape(marker(Marker.LINE_STRIP, 3, (0.0, 0.0, 0.0), points=pts))
+    np.testing.assert_allclose(strip.segments, [[pts[0], pts[1]], [pts[1], pts[2]]])
+    listed = marker_shape(marker(Marker.LINE_LIST, 4, (0.0, 0.0, 0.0), points=pts))
+    np.testing.assert_allclose(listed.segments, [[pts[0], pts[1]]])
+    assert marker_shape(marker(Marker.TEXT_VIEW_FACING, 5, (0.0, 0.0, 0.0))) is None
+    assert marker_shape(marker(Marker.CUBE, 6, (float('nan'), 0.0, 0.0))) is None
+    assert marker_shape(marker(Marker.LINE_STRIP, 7, (0.0, 0.0, 0.0), points=pts[:1])) is None
+
+
+def test_the_nearest_person_is_nearest_to_a_dense_sampling_of_the_capsules():
+    """Against the arm's capsule axes sampled every millimetre, less both radii."""
+    cell = load_cell()
+    arm, q = cell.leader, np.array([0.4, 1.2, 0.1])
+    starts, ends, radii = collision.arm_capsules(arm, q)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        persons = [Person(rng.uniform([0.0, -4.0], [6.0, 1.0]), np.zeros(2),
+                          float(rng.uniform(0.1, 0.4)), 2.0, k) for k in range(3)]
+        gaps = []
+        for p in persons:
+            gap = math.inf
+            for a, b, r in zip(starts, ends, radii):
+                u = np.linspace(0.0, 1.0, int(np.linalg.norm(b - a) / 1e-3) + 2)[:, None]
+                xy = (a + u * (b - a))[:, :2]  # the columns stand above every link
+                gap = min(gap, float(np.linalg.norm(xy - p.position, axis=1).min()) - r)
+            gaps.append(gap - p.radius)
+        if sorted(gaps)[1] - sorted(gaps)[0] > 2e-3:  # a tie within the sampling is either
+            assert nearest_person(arm, q, persons) is persons[int(np.argmin(gaps))]
+    assert nearest_person(arm, q, []) is None
+
+
+def test_a_person_its_scan_and_the_rings_of_s_p_are_shown(graph):
+    """The person's markers, each scanner's returns and each arm's ``S_p`` ring are drawn.
+
+    The markers by type, pose and scale, replaced by each array (DELETEALL first); the returns
+    where the rays' ranges put them from the scanner's pose in config/people.yaml, no-returns
+    and invalid ranges left out; per arm a ring of the column's radius plus ``S_p`` around the
+    tracked person nearest to it, in the arm's colour, its factor and ``S_p`` in the panel.
+    """
+    viewer, cell = graph.viewer, graph.viewer.cell
+    scene = viewer.scene
+    home = ((0.0, 1.5708, 0.0), (0.0, -1.5708, 0.0))
+    drawn(graph, *home)
+
+    # the person: a leg (cylinder along x here), its two sphere ends, a line, a text not drawn
+    body = [marker(Marker.CYLINDER, 0, (1.0, -3.0, 0.45), HALF_TURN_ABOUT_Y),
+            marker(Marker.SPHERE, 1, (0.75, -3.0, 0.45), scale=(0.2, 0.2, 0.2)),
+            marker(Marker.SPHERE, 2, (1.25, -3.0, 0.45), scale=(0.2, 0.2, 0.2)),
+            marker(Marker.LINE_STRIP, 3, (0.0, 0.0, 0.0), ns='',
+                   points=[(1.0, -3.0, 0.0), (1.0, -3.0, 1.8)]),
+            marker(Marker.TEXT_VIEW_FACING, 4, (1.0, -3.0, 2.0))]
+    pub = publish(graph, MarkerArray, '/person/markers', marker_array(*body))
+    keys = {('person', 0), ('person', 1), ('person', 2), ('', 3)}
+    assert graph.spin_until(lambda: set(scene.person) == keys, 5)
+    leg = scene.person[('person', 0)][0]
+    axis = vtf.SO3(np.asarray(leg.wxyz)).apply(np.array([0.0, 0.0, 0.25]))
+    np.testing.assert_allclose(np.asarray(leg.position) + axis, [1.25, -3.0, 0.45], atol=1e-6)
+    np.testing.assert_allclose(np.asarray(leg.position) - axis, [0.75, -3.0, 0.45], atol=1e-6)
+    assert tuple(leg.scale) == pytest.approx((0.2, 0.2, 0.5))
+    assert leg.radius == 0.5 and leg.height == 1.0  # the scale is the size, as in RViz
+    np.testing.assert_allclose(scene.person[('person', 2)][0].position, [1.25, -3.0, 0.45])
+    np.testing.assert_allclose(scene.person[('', 3)][0].points,
+                               [[[1.0, -3.0, 0.0], [1.0, -3.0, 1.8]]], atol=1e-6)
+    moved = [marker(Marker.CYLINDER, 0, (2.0, -3.0, 0.45), HALF_TURN_ABOUT_Y)]
+    pub.publish(marker_array(*moved))
+    assert graph.spin_until(lambda: set(scene.person) == {('person', 0)}, 5)
+    assert scene.person[('person', 0)][0] is leg, 'a marker that moves keeps its handle'
+    np.testing.assert_allclose(leg.position, [2.0, -3.0, 0.45], atol=1e-6)
+
+    # the scan: three returns of scanner_a among no-returns, a NaN and one below range_min
+    geometry = {g.name: g for g in scanners_from_config(load_config('people'))}['scanner_a']
+    ranges = np.full(geometry.count, np.inf)
+    hits = {100: 5.0, 270: 9.25, 400: 3.5}
+    for i, r in hits.items():
+        ranges[i] = r
+    ranges[300], ranges[301] = np.nan, 0.01
+    scan = LaserScan(angle_min=geometry.angle_min, angle_increment=geometry.angle_increment,
+                     range_min=geometry.range_min, range_max=geometry.range_max,
+                     ranges=ranges.astype(np.float32).tolist())
+    scan.header.frame_id = 'scanner_a'
+    publish(graph, LaserScan, '/safety_scanner/scan', scan)
+    assert graph.spin_until(lambda: 'scanner_a' in scene.scans, 5)
+    expected = [[geometry.x + r * math.cos(geometry.yaw + geometry.angle_min
+                                           + i * geometry.angle_increment),
+                 geometry.y + r * math.sin(geometry.yaw + geometry.angle_min
+                                           + i * geometry.angle_increment),
+                 geometry.height] for i, r in hits.items()]
+    np.testing.assert_allclose(scene.scans['scanner_a'].points, expected, atol=1e-4)
+    scan.header.frame_id = 'laser'  # not a scanner of config/people.yaml
+    publish(graph, LaserScan, '/safety_scanner/scan', scan)
+    graph.spin_until(lambda: False, 0.3)
+    assert set(scene.scans) == {'scanner_a'}
+
+    # the separation monitor: one person near each arm, each arm's ring around its own
+    near_left = PersonSeen(3, 2.5, -3.2, 0.3, 0.0, 0.0)
+    near_right = PersonSeen(8, 4.6, 2.6, 0.25, 0.0, 0.0)
+    s_p = {cell.leader.name: 1.38, cell.follower.name: 2.41}
+    status = person_status([near_left, near_right], s_p,
+                           {cell.leader.name: 0.0, cell.follower.name: 0.52},
+                           stop={cell.leader.name: True, cell.follower.name: False})
+    spub = publish(graph, DiagnosticStatus, '/separation_monitor/status', status.to_msg())
+    assert graph.spin_until(lambda: len(scene.rings) == 2 and len(scene.columns) == 2, 5)
+    for k, (arm, person) in enumerate(zip(cell.arms, (near_left, near_right))):
+        segs = np.asarray(scene.rings[arm.name].points, dtype=float)
+        z = collision.arm_capsules(arm, viewer.q[arm.name])[0][1, 2]
+        np.testing.assert_allclose(segs[..., 2], z, atol=1e-5)
+        radial = np.linalg.norm(segs[..., :2] - [person.x, person.y], axis=-1)
+        np.testing.assert_allclose(radial, person.radius + s_p[arm.name], atol=1e-5)
+        assert rgb(scene.rings[arm.name].colors) == PATH_COLOURS[k]
+        column = scene.columns[person.id]
+        np.testing.assert_allclose(np.asarray(column.position)[:2], [person.x, person.y])
+        assert column.scale[0] == pytest.approx(person.radius)
+    text = lambda: scene.status_md.content  # noqa: E731
+    assert graph.spin_until(lambda: f'| {cell.leader.name} | stop | 1.50 | 1.38 |' in text()
+                            and f'| {cell.follower.name} | x 0.52 | 1.50 | 2.41 |' in text()
+                            and '2 persons tracked' in text(), 5), text()
+
+    # a scanner falls silent: every arm stops, nobody tracked, no ring
+    spub.publish(person_status([], {}, {cell.leader.name: 0.0, cell.follower.name: 0.0},
+                               fault='scanner_b silent for 0.1 s').to_msg())
+    assert graph.spin_until(lambda: not scene.columns and not any(
+        r.visible for r in scene.rings.values()), 5)
+    assert graph.spin_until(lambda: 'every arm stopped**: scanner_b silent' in text(), 5)
+    pub.publish(marker_array())  # the person has left
+    assert graph.spin_until(lambda: not scene.person, 5)
+    for part in ('person', 'scan', 'separation'):
+        scene.set_visible(part, False)
+        assert not scene.root[part].visible and not scene.show[part].value
+
+
+def test_without_a_person_the_scene_is_as_it_was(graph):
+    """Joint states, items and stats alone add no person, scan or ring, nor their checkboxes."""
+    viewer = graph.viewer
+    scene = viewer.scene
+    nodes = set(viewer.server.scene._handle_from_node_name)  # viser's scene tree, by name
+    drawn(graph, (0.0, 1.5708, 0.0), (0.0, -1.5708, 0.0))
+    publish(graph, DiagnosticStatus, '/automation_manager/stats',
+            proto.JobStats('collaborative', True, 3.0, 0.0, {'sorted': 3, 'missed': 0},
+                           items_per_minute=30.0).to_msg())
+    assert graph.spin_until(lambda: '| sorted | 3 |' in scene.stats_md.content, 5)
+    assert set(viewer.server.scene._handle_from_node_name) == nodes
+    assert not any(n.startswith(('/person', '/scan', '/separation')) for n in nodes)
+    assert list(scene.show) == ['arms', 'capsules', 'paths', 'items', 'cell']
+    assert set(scene.root) == set(scene.show)
+    assert not (scene.person or scene.scans or scene.columns or scene.rings)
+    assert 'Separation' not in scene.status_md.content
 
 
 def test_invalid_parameters_are_refused_with_the_name():

@@ -1,15 +1,21 @@
 """state_publisher: /robot_description for late subscribers; /tf against FK of /joint_states.
 
-The TF test needs tf2_msgs (no PyPI wheel: ``./scripts/build_interfaces`` builds it, CI does);
-it composes the transforms itself, as a TF listener would, from ``world`` to each tool.
+The TF tests need tf2_msgs (no PyPI wheel: ``./scripts/build_interfaces`` builds it, CI does);
+they compose the transforms themselves, as a TF listener would, from ``world`` to each tool,
+and place a safety scanner's rays from its frame as RViz does.
 """
+import math
+from pathlib import Path
+
 import numpy as np
 import pytest
 from ros_harness import Graph
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from tf_listener import by_child, pose_in
+import yaml
 
+from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import fk
 from scara_collab.core.model import parse_urdf
 from scara_collab.nodes import conversions as conv
@@ -67,3 +73,40 @@ def test_the_tf_chain_from_world_to_each_tool_is_fk_of_the_joint_states(graph):
         np.testing.assert_allclose(pose_in(tree, f'{arm.name}_quill')[:3, 3], fk(arm, q),
                                    atol=1e-6)
     assert {t.header.frame_id for m in static for t in m.transforms} == {'world'}
+
+
+@pytest.mark.skipif(TFMessage is None, reason='tf2_msgs not built (./scripts/build_interfaces)')
+def test_each_safety_scanner_has_a_static_frame_at_its_pose_and_scan_height(graph):
+    """``world`` -> ``scanner_a``/``scanner_b`` put a ray where config/people.yaml's pose does.
+
+    A range ``r`` at angle ``a`` of the scan, at ``(r cos a, r sin a, 0)`` in the scanner's
+    frame, lands at ``(x + r cos(yaw + a), y + r sin(yaw + a), height)`` in the world.
+    """
+    static = graph.collect(TFMessage, '/tf_static', LATCHED)
+    assert graph.spin_until(lambda: static, timeout=20)
+    frames = by_child(t for m in static for t in m.transforms)
+    scanner = load_config('people')['scanner']
+    assert set(scanner['names']) <= set(frames)
+    for name in scanner['names']:
+        x, y, yaw = scanner[name]['pose']
+        pose = pose_in(frames, name)
+        for a, r in ((0.0, 2.0), (1.2, 5.5), (-2.0, 0.7)):
+            ray = pose @ np.array([r * math.cos(a), r * math.sin(a), 0.0, 1.0])
+            np.testing.assert_allclose(ray[:3], [x + r * math.cos(yaw + a),
+                                                 y + r * math.sin(yaw + a), scanner['height']],
+                                       atol=1e-9)
+
+
+def test_the_rviz_config_shows_the_person_the_scan_and_the_rings_in_world():
+    """config/cell.rviz has the person's, the scanners' and the monitor's displays.
+
+    Its LaserScan display places each scan by the scan's frame: a scanner's, published above.
+    """
+    rviz = yaml.safe_load((Path(__file__).resolve().parents[1] / 'config' / 'cell.rviz')
+                          .read_text())['Visualization Manager']
+    assert rviz['Global Options']['Fixed Frame'] == 'world'
+    shown = {d['Topic']['Value']: d['Class'] for d in rviz['Displays'] if 'Topic' in d}
+    assert shown['/person/markers'] == 'rviz_default_plugins/MarkerArray'
+    assert shown['/safety_scanner/scan'] == 'rviz_default_plugins/LaserScan'
+    assert shown['/separation_monitor/markers'] == 'rviz_default_plugins/MarkerArray'
+    assert shown['/conveyor/items'] == 'rviz_default_plugins/MarkerArray'  # and the cell's

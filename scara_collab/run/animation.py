@@ -12,6 +12,8 @@ What moves comes from the run's files:
 - the joints from ``timeseries.csv`` (every joint state of the run window);
 - the items from ``run.mcap`` (``/conveyor/items``, recorded with ``--record``), if present;
   otherwise the arms only;
+- a person in the cell from ``run.mcap``'s ``/person/markers`` (the bridge's ground truth:
+  each message the whole body, cylinders with sphere ends), if the run had one;
 - the counters in the caption from ``events.csv``.
 
 The GIF is a time-lapse of the job window (``summary.json``): ``fps`` frames per second of
@@ -27,7 +29,7 @@ import math
 from pathlib import Path
 import sys
 import time
-from typing import Callable, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Callable, Dict, List, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
@@ -41,6 +43,7 @@ from scara_collab.sim.cell_sim import CellSim
 
 GIF_FILE = 'run.gif'
 ITEMS_TOPIC = '/conveyor/items'
+PERSON_TOPIC = '/person/markers'
 FLOOR_RGBA = (0.78, 0.80, 0.82, 1.0)
 BACKGROUND = (255, 255, 255)
 CAPTION_HEIGHT = 24
@@ -102,6 +105,8 @@ class RenderScene:
         self.items: Dict[int, int] = {}  # item id -> body, the items shown now
         self._spare: Dict[Tuple[float, ...], List[int]] = {}
         self._item_colour: Dict[int, Tuple[float, ...]] = {}
+        self.person: List[Tuple[PersonShape, int]] = []  # the person's shapes shown now
+        self._person_spare: Dict[Tuple, List[int]] = {}
         c = self.camera
         self.view_matrix = pb.computeViewMatrixFromYawPitchRoll(
             c.target, c.distance, c.yaw, c.pitch, 0.0, 2)
@@ -143,6 +148,32 @@ class RenderScene:
                 pybullet.GEOM_BOX, halfExtents=[half] * 3, rgbaColor=list(rgba))
         return self.pb.createMultiBody(0.0, -1, shape, list(_HIDDEN))
 
+    def set_person(self, shapes: Sequence['PersonShape']) -> None:
+        """Show exactly these shapes of a person (:func:`decode_person`); hide the others."""
+        pb = self.pb
+        for shape, body in self.person:
+            pb.resetBasePositionAndOrientation(body, _HIDDEN, [0, 0, 0, 1])
+            self._person_spare.setdefault(shape[:3], []).append(body)
+        self.person = []
+        for shape in shapes:
+            spare = self._person_spare.get(shape[:3])
+            body = spare.pop() if spare else self._person_body(*shape[:3])
+            pb.resetBasePositionAndOrientation(body, list(shape.position), list(shape.quat))
+            self.person.append((shape, body))
+
+    def _person_body(self, kind: str, size: Tuple[float, ...], rgba: Tuple[float, ...]) -> int:
+        pb = self.pb
+        if kind == 'cylinder':
+            visual = pb.createVisualShape(pybullet.GEOM_CYLINDER, radius=size[0] / 2.0,
+                                          length=size[2], rgbaColor=list(rgba))
+        elif kind == 'sphere':
+            visual = pb.createVisualShape(pybullet.GEOM_SPHERE, radius=size[0] / 2.0,
+                                          rgbaColor=list(rgba))
+        else:
+            visual = pb.createVisualShape(pybullet.GEOM_BOX, halfExtents=[v / 2.0 for v in size],
+                                          rgbaColor=list(rgba))
+        return pb.createMultiBody(0.0, -1, visual, list(_HIDDEN))
+
     def render(self) -> np.ndarray:
         """Return the current scene as an ``(height, width, 3)`` uint8 RGB image."""
         _, _, rgba, _, _ = self.pb.getCameraImage(
@@ -165,17 +196,30 @@ class RenderScene:
 
 
 # --- the run's data --------------------------------------------------------------------------
+def load_recorded(path: Union[str, Path], topics: Sequence[str]
+                  ) -> Tuple[Dict[str, Tuple[np.ndarray, List[bytes]]], Reading]:
+    """Return the recorded messages of ``topics`` in an MCAP file, undecoded, in one pass.
+
+    :return: ``({topic: (log times (N,) in s, CDR bytes of each message)}, the reading
+        status)``; a topic not recorded has no messages.
+    """
+    reading = Reading()
+    found: Dict[str, Tuple[List[float], List[bytes]]] = {t: ([], []) for t in topics}
+    for msg in iter_messages(path, topics, reading):
+        times, data = found[msg.topic]
+        times.append(msg.log_time * 1e-9)
+        data.append(msg.data)
+    return {t: (np.asarray(times, dtype=float), data)
+            for t, (times, data) in found.items()}, reading
+
+
 def load_items(path: Union[str, Path]) -> Tuple[np.ndarray, List[bytes], Reading]:
     """Return the recorded ``/conveyor/items`` of an MCAP file, undecoded.
 
     :return: ``(log times (N,) in s, CDR bytes of each message, the reading status)``.
     """
-    reading = Reading()
-    times, data = [], []
-    for msg in iter_messages(path, [ITEMS_TOPIC], reading):
-        times.append(msg.log_time * 1e-9)
-        data.append(msg.data)
-    return np.asarray(times, dtype=float), data, reading
+    found, reading = load_recorded(path, [ITEMS_TOPIC])
+    return (*found[ITEMS_TOPIC], reading)
 
 
 def decode_items(data: bytes) -> List[Tuple[int, Tuple[float, ...], Tuple[float, ...]]]:
@@ -189,6 +233,43 @@ def decode_items(data: bytes) -> List[Tuple[int, Tuple[float, ...], Tuple[float,
         rgba = tuple(round(float(v), 3) for v in (m.color.r, m.color.g, m.color.b, 1.0))
         p = m.pose.position
         out.append((int(m.id), rgba, (p.x, p.y, p.z)))
+    return out
+
+
+class PersonShape(NamedTuple):
+    """One shape of a person's markers as the scene draws it (:func:`decode_person`).
+
+    :ivar kind: ``cylinder`` (along its z), ``sphere`` or ``box``.
+    :ivar size: a cylinder's diameter twice and height, a sphere's diameter three times, a
+        box's edges, m (a marker's ``scale``).
+    :ivar rgba: 0-1; :ivar position: ``(x, y, z)`` world, m; :ivar quat: ``(x, y, z, w)``.
+    """
+
+    kind: str
+    size: Tuple[float, float, float]
+    rgba: Tuple[float, float, float, float]
+    position: Tuple[float, float, float]
+    quat: Tuple[float, float, float, float]
+
+
+def decode_person(data: bytes) -> List[PersonShape]:
+    """``visualization_msgs/MarkerArray`` CDR bytes -> the person's shapes.
+
+    The cylinders, spheres and cubes added in ``world``; other markers are left out.
+    """
+    from rclpy.serialization import deserialize_message
+    from visualization_msgs.msg import Marker, MarkerArray
+    kinds = {Marker.CYLINDER: 'cylinder', Marker.SPHERE: 'sphere', Marker.CUBE: 'box'}
+    out = []
+    for m in deserialize_message(data, MarkerArray).markers:
+        kind = kinds.get(m.type)
+        if m.action != Marker.ADD or kind is None or m.header.frame_id not in ('', 'world'):
+            continue
+        p, o, sc, c = m.pose.position, m.pose.orientation, m.scale, m.color
+        quat = (o.x, o.y, o.z, o.w) if (o.x, o.y, o.z, o.w) != (0.0,) * 4 else (0, 0, 0, 1.0)
+        out.append(PersonShape(kind, tuple(round(float(v), 4) for v in (sc.x, sc.y, sc.z)),
+                               tuple(round(float(v), 3) for v in (c.r, c.g, c.b, 1.0)),
+                               (p.x, p.y, p.z), tuple(float(v) for v in quat)))
     return out
 
 
@@ -268,19 +349,26 @@ def render_gif(run_dir: Union[str, Path], out: Optional[Union[str, Path]] = None
     t0 = float(t[0]) if t0 is None else max(float(t0), float(t[0]))
     t1 = float(t[-1]) if t1 is None else min(float(t1), float(t[-1]))
     times = frame_times(t0, max(t0, t1), fps, max_seconds)
-    item_t, item_data, reading = (np.zeros(0), [], Reading())
+    recorded: Dict[str, Tuple[np.ndarray, List[bytes]]] = {}
+    reading = Reading()
     mcap = run_dir / MCAP_FILE
     if mcap.is_file():
-        item_t, item_data, reading = load_items(mcap)
+        recorded, reading = load_recorded(mcap, [ITEMS_TOPIC, PERSON_TOPIC])
+    item_t, item_data = recorded.get(ITEMS_TOPIC, (np.zeros(0), []))
+    person_t, person_data = recorded.get(PERSON_TOPIC, (np.zeros(0), []))
     events = report.load_events(run_dir) if (run_dir / 'events.csv').is_file() else []
     ev_t = {k: np.sort([float(e['time']) for e in events if e.get('kind') == k])
             for k in ('sorted', 'missed')}
     colours = sorted({rgba for d in item_data[:: max(1, len(item_data) // 20)]
-                      for _, rgba, _ in decode_items(d)})
+                      for _, rgba, _ in decode_items(d)}
+                     | {shape.rgba for d in person_data[:: max(1, len(person_data) // 20)]
+                        for shape in decode_person(d)})
     speed = (t1 - t0) / max(1e-9, len(times) / fps) if len(times) > 1 else 1.0
     items_note = (f'items from {mcap.name}' if item_data else
                   'arms only (no /conveyor/items in run.mcap)' if mcap.is_file() else
                   'arms only (record with --record to show the items)')
+    if person_data:
+        items_note += ', a person from /person/markers'
     cut = '' if reading.complete else f'; {mcap.name} is cut short: {reading.error}'
     say(f'[animation] {len(times)} frames of t={t0:.1f}..{t1:.1f} s at {fps:g} fps '
         f'({speed:.1f}x), {items_note}{cut}')
@@ -304,6 +392,9 @@ def render_gif(run_dir: Union[str, Path], out: Optional[Union[str, Path]] = None
             if item_data:
                 j = int(np.searchsorted(item_t, ft, side='right')) - 1
                 scene.set_items(decode_items(item_data[j]) if j >= 0 else [])
+            if person_data:
+                j = int(np.searchsorted(person_t, ft, side='right')) - 1
+                scene.set_person(decode_person(person_data[j]) if j >= 0 else [])
             text = (f'scara_collab {mode}   t = {ft:6.1f} s   sorted '
                     f'{int(np.searchsorted(ev_t["sorted"], ft, side="right"))}   missed '
                     f'{int(np.searchsorted(ev_t["missed"], ft, side="right"))}   '
