@@ -41,12 +41,12 @@ from scara_collab.core import collision, kinematics as kin
 from scara_collab.core.config import load_config
 from scara_collab.core.model import load_cell
 from scara_collab.core.scan_tracking import scanners_from_config
-from scara_collab.core.separation_monitor import PersonSeen
+from scara_collab.core.separation_monitor import nearest_person, PersonSeen
 from scara_collab.core.ssm import Person
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.cell_viewer import (
-    CellViewer, LATCHED, margin_colour, MARGIN_COLOURS, marker_shape, nearest_person,
+    CellViewer, LATCHED, margin_colour, MARGIN_COLOURS, marker_shape,
     PATH_COLOURS)
 
 CHROMIUM = shutil.which('chromium')

@@ -53,9 +53,10 @@ import yourdfpy
 from scara_collab.core import collision
 from scara_collab.core.config import load_config
 from scara_collab.core.kinematics import base_to_world
-from scara_collab.core.model import ArmModel, CellModel, load_cell
+from scara_collab.core.model import CellModel, load_cell
 from scara_collab.core.palette import class_colour_255
 from scara_collab.core.scan_tracking import ScanGeometry, scanners_from_config
+from scara_collab.core.separation_monitor import nearest_person
 from scara_collab.core.ssm import Person
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
@@ -221,29 +222,6 @@ def scan_points(geometry: ScanGeometry, ranges: np.ndarray, angle_min: float,
         hit = np.isfinite(ranges) & (ranges >= range_min) & (ranges <= range_max)
     xy = rays.points(ranges, hit)
     return np.column_stack([xy, np.full(len(xy), geometry.height)])
-
-
-def nearest_person(arm: ArmModel, q: np.ndarray, persons: Sequence[Person]
-                   ) -> Optional[Person]:
-    """Return the person whose column comes nearest to the arm's capsules (None for none).
-
-    Surface to surface, as :func:`scara_collab.core.ssm.assess_arm` measures ``S``: the
-    capsules (:func:`scara_collab.core.collision.arm_capsules`) against each column's axis,
-    less both radii.
-
-    :param arm: the arm; :param q: ``(3,)`` its joints.
-    :param persons: the persons, as columns.
-    """
-    if not persons:
-        return None
-    start, end, radii = collision.arm_capsules(arm, q)
-    pos = np.array([p.position for p in persons], dtype=float).reshape(-1, 2)
-    bottom = np.column_stack([pos, np.zeros(len(pos))])
-    top = np.column_stack([pos, [p.height for p in persons]])
-    axis, _, _ = collision.segment_distance(start[None], end[None], bottom[:, None],
-                                            top[:, None])
-    gap = axis - radii[None, :] - np.array([p.radius for p in persons])[:, None]
-    return persons[int(np.argmin(gap.min(axis=1)))]
 
 
 def ring_segments(centre: Sequence[float], radius: float, z: float,

@@ -105,7 +105,8 @@ class Launcher:
                 from scara_collab.run.faults import hook
                 recorder = hook(opts.faults)(RunRecorder)
             self.recorder = recorder(output, opts.mode, profile=opts.profile,
-                                     context=self.context, namespace=self.namespace)
+                                     context=self.context, namespace=self.namespace,
+                                     person=opts.cell_person or '')
         self.recorder.extra['lockstep'] = opts.lockstep_name
         if opts.record:
             record_mcap(self.recorder, output, console)
