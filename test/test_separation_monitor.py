@@ -79,12 +79,15 @@ def test_an_untaught_monitor_stops_every_arm(cell, cfg):
 
 
 def test_an_empty_cell_runs_at_full_speed(cell, cfg):
-    """The empty cell: no person, the factor rises to 1 after the dwell and stays there."""
+    """The empty cell: no person, full speed from the first good decision on.
+
+    The cell starts at rest, so the first look sets the factor at once; after a stop the
+    factor rises only after the dwell, at the resume rate (the tests below).
+    """
     sim = Cell(cell, cfg)
     s = scale(sim.run(3.0))
-    dwell, rate = cfg['monitor']['dwell'], cfg['monitor']['resume_rate']
     first_full = np.argmax(s >= 1.0) * TICK + TICK
-    assert first_full == pytest.approx(dwell + 1.0 / rate, abs=2 * TICK + PERIOD)
+    assert first_full <= PERIOD + 2 * TICK  # the first scan taught, then the first decision
     assert np.all(s[int(first_full / TICK):] == 1.0)
     assert np.all(np.diff(s) >= 0.0)
 

@@ -31,6 +31,8 @@ from scara_collab.core.sharing import Unblock
 
 #: s an idle arm that found nothing to take waits before it looks again (the items move 2 cm)
 LOOK_AGAIN = 0.1
+#: s it waits when a person kept it from the items it looked at (the person moves slowly)
+PERSON_LOOK = 0.5
 #: urgent items an arm can still save by taking them first, most urgent first; with more, the
 #: feed is faster than the arm and it takes the item that makes the shortest cycle
 SAVABLE = 2
@@ -218,7 +220,8 @@ class LaneDecisions:
                 if partner is not None:
                     board.claimed[partner.id] = self.cell.follower.name
             return out
-        lane.next_look = now + LOOK_AGAIN  # each look plans: not at every tick
+        # each look plans: not at every tick; kept clear of a person, less often still
+        lane.next_look = now + (PERSON_LOOK if self.moves.declined == 'person' else LOOK_AGAIN)
         return []
 
     # --- after a grip -----------------------------------------------------------------------

@@ -23,6 +23,11 @@ from scara_collab.core.trajectory import Trajectory
 
 #: s a meeting the arm could not make at speed near a person is put off by, each time
 PUT_OFF = 0.5
+#: times a meeting is put off before the item is left for the person
+PUT_OFFS = 4
+#: m: a person this far beyond an arm's reach cannot slow it (its protective separation at
+#: full speed stays below this: docs/people.md)
+UNHINDERED = 3.5
 
 
 class JobMoves:
@@ -103,10 +108,17 @@ class JobMoves:
         :attr:`declined` says it was left for the person).
         """
         s, arm = self.settings, self.cell.arm(lane.robot)
+        reach = arm.l1 + arm.l2 + UNHINDERED
+        near = [p for p in self.persons
+                if np.hypot(*(p.position - arm.base[:2, 3])) - p.radius < reach]
+        if not near:
+            return hit
         q0 = self.protocol.q[lane.robot]
-        while hit is not None:
+        for _ in range(PUT_OFFS + 1):
+            if hit is None:
+                break
             samples = np.linspace(0, len(hit.traj.t) - 1, 5)[1:].round().astype(int)
-            if ssm.allowed_along(arm, hit.traj.q[samples], hit.traj.qd[samples], self.persons,
+            if ssm.allowed_along(arm, hit.traj.q[samples], hit.traj.qd[samples], near,
                                  self.people) >= s.person_speed:
                 return hit
             hit = sorting.intercept(self.cell, arm, q0, item, hit.start + PUT_OFF, s.pick_z,

@@ -163,7 +163,10 @@ class Decision:
 class ScaleGovernor:
     """The factor one arm is given: falls at the braking rate, rises after a dwell, slowly.
 
-    See the module docstring. It starts at 0: nothing moves before the first good decision.
+    See the module docstring. It starts at 0: nothing moves before the first good decision,
+    which sets the factor at once to what it allows (the cell starts at rest: there is no
+    motion to spare a sudden rise, and the bridge's trajectory clocks still rise within the
+    joints' limits); from then on it falls and rises as above.
 
     :param dwell: s the relaxed factor must exceed the current one before it rises.
     :param resume_rate: 1/s, the fastest rise.
@@ -175,6 +178,7 @@ class ScaleGovernor:
         self.scale = 0.0
         self._time: Optional[float] = None
         self._rising_since: Optional[float] = None
+        self._started = False  # the first good decision sets the factor at once
 
     def update(self, now: float, required: float, relaxed: float, fall_rate: float) -> float:
         """Return the factor at ``now``.
@@ -187,6 +191,10 @@ class ScaleGovernor:
         self._time = now
         dt = now - last
         relaxed = min(relaxed, required)
+        if not self._started:  # the cell starts at rest: what the first look allows, at once
+            self._started = True
+            self.scale = relaxed
+            return self.scale
         if required < self.scale:
             step = fall_rate * dt if math.isfinite(fall_rate) else math.inf
             self.scale = max(required, self.scale - step) if required > 0.0 else 0.0

@@ -49,13 +49,19 @@ class BridgeOutputs:
         self.items_pub = node.create_publisher(MarkerArray, 'conveyor/items', STATE_QOS)
         self.diagnostics = Diagnostics(node)
         self._added: List[Tuple[str, Callable[[], None]]] = []
+        self._first: List[Tuple[str, Callable[[], None]]] = []
 
-    def add(self, key: str, rate: float, publish: Callable[[], None]) -> None:
-        """Publish with ``publish()`` at ``rate`` (Hz of sim time), after the others, from now."""
+    def add(self, key: str, rate: float, publish: Callable[[], None],
+            first: bool = False) -> None:
+        """Publish with ``publish()`` at ``rate`` (Hz of sim time), from now.
+
+        :param first: before the clock of its instant (what a node decides on at that clock
+            must be there when the clock comes), else after the others.
+        """
         self.periods[key] = 1.0 / rate
         self.next[key] = self._origin[key] = self.sim.time
         self._count[key] = 0
-        self._added.append((key, publish))
+        (self._first if first else self._added).append((key, publish))
 
     def steps_to_next(self, dt: float) -> int:
         """Return the physics steps (of ``dt`` s) until the next publication falls due (>= 1)."""
@@ -65,6 +71,10 @@ class BridgeOutputs:
     def publish_due(self) -> None:
         """Publish whatever has fallen due by the simulator's time, in the order above."""
         t = self.sim.time + 1e-9
+        for key, publish in self._first:
+            if t >= self.next[key]:
+                publish()
+                self._step(key)
         if t >= self.next['clock']:
             self.clock()
             self._step('clock')

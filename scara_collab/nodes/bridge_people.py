@@ -15,10 +15,12 @@ It publishes, on sim time:
 - ``person/poses`` (``geometry_msgs/PoseArray``, one pose per capsule centre) and
   ``person/markers`` (``visualization_msgs/MarkerArray``), at the markers' rate, and
   ``person/truth`` (:class:`~scara_collab.nodes.protocol.PersonTruth`: each arm's true
-  separation and margin, whether it moves, a contact) at the state rate: ground truth, for
+  separation and margin, whether it moves, a contact) with every scan: ground truth, for
   the record, viewers and tests only;
-- ``<robot>/trajectory_clock`` (:class:`~scara_collab.nodes.protocol.TrajectoryClock`) at the
-  state rate: each arm's trajectory clock, so every node predicts the arm on it.
+- ``<robot>/trajectory_clock`` (:class:`~scara_collab.nodes.protocol.TrajectoryClock`) with
+  every scan while the arm runs slowed (and once when its clock changes otherwise): each
+  arm's trajectory clock, so every node predicts the arm on it, and its planned velocity for
+  the monitor (at full speed the measured one is the same).
 
 It takes each arm's speed factor from ``<robot>/speed_scaling`` (``std_msgs/Float64``,
 transient local: the separation monitor's) and runs the arm's trajectories at it
@@ -57,9 +59,10 @@ from scara_collab.sim.scanner import SafetyScanner
 SCALING_MODES = ('cell', 'arm')
 #: rad/s | m/s: an arm with a joint faster than this moves (the truth's "while it moved")
 MOVING = 1e-3
-#: m: beyond this lower bound on the separation, an arm's truth is not computed exactly
-#: (no protective separation of this cell comes near it)
-FAR = 6.0
+#: m: beyond this lower bound on the separation, an arm's truth is not computed exactly (the
+#: true protective separation, without the intrusion distance, stays below 3.5 m for this
+#: cell's arms at their full speed: docs/people.md)
+FAR = 3.5
 
 
 class BridgePeople:
@@ -106,6 +109,7 @@ class BridgePeople:
             node.create_subscription(Float64, f'{a.name}/speed_scaling', guarded(
                 node, lambda msg, r=a.name: self._on_factor(r, msg)), LATCHED)
         self.started = sim.time
+        self._said: Dict[str, tuple] = {}  # the clock each arm was last said to run at
         node.get_logger().info(
             f'a person in the cell: {self.scenario.name}, {len(self.geometry)} safety scanners '
             f'at {self.rate:g} Hz, speed scaling per {mode}')
@@ -146,10 +150,11 @@ class BridgePeople:
             self.sim.servo.held_back = []
 
     def scan(self) -> None:
-        """Cast the scanners' rays now and publish each scan."""
+        """Cast the scanners' rays now and publish each scan; the clocks and the truth with it."""
         t = self.sim.time
         for geometry, ranges in zip(self.geometry, self.scanner.scan()):
             self.scan_pub.publish(conv.laser_scan(geometry, ranges, t, 1.0 / self.rate))
+        self.state()
 
     def ground_truth(self) -> None:
         """Publish the person's capsules as poses and markers (ground truth)."""
@@ -167,11 +172,16 @@ class BridgePeople:
         servo = self.sim.servo
         for a, arm in enumerate(self.cell.arms):
             clock = servo.clocks.get(arm.name)
-            planned = servo.planned[a] if clock is not None else servo.ref_qd[a]
+            if clock is None:
+                continue  # never slowed: on sim time, at its planned speed
+            said = (float(self.sim.motion[arm.name].lag), servo.speed(arm.name),
+                    float(servo.factors[arm.name]))
+            if said[1] >= 1.0 and said == self._said.get(arm.name):
+                continue  # at full speed as last said: its measured velocity is the planned
+            self._said[arm.name] = said
             self.clock_pub[arm.name].publish(proto.TrajectoryClock(
-                arm.name, round(t, 6), float(self.sim.motion[arm.name].lag),
-                servo.speed(arm.name), float(servo.factors[arm.name]),
-                dict(zip(arm.joint_names, (float(v) for v in planned)))).to_msg())
+                arm.name, round(t, 6), *said,
+                dict(zip(arm.joint_names, (float(v) for v in servo.planned[a])))).to_msg())
         self.truth_pub.publish(self._truth(t, q, qd).to_msg())
 
     def _truth(self, t: float, q: np.ndarray, qd: np.ndarray) -> proto.PersonTruth:

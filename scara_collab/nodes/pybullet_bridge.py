@@ -85,7 +85,7 @@ PARAMETERS = {
     'person': '',                         # a person in the cell: a scenario or a YAML file
     'person_seed': -1,                    # its seed (random); -1: config/people.yaml's
     'speed_scaling': 'cell',              # one factor for both arms (cell) or each its own
-    'scaling_timeout': 0.05,              # sim s a speed factor stays valid once heard
+    'scaling_timeout': 0.1,               # sim s a speed factor stays valid once heard
     'slip_at': '',                        # sim s at which a held item slips ('12.5,30')
     'slip_rate': 0.0,                     # slips per second of carrying (seeded)
 }
@@ -264,10 +264,9 @@ class PyBulletBridge(Node):
             self, self.cell, self.sim, cfg, params['person'], seed,
             {'state': 1.0 / self.outputs.periods['state']}, self.execution.hold,
             params['speed_scaling'], params['scaling_timeout'])
-        self.outputs.add('scan', self.people.rate, self.people.scan)
+        # what the separation monitor decides on comes before the clock of its instant
+        self.outputs.add('scan', self.people.rate, self.people.scan, first=True)
         self.outputs.add('person', float(params['markers_rate']), self.people.ground_truth)
-        self.outputs.add('person_state', 1.0 / self.outputs.periods['state'],
-                         self.people.state)
 
     def _build_slips(self, params: dict, seed: int) -> None:
         """Arm the slips of items from the grippers (``--fault drop@...``), if any.

@@ -18,12 +18,15 @@ simulates the person and the safety scanners.
   (:func:`scara_collab.nodes.conversions.admit_state`) is ignored, a non-finite one stops the
   arm it is of until a finite one comes.
 - ``<robot>/trajectory_clock`` (:class:`~scara_collab.nodes.protocol.TrajectoryClock`): the
-  planned, unscaled joint velocity of each arm's trajectory. Until the first one comes (and
-  for a joint it does not name) the measured velocity stands for it: at ``s = 1`` they agree.
+  planned, unscaled joint velocity of each arm's trajectory while it runs slowed (the bridge
+  says it with every scan then). At full speed, before the first one and for a joint it does
+  not name, the measured velocity stands for it: at ``s = 1`` they agree.
 
-At the state rate, on sim time (:func:`scara_collab.nodes.sim_timer.every`), it decides and
-publishes each arm's factor on ``<robot>/speed_scaling`` (``std_msgs/Float64``, latched, at
-start 0 and then whenever it changes), the decision on ``~/status``
+At each step of sim time (:func:`scara_collab.nodes.sim_timer.every`, at most the state rate)
+it observes the scans that have come and decides when there is something new to decide on:
+scans of a new instant (at the scanners' rate), a fault, the end of one. It publishes each
+arm's factor on ``<robot>/speed_scaling`` (``std_msgs/Float64``, latched: at start 0, then at
+every decision, so the bridge hears the monitor alive), the decision on ``~/status``
 (:class:`~scara_collab.nodes.protocol.SeparationStatus`, every decision) and once a sim second
 on ``/diagnostics``, and, while something subscribes, RViz markers on ``~/markers``: each
 tracked person's column as a cylinder and per arm a ring of ``S_p`` around the column of the
@@ -117,6 +120,8 @@ class SeparationMonitorNode(Node):
         self._scales: Dict[str, float] = {}
         self._stopped: Dict[str, bool] = {}
         self._fault = ''
+        self._decided: Optional[int] = None  # the newest instant decided on, ns
+        self.checked: Optional[float] = None  # sim s of the last look (a decision or not)
         self._next_marker = 0.0
         # one logger per arm, kept: a throttled message is throttled per logger and call site
         self._logs = {a.name: self.get_logger().get_child(a.name) for a in self.cell.arms}
@@ -232,16 +237,22 @@ class SeparationMonitorNode(Node):
                 continue
             q, measured = state
             clock = self._clocks.get(arm.name)
-            qd = measured if clock is None else np.array(
-                [clock.planned.get(j, m) for j, m in zip(arm.joint_names, measured)],
-                dtype=float)
+            if clock is None or clock.scale >= 1.0:  # at full speed: measured = planned
+                qd = measured
+            else:
+                qd = np.array([clock.planned.get(j, m)
+                               for j, m in zip(arm.joint_names, measured)], dtype=float)
             out[arm.name] = (q, qd)
         return out
 
     def _decide(self) -> None:
-        now = conv.now(self)
+        now = self.checked = conv.now(self)
         # the instants whose missing scans are half a period late: without them
         self._observe_until(int(round(now * 1e9)) - self._half_period)
+        fault = self.monitor.fault(now)
+        if self.observed == self._decided and fault == self._fault and self.decision:
+            return  # nothing new since the last decision: it stands
+        self._decided = self.observed
         decision = self.monitor.decide(now, self.planned())
         self.decision = decision
         for arm in decision.arms:
@@ -260,10 +271,9 @@ class SeparationMonitorNode(Node):
             self.marker_pub.publish(self._markers(decision))
 
     def _publish_scale(self, robot: str, scale: float) -> None:
-        """Publish ``robot``'s factor if it changed (latched: the last one stands)."""
-        if self._scales.get(robot) != scale:
-            self._scales[robot] = scale
-            self.scale_pubs[robot].publish(Float64(data=float(scale)))
+        """Publish ``robot``'s factor (latched: the last one stands; the bridge times it out)."""
+        self._scales[robot] = scale
+        self.scale_pubs[robot].publish(Float64(data=float(scale)))
 
     def _log(self, decision: Decision) -> None:
         """Log each stop's begin and end (throttled while it stands)."""
