@@ -103,3 +103,26 @@ def test_an_arm_never_slowed_has_no_clock_and_an_idle_arm_builds_no_lag(sim):
     sim.step(200)
     assert RIGHT in sim.servo.clocks and sim.motion[RIGHT].lag == 0.0
     assert LEFT not in sim.servo.clocks
+
+
+def test_coupled_arms_slow_in_step_so_their_schedule_against_each_other_holds(sim):
+    """One factor for both arms: their clocks take one rate, the slower arm's, to the bit."""
+    cell = sim.cell
+    sim.reset_arm(RIGHT, ik(cell.follower, [3.0, 1.3, 0.4]).q)
+    moves = {LEFT: line_move(cell.leader, sim.arm_state(LEFT)[0], [2.2, -0.6, 0.4]),
+             RIGHT: line_move(cell.follower, sim.arm_state(RIGHT)[0], [3.6, 0.8, 0.4])}
+    t0 = sim.time
+    for robot, move in moves.items():
+        sim.execute(robot, t0 + move.t, move.q, move.qd, move.qdd, robot, 0.0)
+    servo = sim.servo
+    servo.coupled = True
+    lags = []
+    while sim.active(LEFT) and sim.active(RIGHT):
+        factor = _profile(sim.time - t0)
+        for robot in (LEFT, RIGHT):
+            servo.scale(robot, factor)
+        sim.step(4)
+        lags.append((sim.motion[LEFT].lag, sim.motion[RIGHT].lag))
+        assert servo.speed(LEFT) == servo.speed(RIGHT)
+    lags = np.array(lags)
+    assert np.all(lags[:, 0] == lags[:, 1]) and lags[-1, 0] > 0.3

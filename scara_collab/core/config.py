@@ -168,6 +168,7 @@ SCHEMAS = {
         Rule('line_cell', 'int', lambda v: v >= 0, 'must be >= 0'),
         Rule('line_capacity', 'positive'),
         Rule('person_speed', 'number', lambda v: 0.0 <= v <= 1.0, 'must be in [0, 1]'),
+        Rule('person_buffer', 'nonneg'),
     ],
     'people': [
         Rule('person.scenario', 'str'),

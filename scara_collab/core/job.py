@@ -39,6 +39,7 @@ One tick (:meth:`SortingJob.tick`) goes through them in one direction: the proto
 every waiting lane to ``now`` (what is sent again, what ended each wait), the decisions
 decide on all of it, the belt sharing sends the result in turn.
 """
+import dataclasses
 from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
@@ -98,7 +99,10 @@ class SortingJob:
         self.protocol = LaneProtocol(cell, settings, self.plan, log)
         self.belt = (SharedBelt if settings.mode == 'collaborative' else SoloBelt)(
             cell, settings, self.plan)
-        self.moves = JobMoves(cell, settings, self.protocol, self.belt, self.plan, people)
+        # a meeting near a person is chosen with room to spare beyond the protective separation
+        aside = (None if people is None else
+                 dataclasses.replace(people, intrusion=people.intrusion + settings.person_buffer))
+        self.moves = JobMoves(cell, settings, self.protocol, self.belt, self.plan, aside)
         #: in a line of cells, the items this cell leaves for the ones downstream
         self.share = (line.Share(settings.line_cell, settings.line_cells, settings.line_capacity)
                       if settings.line_cells > 1 else None)

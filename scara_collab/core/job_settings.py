@@ -43,6 +43,8 @@ class JobSettings:
     line_capacity: float = 40.0
     #: the least speed factor a meeting with an item is chosen at, near a person
     person_speed: float = 0.9
+    #: m kept beyond the protective separation when that meeting is chosen
+    person_buffer: float = 0.3
 
     @staticmethod
     def from_config(cell: CellModel, cfg: dict, mode: Optional[str] = None,
@@ -82,4 +84,5 @@ class JobSettings:
             leads=Leads.of(cfg, controllers),
             line_cell=int(cfg['line_cell']), line_cells=int(cfg['line_cells']),
             line_capacity=float(cfg['line_capacity']),
-            person_speed=float(cfg['person_speed']))
+            person_speed=float(cfg['person_speed']),
+            person_buffer=float(cfg['person_buffer']))

@@ -39,7 +39,7 @@ time: at ``s = 1`` throughout, ``tau`` is the sim time and the arm runs its traj
 planned; the lag ``t - tau`` is what the scaling cost.
 """
 import math
-from typing import Callable, NamedTuple, Tuple
+from typing import Callable, NamedTuple, Optional, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -174,8 +174,21 @@ class ScaledClock:
             rate = min(max(rate, low), high)
         return rate
 
+    def feasible(self, now: float, target: float, sample: Callable[[float], Sample]) -> float:
+        """Return the rate :meth:`tick` would take towards ``target`` up to ``now``, 1/s.
+
+        Clocks that must run together (two arms scheduled against each other) each say theirs,
+        and all take the one of smallest size: it lies within every clock's limits (each
+        interval of :func:`rate_bounds` holds 0).
+        """
+        dt = float(now) - self.time
+        target = min(max(float(target), 0.0), 1.0)
+        if dt <= 0.0 or target == self.scale:
+            return 0.0
+        return self._rate(dt, target, sample)
+
     def tick(self, now: float, target: float,
-             sample: Callable[[float], Sample]) -> ScaledSample:
+             sample: Callable[[float], Sample], rate: Optional[float] = None) -> ScaledSample:
         """Advance to sim time ``now``, moving ``s`` towards ``target``; return the command.
 
         ``s`` moves towards ``target`` (clipped to [0, 1]) at the fastest rate
@@ -186,6 +199,8 @@ class ScaledClock:
         :param now: sim time, s (not before the last tick).
         :param target: the factor asked for (the separation monitor's).
         :param sample: the reference, ``sample(tau) -> (q, qd, qdd)``.
+        :param rate: the rate to take (clocks run together, :meth:`feasible`), within this
+            clock's limits; None: this clock's own.
         :raises ValueError: if ``now`` is before the last tick.
         """
         dt = float(now) - self.time
@@ -194,7 +209,8 @@ class ScaledClock:
         target = min(max(float(target), 0.0), 1.0)
         held_back = False
         if dt > 0.0:
-            rate = self._rate(dt, target, sample) if target != self.scale else 0.0
+            if rate is None:
+                rate = self._rate(dt, target, sample) if target != self.scale else 0.0
             new = min(max(self.scale + rate * dt, 0.0), 1.0)
             if target < self.scale:
                 if self._fall is None:  # a fall starts: the braking it promises

@@ -55,8 +55,10 @@ from scara_collab.sim.person import arm_link_names, BodyModel, PersonSim
 from scara_collab.sim.person_scenarios import Motion, PersonPath, scenario
 from scara_collab.sim.scanner import SafetyScanner
 
-#: how the factors of the two arms are applied: one for both (the smaller), or each its own
-SCALING_MODES = ('cell', 'arm')
+#: how the factors of the two arms are applied: one for both (the smaller), their clocks in
+#: step. (Each arm its own would need the arms' schedules against each other kept otherwise:
+#: docs/people.md.)
+SCALING_MODES = ('cell',)
 #: rad/s | m/s: an arm with a joint faster than this moves (the truth's "while it moved")
 MOVING = 1e-3
 #: m: beyond this lower bound on the separation, an arm's truth is not computed exactly (the
@@ -83,6 +85,7 @@ class BridgePeople:
             raise ValueError(f'speed_scaling must be one of {SCALING_MODES}, got {mode!r}')
         self.node, self.cell, self.sim, self.hold = node, cell, sim, hold
         self.mode, self.timeout = mode, float(timeout)
+        sim.servo.coupled = mode == 'cell'
         self.scenario = scenario(spec, cell, cfg, seed)
         if self.scenario is None:
             raise ValueError(f'person {spec!r} names no scenario')

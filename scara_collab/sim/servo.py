@@ -95,6 +95,8 @@ class Servo:
         self.held_back: List[str] = []
         #: ``(arms, 3)`` each slowed arm's trajectory velocity at its trajectory time, unscaled
         self.planned = np.zeros_like(self.ref_q)
+        #: one factor for every arm, their clocks at one rate (:meth:`_run_clocks`)
+        self.coupled = False
 
     def speed(self, robot: str) -> float:
         """Return the factor ``robot``'s trajectory runs at now (1: full speed, or no clock)."""
@@ -143,32 +145,50 @@ class Servo:
         towards the one asked as fast as its running trajectory allows (a brake runs at full
         speed, at once); an arm that holds has nothing to keep, so its factor follows at once
         and its clock keeps its lag: an arm with nothing to do is not set back by a slowdown.
+        With :attr:`coupled` (one factor for every arm, the arms' moves scheduled against each
+        other) every clock takes one rate, the smallest any arm's trajectory allows, so their
+        trajectory times keep in step: what was safe between them at full speed stays so.
         """
         self.held_back = []
+        ticks = []
         for robot in self.names:
             clock = self.clocks.get(robot)
             if clock is None:
-                if self.factors[robot] >= 1.0:
+                if self.factors[robot] >= 1.0 and not (self.coupled and self.clocks):
                     continue
                 arm = self.arms[self.names.index(robot)]
                 clock = self.clocks[robot] = ScaledClock(now, arm.max_velocity,
                                                          arm.max_acceleration)
-            motion = self.motion[robot]
-            running = motion.running
+            running = self.motion[robot].running
             if running is not None and running.braking:
                 clock.full_speed()
-                sample = running.ref.sample
-            elif running is not None and running.ref is not None:
-                sample = running.ref.sample
-            else:
-                sample = _holding
-            cmd = clock.tick(now, self.factors[robot], sample)
-            if running is None and motion.waiting is None:
+            sample = (running.ref.sample if running is not None and running.ref is not None
+                      else _holding)
+            ticks.append((robot, clock, sample, running is not None and running.braking))
+        rate = None
+        if self.coupled and ticks:
+            target = min(self.factors.values())
+            busy = [(c, f) for r, c, f, braking in ticks
+                    if not braking and not self._idle(r)]
+            rate = min((c.feasible(now, target, f) for c, f in busy), key=abs, default=None)
+            for r, c, _, braking in ticks:  # an arm at rest keeps in step at once
+                if self._idle(r) and busy:
+                    c.scale = busy[0][0].scale
+        for robot, clock, sample, braking in ticks:
+            motion = self.motion[robot]
+            target = min(self.factors.values()) if self.coupled else self.factors[robot]
+            cmd = clock.tick(now, target, sample, None if braking else rate)
+            if self._idle(robot):
                 clock.tau = now - motion.lag  # nothing committed: nothing to fall behind on
                 self.planned[self.names.index(robot)] = 0.0
             motion.lag = clock.lag
             if cmd.held_back:
                 self.held_back.append(robot)
+
+    def _idle(self, robot: str) -> bool:
+        """Return True if ``robot`` has nothing committed (no move running or waiting)."""
+        motion = self.motion[robot]
+        return motion.running is None and motion.waiting is None
 
     def execute(self, a: int, t: ArrayLike, q: ArrayLike, qd: Optional[ArrayLike],
                 qdd: Optional[ArrayLike], q_now: np.ndarray, qd_now: np.ndarray,
