@@ -7,7 +7,7 @@ import pytest
 
 from scara_collab.core import safety
 from scara_collab.core.kinematics import fk
-from scara_collab.core.scaled_clock import rate_bounds, ScaledClock
+from scara_collab.core.scaled_clock import BRAKING_SLACK, rate_bounds, ScaledClock
 from scara_collab.core.trajectory import line_move
 from scara_collab.sim.reference import HermiteReference, validate_trajectory
 
@@ -134,32 +134,40 @@ def test_the_fall_is_the_braking_rate_where_the_trajectory_leaves_room(cell):
 
 
 def test_a_fall_the_trajectory_does_not_allow_is_flagged(cell):
-    """A joint braked at its limit by the trajectory leaves no room: the clock says so."""
+    """A joint braked at its limit while another speeds up leaves no room: the clock says so.
+
+    Joint 1 decelerates at its limit (6 rad/s^2), joint 2 accelerates from 1.5 rad/s: no fall
+    of s keeps joint 1 within its limit, and the stopping time (joint 2's, 0.25 s) grows at
+    1 s/s instead of falling at 1 / 2 s/s; 0.1 of it (25 ms) behind the profile, after about
+    17 ms, the clock says it is held back.
+    """
     arm = cell.leader
 
-    def braking(tau):  # joint 1 at 2 rad/s decelerating at the limit
-        return np.zeros(3), np.array([2.0, 0.0, 0.0]), np.array([-6.0, 0.0, 0.0])
+    def braking(tau):
+        return (np.zeros(3), np.array([1.0 - 6.0 * tau, 1.5 + 6.0 * tau, 0.0]),
+                np.array([-6.0, 6.0, 0.0]))
 
-    clock = ScaledClock(0.0, arm.max_velocity, arm.max_acceleration)
-    clock.tick(DT, 1.0, braking)
-    cmds = run(clock, braking, [0.0] * 3)  # 0.02 above the fall at 3 /s after 7 ms
-    assert [c.held_back for c in cmds] == [False, True, True]
+    clock = ScaledClock(0.0, arm.max_velocity, arm.max_acceleration, stop_allowance=2.0)
+    cmds = run(clock, braking, [0.0] * 6)
+    assert [c.held_back for c in cmds] == [False] * 4 + [True] * 2
     assert all(c.scale == pytest.approx(1.0) and abs(c.qdd[0]) <= 6.0 + 1e-9 for c in cmds)
 
 
 def test_stops_along_planned_lines_against_the_braking_model(cell):
-    """How the path-keeping stop compares with braking, on 60 random planned lines.
+    """How the path-keeping stop compares with braking, on 200 random planned lines.
 
-    Asked to stop mid-move, the clock either keeps up with the braking rate (the stop takes
-    about T_s, 10 % for the changing trajectory speed and the 4 ms ticks) or says it is held
-    back at some tick of the stop, so that the arm brakes instead. The share of stops held back
-    is reported, not asserted: it depends on how hard the planner uses the limits.
+    Asked to stop mid-move, the clock stops the arm along its path in about its braking time
+    ``T_s`` (1.03 ``T_s`` at the median: config/people.yaml's ``stop_allowance`` quotes these
+    figures), or says it is held back at some tick of the stop (slower than the monitor's
+    ``stop_allowance`` 2 counts on), so that the arm brakes instead. Every stop it keeps up
+    with is within the allowance. The shares are printed, not asserted: they depend on how
+    hard the planner uses the limits.
     """
     arm = cell.leader
     rng = np.random.default_rng(3)
-    held = total = 0
-    worst_kept = 0.0
-    while total < 60:
+    held = 0
+    ratios = []
+    while len(ratios) < 200:
         q0 = np.array([rng.uniform(-1.5, 1.5), rng.choice([-1, 1]) * rng.uniform(0.5, 2.4),
                        rng.uniform(0, 0.6)])
         q1 = np.array([rng.uniform(-1.5, 1.5), np.sign(q0[1]) * rng.uniform(0.5, 2.4),
@@ -168,17 +176,19 @@ def test_stops_along_planned_lines_against_the_braking_model(cell):
             ref = reference(arm, q0, fk(arm, q1))
         except Exception:  # noqa: BLE001 - an unplannable random line: draw another
             continue
-        clock = ScaledClock(0.0, arm.max_velocity, arm.max_acceleration)
+        clock = ScaledClock(0.0, arm.max_velocity, arm.max_acceleration, stop_allowance=2.0)
         cmds = run(clock, ref, [1.0] * int(rng.uniform(0.1, 0.9) * (ref.end / DT)))
         t_s = safety.stopping_time(arm, cmds[-1].qd)
         if t_s < 0.05:
             continue
-        total += 1
         stop = run(clock, ref, [0.0] * 500)
+        ratio = (next(k for k, c in enumerate(stop) if c.scale == 0.0) + 1) * DT / t_s
+        ratios.append(ratio)
         if any(c.held_back for c in stop):
             held += 1
-            continue
-        steps = next(k for k, c in enumerate(stop) if c.scale == 0.0) + 1
-        worst_kept = max(worst_kept, steps * DT / t_s)
-    print(f'stops held back: {held} of {total}; slowest kept-up stop: {worst_kept:.2f} T_s')
-    assert worst_kept <= 1.35
+        else:
+            assert ratio <= 2.0 * (1.0 + BRAKING_SLACK) + DT / t_s
+    median, p99, worst = np.percentile(ratios, [50, 99, 100])
+    print(f'path-keeping stop / T_s: median {median:.2f}, 99th percentile {p99:.2f}, worst '
+          f'{worst:.2f}; held back (braked instead): {held} of {len(ratios)}')
+    assert median <= 1.2

@@ -214,6 +214,7 @@ SCHEMAS = {
         Rule('monitor.reaction.bridge', 'nonneg'),
         Rule('monitor.sensor_tolerance', 'nonneg'),
         Rule('monitor.robot_tolerance', 'nonneg'),
+        Rule('monitor.stop_allowance', 'number', lambda v: v >= 1.0, 'must be >= 1'),
         Rule('monitor.foreground', 'positive'),
         Rule('monitor.teach_scans', 'int', lambda v: v >= 1, 'must be >= 1'),
         Rule('monitor.cluster_gap', 'positive'),

@@ -204,6 +204,9 @@ class SsmParams:
     :ivar sensor_tolerance: ``Z_d``, m.
     :ivar robot_tolerance: ``Z_r``, m.
     :ivar hysteresis: m taken off the separation for the factor a rise may reach.
+    :ivar stop_allowance: how many times its braking time ``T_s`` an arm's path-keeping stop
+        is allowed (at least 1): the stop counted on (and what the bridge brakes to when a
+        trajectory's own accelerations leave less room, :mod:`scara_collab.core.scaled_clock`).
     """
 
     walking_speed: float
@@ -214,6 +217,7 @@ class SsmParams:
     sensor_tolerance: float
     robot_tolerance: float
     hysteresis: float = 0.0
+    stop_allowance: float = 1.0
 
     @property
     def constant(self) -> float:
@@ -232,7 +236,8 @@ class SsmParams:
             intrusion=intrusion_distance(float(cfg['scanner']['height'])),
             sensor_tolerance=float(mon['sensor_tolerance']),
             robot_tolerance=float(mon['robot_tolerance']),
-            hysteresis=float(mon['hysteresis']))
+            hysteresis=float(mon['hysteresis']),
+            stop_allowance=float(mon['stop_allowance']))
 
 
 @dataclass(frozen=True)
@@ -387,6 +392,28 @@ def true_margin(arm: ArmModel, q: ArrayLike, qd: ArrayLike, starts: ArrayLike, e
     return out.separation, out.margin
 
 
+def true_separation_bound(arm: ArmModel, params: SsmParams) -> float:
+    """Return an upper bound of the protective separation :func:`true_margin` counts, m.
+
+    At the arm's fastest: its tool at ``(l1 + l2) w1 + l2 w2 + vz`` of its velocity limits
+    (every other point is slower), stopping along its path in ``stop_allowance`` times its
+    longest braking time and covering at most half of that at this speed, the person at the
+    faster of the standard's speeds. Beyond it from an arm's reach nothing needs an exact
+    look: the margin is at least the floor distance less this.
+
+    >>> from scara_collab.core.model import load_cell
+    >>> round(true_separation_bound(load_cell().leader, SsmParams(1.6, 2.0, 0.5, 0.12, 0.0,
+    ...                                                           0.0, 0.01, 0.0, 2.0)), 2)
+    4.98
+    """
+    w = np.abs(arm.max_velocity)
+    v = (arm.l1 + arm.l2) * w[0] + arm.l2 * w[1] + w[2]
+    t_s = params.stop_allowance * float(np.max(w / arm.max_acceleration))
+    v_h = max(params.walking_speed, params.reach_speed)
+    return float(v_h * (params.reaction_time + t_s) + v * params.reaction_time + v * t_s / 2.0
+                 + params.robot_tolerance)
+
+
 def _assess(arm: ArmModel, q: np.ndarray, qd: np.ndarray, bottom: np.ndarray, top: np.ndarray,
             v_person: np.ndarray, r_person: np.ndarray, params: SsmParams,
             labels: Sequence[str]) -> ArmSeparation:
@@ -395,7 +422,7 @@ def _assess(arm: ArmModel, q: np.ndarray, qd: np.ndarray, bottom: np.ndarray, to
     :param v_person: ``(P, 2)`` each body's velocity on the floor, m/s; :param r_person:
         ``(P,)`` radii, m; :param labels: each body in words (for the cause).
     """
-    t_s = safety.stopping_time(arm, qd)
+    t_s = params.stop_allowance * safety.stopping_time(arm, qd)
     # the arm's capsules now and while it stops, from the one capsule model: (1 + M, 3, 3)
     start, end, radii = collision.arm_capsules(arm, q)
     # one segment distance for the capsules (their closest points) and the fixed samples

@@ -61,10 +61,6 @@ from scara_collab.sim.scanner import SafetyScanner
 SCALING_MODES = ('cell',)
 #: rad/s | m/s: an arm with a joint faster than this moves (the truth's "while it moved")
 MOVING = 1e-3
-#: m: beyond this lower bound on the separation, an arm's truth is not computed exactly (the
-#: true protective separation, without the intrusion distance, stays below 3.5 m for this
-#: cell's arms at their full speed: docs/people.md)
-FAR = 3.5
 
 
 class BridgePeople:
@@ -86,6 +82,7 @@ class BridgePeople:
         self.node, self.cell, self.sim, self.hold = node, cell, sim, hold
         self.mode, self.timeout = mode, float(timeout)
         sim.servo.coupled = mode == 'cell'
+        sim.servo.stop_allowance = float(cfg['monitor']['stop_allowance'])
         self.scenario = scenario(spec, cell, cfg, seed)
         if self.scenario is None:
             raise ValueError(f'person {spec!r} names no scenario')
@@ -96,6 +93,8 @@ class BridgePeople:
         self.scanner = SafetyScanner.from_config(sim.client, cfg)
         self.geometry = scanners_from_config(cfg)
         self.params = ssm.SsmParams.from_config(cfg)
+        #: m: an arm's true protective separation is at most this (its truth beyond: bounds)
+        self.far = {a.name: ssm.true_separation_bound(a, self.params) for a in cell.arms}
         self.rate = float(cfg['scanner']['rate'])
         self.rates = rates
         self.scan_pub = node.create_publisher(LaserScan, 'safety_scanner/scan', 10)
@@ -201,8 +200,9 @@ class BridgePeople:
         for k, arm in enumerate(arms):
             reach = arm.l1 + arm.l2 + arm.link_radius
             floor = float(np.min(np.hypot(*(caps.start[:, :2] - arm.base[:2, 3]).T))) - reach
-            if floor > FAR:  # a lower bound: nothing near, exactness would cost for nothing
-                separation[arm.name] = margin[arm.name] = floor
+            if floor > self.far[arm.name]:  # nothing near: lower bounds, not worth exactness
+                separation[arm.name] = floor
+                margin[arm.name] = floor - self.far[arm.name]
                 continue
             separation[arm.name], margin[arm.name] = ssm.true_margin(
                 arm, q[k], qd[k], caps.start, caps.end, caps.radius, self.params)

@@ -64,7 +64,7 @@ from builtin_interfaces.msg import Time
 from rclpy.clock import Clock, ClockType, JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from std_msgs.msg import Header
 
 from scara_collab import graph
@@ -72,7 +72,10 @@ from scara_collab.nodes import shutdown
 from scara_collab.nodes.guarded import guarded
 
 TOPIC = 'sim/lockstep'  # relative: in the cell's namespace
-QOS = QoSProfile(depth=50)
+#: transient local: an answer published before the bridge's subscription has matched the
+#: participant's new publisher (a node started last, on a busy machine) is delivered when it
+#: matches, instead of lost: a lost answer holds sim time until the lockstep timeout
+QOS = QoSProfile(depth=50, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 END_OF_TIME = Time(sec=2**31 - 1, nanosec=0)
 #: wall s a participant holds its answer for an awaited reply (a lost one: then it answers).
 #: Until then a slow reply looks the same, and one answered without it makes the run depend

@@ -97,6 +97,8 @@ class Servo:
         self.planned = np.zeros_like(self.ref_q)
         #: one factor for every arm, their clocks at one rate (:meth:`_run_clocks`)
         self.coupled = False
+        #: the stop a clock's slowdown must keep up with, in braking times (the monitor's)
+        self.stop_allowance = 1.0
 
     def speed(self, robot: str) -> float:
         """Return the factor ``robot``'s trajectory runs at now (1: full speed, or no clock)."""
@@ -157,8 +159,9 @@ class Servo:
                 if self.factors[robot] >= 1.0 and not (self.coupled and self.clocks):
                     continue
                 arm = self.arms[self.names.index(robot)]
-                clock = self.clocks[robot] = ScaledClock(now, arm.max_velocity,
-                                                         arm.max_acceleration)
+                clock = self.clocks[robot] = ScaledClock(
+                    now, arm.max_velocity, arm.max_acceleration,
+                    stop_allowance=self.stop_allowance)
             running = self.motion[robot].running
             if running is not None and running.braking:
                 clock.full_speed()
