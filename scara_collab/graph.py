@@ -466,7 +466,8 @@ REALTIME_SEND_MARGIN = 0.05
 def job_params(mode: str, lockstep: bool = True) -> Dict[str, Dict[str, str]]:
     """Return the parameters a launch mode sets, per node name (string values).
 
-    Mirrored mode feeds items in mirror pairs; the replication manager follows
+    Mirrored mode feeds items in mirror pairs and slows both arms alike for a person (the
+    bridge's ``speed_scaling`` ``cell``); the replication manager follows
     ``/joint_states`` only where mirrored moves are asked for (mirrored mode, and the idle
     graph a user drives by hand); the automation manager runs the mode's job. Without
     ``lockstep`` the clock waits for nobody (the bridge's ``lockstep_window`` 0), as on
@@ -482,8 +483,8 @@ def job_params(mode: str, lockstep: bool = True) -> Dict[str, Dict[str, str]]:
     if mode not in LAUNCH_MODES:
         raise ValueError(f'mode must be one of {", ".join(LAUNCH_MODES)}, got {mode!r}')
     out: Dict[str, Dict[str, str]] = {n.name: {} for n in NODES}
-    if mode == 'mirrored':
-        out['pybullet_bridge']['feed_pattern'] = 'mirror_pairs'
+    if mode == 'mirrored':  # a person slows both arms of a mirrored pair alike
+        out['pybullet_bridge'].update(feed_pattern='mirror_pairs', speed_scaling='cell')
     out['replication_manager']['enabled'] = str(mode in ('mirrored', 'idle')).lower()
     if mode != 'idle':
         out['automation_manager']['mode'] = mode

@@ -12,7 +12,7 @@ import pytest
 from scara_collab.core import kinematics
 from scara_collab.core.collision import (arm_capsules, arm_distance, arm_pair_distances,
                                          capsule_distance, closest_points, first_safe_delay,
-                                         segment_distance, smallest_safe_delay,
+                                         paths_apart, segment_distance, smallest_safe_delay,
                                          trajectory_min_distance)
 from scara_collab.core.model import load_cell
 from scara_collab.core.trajectory import interp_rows
@@ -570,3 +570,32 @@ def test_one_state_pair_is_the_batch_formula(cell):
         one = arm_pair_distances(left, q_l[k], right, q_r[k])
         assert one.shape == (3, 3)
         assert np.array_equal(one, batch[k])
+
+
+def test_paths_apart_at_any_timing_against_the_timed_distance(arms):
+    """Apart at any timing: every state of one path against every state of the other.
+
+    Two lines that cross the belt's centre at different times keep the margin when timed (one
+    waits for the other) but not at every timing: not apart. Lines on their own halves are.
+    """
+    left, right = arms
+    to_centre = np.linspace(kinematics.ik(left, [3.0, -1.2, 0.4]).q,
+                            kinematics.ik(left, [3.0, 0.0, 0.4]).q, 40)
+    back = to_centre[::-1]
+    left_path = np.vstack([to_centre, back])
+    right_path = np.linspace(kinematics.ik(right, [3.0, 1.2, 0.4]).q,
+                             kinematics.ik(right, [3.0, 0.05, 0.4]).q, 40)
+    t_left = np.linspace(0.0, 2.0, 80)
+    t_right = np.linspace(0.0, 1.0, 40)
+    # timed: the right arm comes in after the left one has left
+    timed, _ = trajectory_min_distance(left, t_left, left_path, right, t_right, right_path,
+                                       start_b=2.5)
+    assert timed > 0.1
+    assert not paths_apart(left, left_path, right, right_path, 0.1)
+    own_half = np.linspace(kinematics.ik(right, [3.0, 1.2, 0.4]).q,
+                           kinematics.ik(right, [2.2, 0.8, 0.4]).q, 40)
+    assert paths_apart(left, to_centre[:20], right, own_half, 0.1)
+    # the sampling never hides a meeting: against every pair of the dense paths
+    dense = arm_distance(left, np.repeat(to_centre[:20], 40, axis=0),
+                         right, np.tile(own_half, (20, 1)))
+    assert dense.min() > 0.1

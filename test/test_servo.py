@@ -98,10 +98,11 @@ def test_an_arm_never_slowed_has_no_clock_and_an_idle_arm_builds_no_lag(sim):
     """Full speed costs nothing; holding with nothing to do, a slowdown costs no time."""
     sim.step(100)
     assert sim.servo.clocks == {}
+    sim.servo.coupling = 'arm'  # the arms hold apart: each its own factor
     sim.servo.scale(RIGHT, 0.0)
     sim.step(200)
-    assert RIGHT in sim.servo.clocks and sim.motion[RIGHT].lag == 0.0
-    assert LEFT not in sim.servo.clocks
+    assert sim.motion[RIGHT].lag == 0.0 and sim.servo.speed(RIGHT) == 0.0
+    assert sim.motion[LEFT].lag == 0.0 and sim.servo.speed(LEFT) == 1.0  # on sim time
 
 
 def test_coupled_arms_slow_in_step_so_their_schedule_against_each_other_holds(sim):
@@ -114,7 +115,7 @@ def test_coupled_arms_slow_in_step_so_their_schedule_against_each_other_holds(si
     for robot, move in moves.items():
         sim.execute(robot, t0 + move.t, move.q, move.qd, move.qdd, robot, 0.0)
     servo = sim.servo
-    servo.coupled = True
+    servo.coupling = 'cell'
     lags = []
     while sim.active(LEFT) and sim.active(RIGHT):
         factor = _profile(sim.time - t0)
@@ -125,3 +126,28 @@ def test_coupled_arms_slow_in_step_so_their_schedule_against_each_other_holds(si
         assert servo.speed(LEFT) == servo.speed(RIGHT)
     lags = np.array(lags)
     assert np.all(lags[:, 0] == lags[:, 1]) and lags[-1, 0] > 0.3
+
+
+def test_arms_whose_paths_stay_apart_each_run_at_their_own_factor(sim):
+    """Per arm: the right arm stopped by its factor, the left one runs its move at full speed.
+
+    Their paths keep the margin at any timing, so nothing ties one arm's clock to the other's;
+    the cell's margin holds however far the stopped arm falls behind.
+    """
+    cell = sim.cell
+    sim.reset_arm(RIGHT, ik(cell.follower, [3.0, 1.3, 0.4]).q)
+    moves = {LEFT: line_move(cell.leader, sim.arm_state(LEFT)[0], [2.2, -0.6, 0.4]),
+             RIGHT: line_move(cell.follower, sim.arm_state(RIGHT)[0], [3.6, 0.8, 0.4])}
+    t0 = sim.time
+    for robot, move in moves.items():
+        sim.execute(robot, t0 + move.t, move.q, move.qd, move.qdd, robot, 0.0)
+    servo = sim.servo
+    servo.coupling = 'arm'
+    servo.scale(RIGHT, 0.0)
+    while sim.active(LEFT):
+        sim.step(4)
+        assert not servo.coupled
+    assert sim.time - t0 == pytest.approx(moves[LEFT].t[-1], abs=0.01)  # on time
+    assert sim.motion[LEFT].lag == pytest.approx(0.0, abs=1e-9)
+    assert servo.speed(RIGHT) == 0.0 and sim.motion[RIGHT].lag > 0.5 * moves[LEFT].t[-1]
+    assert sim.active(RIGHT)  # held on its path, its move still to run

@@ -481,6 +481,44 @@ def trajectory_min_distance(arm_a: ArmModel, t_a: ArrayLike, q_a: ArrayLike, arm
     return dist, float(times[k])
 
 
+def _sweep(arm: ArmModel, q: np.ndarray, resolution: float) -> np.ndarray:
+    """Return states along the joint path ``q`` (N, 3) no point of the arm moves more between.
+
+    A point of the arm moves at most ``(l1 + l2) |d theta1| + l2 |d theta2| + |d d3|`` between
+    two states (joint-linear between them); the states returned are spaced by at most
+    ``resolution`` of that, the given ones' first and last included.
+    """
+    q = np.asarray(q, dtype=float).reshape(-1, 3)
+    if len(q) < 2:
+        return q
+    step = np.abs(np.diff(q, axis=0)) @ np.array([arm.l1 + arm.l2, arm.l2, 1.0])
+    along = np.concatenate([[0.0], np.cumsum(step)])
+    at = np.linspace(0.0, along[-1], max(2, int(np.ceil(along[-1] / resolution)) + 1))
+    return np.column_stack([np.interp(at, along, q[:, k]) for k in range(3)])
+
+
+def paths_apart(arm_a: ArmModel, q_a: ArrayLike, arm_b: ArmModel, q_b: ArrayLike,
+                margin: float, resolution: float = 0.05) -> bool:
+    """Return whether two arms keep ``margin`` wherever each is on its path, at any timing.
+
+    Every state of a's joint path (``(N, 3)``, joint-linear between rows) against every state
+    of b's: True only if no pair comes within ``margin``, so that however the two arms' clocks
+    run against each other they stay apart. The paths are sampled at ``resolution`` of any
+    point's travel (:func:`_sweep`), which the margin is grown by (half per arm).
+
+    >>> from scara_collab.core.model import load_cell
+    >>> cell = load_cell()
+    >>> left, right = cell.arms
+    >>> home = np.array([[0.0, 0.0, 0.0]])
+    >>> paths_apart(left, home, right, home, 0.1)
+    True
+    """
+    a = _sweep(arm_a, q_a, resolution)
+    b = _sweep(arm_b, q_b, resolution)
+    i, j = np.divmod(np.arange(len(a) * len(b)), len(b))
+    return _grid_safe(arm_a, a[i], arm_b, b[j], float(margin) + resolution)
+
+
 def first_safe_delay(safe: Callable[[int], bool], max_delay: float, resolution: float = 0.01,
                      scan_step: float = 0.25) -> Optional[float]:
     """Smallest delay ``k * resolution`` that ``safe(k)`` accepts: a scan, then a bisection.

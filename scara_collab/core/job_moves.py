@@ -25,9 +25,6 @@ from scara_collab.core.trajectory import Trajectory
 PUT_OFF = 0.5
 #: times a meeting is put off before the item is left for the person
 PUT_OFFS = 4
-#: m: a person this far beyond an arm's reach cannot slow it (its protective separation at
-#: full speed stays below this: docs/people.md)
-UNHINDERED = 3.5
 
 
 class JobMoves:
@@ -108,7 +105,9 @@ class JobMoves:
         :attr:`declined` says it was left for the person).
         """
         s, arm = self.settings, self.cell.arm(lane.robot)
-        reach = arm.l1 + arm.l2 + UNHINDERED
+        # beyond the arm's reach by its largest protective separation, a person cannot slow it
+        reach = (arm.l1 + arm.l2 + ssm.true_separation_bound(arm, self.people)
+                 + self.people.intrusion + self.people.sensor_tolerance)
         near = [p for p in self.persons
                 if np.hypot(*(p.position - arm.base[:2, 3])) - p.radius < reach]
         if not near:

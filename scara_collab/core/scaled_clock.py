@@ -225,7 +225,10 @@ class ScaledClock:
             elif target >= self.scale:
                 self._fall = None
             self.rate = (new - self.scale) / dt
-            self.tau += 0.5 * (self.scale + new) * dt
+            if self.tau == self.time and self.scale == new == 1.0:
+                self.tau = float(now)  # on sim time: it stays there, to the bit
+            else:
+                self.tau += 0.5 * (self.scale + new) * dt
             self.scale = new
         self.time = float(now)
         q, qd, qdd = sample(self.tau)

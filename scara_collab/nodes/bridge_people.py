@@ -24,13 +24,17 @@ It publishes, on sim time:
 
 It takes each arm's speed factor from ``<robot>/speed_scaling`` (``std_msgs/Float64``,
 transient local: the separation monitor's) and runs the arm's trajectories at it
-(:meth:`scara_collab.sim.servo.Servo.scale`). With ``speed_scaling`` ``cell`` (the default)
-both arms run at the smaller of the two factors: their moves were scheduled against each other
-in time, and one factor keeps every such schedule (the arms' 0.10 m margin) as it was, only
-slower. A factor not heard for ``scaling_timeout`` sim s counts as 0 (a silent monitor is a
-protective stop). An arm whose path-keeping stop cannot keep up with braking
-(:attr:`scara_collab.sim.servo.Servo.held_back`) is braked, and with one factor the other arm
-too.
+(:meth:`scara_collab.sim.servo.Servo.scale`). With ``speed_scaling`` ``arm`` (the default)
+each arm runs at its own factor while the two arms' committed paths cannot meet, whatever the
+timing of one against the other, and both at the smaller factor, their clocks in step, while
+they could (:meth:`scara_collab.sim.servo.Servo._coupled`): their moves were scheduled
+against each other in time, and one factor keeps every such schedule (the arms' 0.10 m
+margin) as it was, only slower. With ``cell`` (mirrored mode: the mirror keeps) both arms
+always run at the smaller factor. A factor not heard for ``scaling_timeout`` sim s counts as
+0 (a silent monitor is a protective stop). An arm whose path-keeping stop cannot keep up with
+braking (:attr:`scara_collab.sim.servo.Servo.held_back`) is braked, and while the arms run
+together the other arm too. docs/people.md, *One factor or one per arm*, has the measurements
+behind the default.
 """
 import math
 from typing import Callable, Dict, Optional
@@ -55,10 +59,9 @@ from scara_collab.sim.person import arm_link_names, BodyModel, PersonSim
 from scara_collab.sim.person_scenarios import Motion, PersonPath, scenario
 from scara_collab.sim.scanner import SafetyScanner
 
-#: how the factors of the two arms are applied: one for both (the smaller), their clocks in
-#: step. (Each arm its own would need the arms' schedules against each other kept otherwise:
-#: docs/people.md.)
-SCALING_MODES = ('cell',)
+#: how the arms' factors are applied (:attr:`scara_collab.sim.servo.Servo.coupling`): each
+#: arm its own while their paths stay apart (the default), or one for both
+SCALING_MODES = ('arm', 'cell')
 #: rad/s | m/s: an arm with a joint faster than this moves (the truth's "while it moved")
 MOVING = 1e-3
 
@@ -75,13 +78,13 @@ class BridgePeople:
 
     def __init__(self, node: Node, cell: CellModel, sim: CellSim, cfg: dict, spec: str,
                  seed: int, rates: Dict[str, float], hold: Callable[[str, str], None],
-                 mode: str = 'cell', timeout: float = 0.05):
+                 mode: str = 'arm', timeout: float = 0.05):
         """Put the person and the scanners in the world; create the topics."""
         if mode not in SCALING_MODES:
             raise ValueError(f'speed_scaling must be one of {SCALING_MODES}, got {mode!r}')
         self.node, self.cell, self.sim, self.hold = node, cell, sim, hold
         self.mode, self.timeout = mode, float(timeout)
-        sim.servo.coupled = mode == 'cell'
+        sim.servo.coupling = mode
         sim.servo.stop_allowance = float(cfg['monitor']['stop_allowance'])
         self.scenario = scenario(spec, cell, cfg, seed)
         if self.scenario is None:
@@ -145,7 +148,7 @@ class BridgePeople:
             self.sim.servo.scale(robot, f)
         late = list(self.sim.servo.held_back)
         if late:
-            braked = set(self.asked) if self.mode == 'cell' else set(late)
+            braked = set(self.asked) if self.sim.servo.coupled else set(late)
             for robot in sorted(braked):
                 self.hold(robot, 'protective stop: its path-keeping slowdown fell behind '
                           f'braking ({", ".join(late)}): braked')

@@ -84,7 +84,7 @@ PARAMETERS = {
     'line_timeout': 5.0,                  # wall s of upstream silence taken for its death
     'person': '',                         # a person in the cell: a scenario or a YAML file
     'person_seed': -1,                    # its seed (random); -1: config/people.yaml's
-    'speed_scaling': 'cell',              # one factor for both arms (cell) or each its own
+    'speed_scaling': 'arm',               # each arm its own factor while apart, or one (cell)
     'scaling_timeout': 0.1,               # sim s a speed factor stays valid once heard
     'slip_at': '',                        # sim s at which a held item slips ('12.5,30')
     'slip_rate': 0.0,                     # slips per second of carrying (seeded)

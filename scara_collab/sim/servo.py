@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike
 
 from scara_collab.core import safety
 from scara_collab.core.model import ArmModel
+from scara_collab.core.collision import paths_apart
 from scara_collab.core.motion import CellMotion, Move
 from scara_collab.core.planning import Timeline
 from scara_collab.core.scaled_clock import ScaledClock
@@ -41,6 +42,8 @@ from scara_collab.sim.controllers import ComputedTorqueController, joint_gains, 
 from scara_collab.sim.reference import HermiteReference, TrajectoryError, validate_trajectory
 
 CONTROL_MODES = ('pid', 'computed_torque')
+#: s between two looks at whether arms running together may run apart again
+RECHECK = 0.1
 
 
 class Servo:
@@ -95,8 +98,13 @@ class Servo:
         self.held_back: List[str] = []
         #: ``(arms, 3)`` each slowed arm's trajectory velocity at its trajectory time, unscaled
         self.planned = np.zeros_like(self.ref_q)
-        #: one factor for every arm, their clocks at one rate (:meth:`_run_clocks`)
+        #: how the arms' factors apply (:meth:`_run_clocks`): ``'cell'``, one factor for every
+        #: arm, their clocks at one rate; ``'arm'``, each arm its own while the arms' committed
+        #: paths stay apart, as ``'cell'`` while they could meet
+        self.coupling = 'cell'
+        #: whether the clocks ran together at the last tick (:meth:`_coupled`)
         self.coupled = False
+        self._apart: Optional[Tuple[tuple, float, bool]] = None  # (moves, when, apart)
         #: the stop a clock's slowdown must keep up with, in braking times (the monitor's)
         self.stop_allowance = 1.0
 
@@ -143,22 +151,23 @@ class Servo:
     def _run_clocks(self, now: float) -> None:
         """Advance every slowed arm's trajectory clock to ``now``; keep its lag in the model.
 
-        An arm gets its clock when it is first asked to run below full speed. Its factor moves
-        towards the one asked as fast as its running trajectory allows (a brake runs at full
-        speed, at once); an arm that holds has nothing to keep, so its factor follows at once
-        and its clock keeps its lag: an arm with nothing to do is not set back by a slowdown.
-        With :attr:`coupled` (one factor for every arm, the arms' moves scheduled against each
-        other) every clock takes one rate, the smallest any arm's trajectory allows, so their
+        The arms get their clocks when one is first asked to run below full speed. A factor
+        moves towards the one asked as fast as the arm's running trajectory allows (a brake runs
+        at full speed, at once); an arm that holds has nothing to keep, so its factor follows
+        at once and its clock keeps its lag: an arm with nothing to do is not set back by a
+        slowdown. While the arms run together (:meth:`_coupled`: the arms' moves scheduled
+        against each other could meet) every arm takes the smallest factor asked, and once
+        their factors are one, one rate, the smallest any arm's trajectory allows, so their
         trajectory times keep in step: what was safe between them at full speed stays so.
         """
         self.held_back = []
+        if not self.clocks and all(f >= 1.0 for f in self.factors.values()):
+            return
         ticks = []
-        for robot in self.names:
+        for a, robot in enumerate(self.names):
             clock = self.clocks.get(robot)
             if clock is None:
-                if self.factors[robot] >= 1.0 and not (self.coupled and self.clocks):
-                    continue
-                arm = self.arms[self.names.index(robot)]
+                arm = self.arms[a]
                 clock = self.clocks[robot] = ScaledClock(
                     now, arm.max_velocity, arm.max_acceleration,
                     stop_allowance=self.stop_allowance)
@@ -168,25 +177,53 @@ class Servo:
             sample = (running.ref.sample if running is not None and running.ref is not None
                       else _holding)
             ticks.append((robot, clock, sample, running is not None and running.braking))
+        self.coupled = self._coupled(now)
+        low = min(self.factors.values())
+        targets = {r: low if self.coupled else self.factors[r] for r in self.names}
         rate = None
-        if self.coupled and ticks:
-            target = min(self.factors.values())
+        if self.coupled:
             busy = [(c, f) for r, c, f, braking in ticks
                     if not braking and not self._idle(r)]
-            rate = min((c.feasible(now, target, f) for c, f in busy), key=abs, default=None)
             for r, c, _, braking in ticks:  # an arm at rest keeps in step at once
                 if self._idle(r) and busy:
                     c.scale = busy[0][0].scale
+            if len({c.scale for c, _ in busy}) <= 1:  # in step: one rate (else each falls)
+                rate = min((c.feasible(now, low, f) for c, f in busy), key=abs, default=None)
         for robot, clock, sample, braking in ticks:
             motion = self.motion[robot]
-            target = min(self.factors.values()) if self.coupled else self.factors[robot]
-            cmd = clock.tick(now, target, sample, None if braking else rate)
+            cmd = clock.tick(now, targets[robot], sample, None if braking else rate)
             if self._idle(robot):
                 clock.tau = now - motion.lag  # nothing committed: nothing to fall behind on
                 self.planned[self.names.index(robot)] = 0.0
             motion.lag = clock.lag
             if cmd.held_back:
                 self.held_back.append(robot)
+
+    def _coupled(self, now: float) -> bool:
+        """Return True if the arms' clocks must run together now.
+
+        Always with :attr:`coupling` ``'cell'``. With ``'arm'``, while the arms' committed
+        motions (running and waiting moves, or the pose held) could come within the margin
+        at some timing of one against the other
+        (:func:`scara_collab.core.collision.paths_apart`): apart, each arm may run at its own
+        factor, however far one falls behind. Judged again when a move is taken, started,
+        finished or dropped, and every :data:`RECHECK` s while they run together (what is left
+        of the paths shrinks).
+        """
+        if self.coupling == 'cell' or len(self.arms) < 2:
+            return True
+        key = tuple(id(m) for r in self.names
+                    for m in (self.motion[r].running, self.motion[r].waiting))
+        if (self._apart is not None and self._apart[0] == key
+                and (self._apart[2] or now - self._apart[1] < RECHECK)):
+            return not self._apart[2]
+        paths = [self.motion[r].motion(now, self.ref_q[a]).q
+                 for a, r in enumerate(self.names)]
+        apart = all(paths_apart(self.arms[a], paths[a], self.arms[b], paths[b],
+                                self.motion.margin)
+                    for a in range(len(self.arms)) for b in range(a + 1, len(self.arms)))
+        self._apart = (key, now, apart)
+        return not apart
 
     def _idle(self, robot: str) -> bool:
         """Return True if ``robot`` has nothing committed (no move running or waiting)."""
