@@ -309,6 +309,25 @@ def test_once_the_bridge_drops_the_move_the_next_target_is_planned_at_once(clock
     assert _status(_target(leader, [3.3, -0.5, 0.3])).state == 'planned'
 
 
+def test_a_move_asked_while_the_arm_brakes_is_planned_from_where_it_stops(cell, clock, leader):
+    """Held and braking until t = 10.4: a target waits for it, then starts from the arm at rest.
+
+    Planned at once from the joints measured while the arm still brakes, the move would start
+    where the arm no longer is when it starts, and the bridge would refuse it.
+    """
+    first = _sent(_target(leader, [3.0, -1.0, 0.3]))
+    clock.t += 0.1
+    leader.on_own_execution('held', first.request, end=10.4)
+    st = _status(_target(leader, [3.3, -0.5, 0.3], stamp=10.1))
+    assert (st.state, st.reason) == ('queued', 'behind a brake (at rest t=10.400 s)')
+    stopped = _pose(cell.leader, [3.1, -0.9, 0.3])
+    other = _pose(cell.follower, OUT['scara_right'])
+    assert leader.on_joint_state(stopped, other, 10.3) == []  # still braking
+    clock.t = 10.4
+    move = _sent(leader.on_joint_state(stopped, other, 10.4))
+    assert_allclose(move.plan.traj.q[0], stopped)
+
+
 def test_a_status_of_another_move_changes_nothing(clock, leader):
     """The bridge's word on another request (an old move) does not touch the current one."""
     first = _sent(_target(leader, [3.0, -1.0, 0.3]))

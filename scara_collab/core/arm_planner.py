@@ -318,6 +318,7 @@ class ArmPlanner:
         self.joints_time = 0.0                          # s, when they were measured
         self.committed: Optional[CommittedMove] = None  # this arm's move as sent
         self.queued: Optional[MoveRequest] = None       # to plan when the committed one ends
+        self.settled = 0.0                              # sim s a brake brings the arm to rest
         self.blocked: Optional[MoveRequest] = None      # waiting for the other arm to move
         self.other_motion = Heard(other_arm.name, dt=dt)  # the other arm's commitments
         self.out = PlannerOutput()  # the commands decided, and the last answer to each request
@@ -363,9 +364,9 @@ class ArmPlanner:
         self.joints = np.asarray(joints, dtype=float)
         self.other_joints = np.asarray(other_joints, dtype=float)
         self.joints_time = float(stamp)
-        if self.queued is not None and (self.committed is None
-                                        or self.joints_time - self.lag
-                                        >= self.committed.plan.end):
+        if self.queued is not None and self.joints_time >= self.settled and (
+                self.committed is None or self.joints_time - self.lag
+                >= self.committed.plan.end):
             queued, self.queued = self.queued, None
             self._plan_and_schedule(queued)
         return self.out.take()
@@ -433,16 +434,20 @@ class ArmPlanner:
         return self.out.take()
 
     def on_own_execution(self, state: str, request: int, start: Optional[float] = None,
-                         stamp: Optional[float] = None) -> List[PlannerCommand]:
+                         stamp: Optional[float] = None,
+                         end: Optional[float] = None) -> List[PlannerCommand]:
         """Take the bridge's status of this arm's move for ``request``.
 
         :param start: the start it reports, s; :param stamp: the start the move asked for, s
-            (None or 0: none).
+            (None or 0: none); :param end: of ``held``, when the arm's brake brings it to rest
+            (sim s): a move asked before then waits for it (planned from where it stops).
 
         An ``accepted`` move adds its lateness to the measured lead and, if late, is re-based
         to its real start; once refused, preempted or held nothing of it runs, so the next
         request is planned at once, except a refused re-time: the move it re-timed stays.
         """
+        if state == 'held' and end is not None:
+            self.settled = max(self.settled, float(end))
         if self.committed is None or request != self.committed.request:
             return self.out.take()  # not the arm's current move
         late = lateness(stamp, start) if state == 'accepted' and start is not None else 0.0
@@ -490,6 +495,10 @@ class ArmPlanner:
             self.queued = asked
             self.out.report('queued', request, 'behind the running move (ends '
                             f't={self.committed.plan.end:.3f} s)')
+            return
+        if self.joints_time < self.settled:  # braking: planned from where the arm stops
+            self.queued = asked
+            self.out.report('queued', request, f'behind a brake (at rest t={self.settled:.3f} s)')
             return
         self._plan_and_schedule(asked)
 

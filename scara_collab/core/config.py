@@ -169,6 +169,7 @@ SCHEMAS = {
         Rule('line_capacity', 'positive'),
         Rule('person_speed', 'number', lambda v: 0.0 <= v <= 1.0, 'must be in [0, 1]'),
         Rule('person_buffer', 'nonneg'),
+        Rule('person_least_speed', 'number', lambda v: 0.0 <= v <= 1.0, 'must be in [0, 1]'),
     ],
     'people': [
         Rule('person.scenario', 'str'),

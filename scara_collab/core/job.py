@@ -40,6 +40,7 @@ every waiting lane to ``now`` (what is sent again, what ended each wait), the de
 decide on all of it, the belt sharing sends the result in turn.
 """
 import dataclasses
+import math
 from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
@@ -115,8 +116,11 @@ class SortingJob:
         self.start_time: Optional[float] = None
         self.counts: Dict[str, int] = {}
         self.sorted_by: Dict[str, int] = {a.name: 0 for a in cell.arms}
-        #: missed items the job last left for a person (their last note says so)
+        #: missed items the person cost: left for a person, or on the belt while an arm was
+        #: slowed or stopped for one (:meth:`on_persons`)
         self.missed_due_to_person = 0
+        self._seen_at: Dict[int, float] = {}  # item id -> sim s it was first seen on the belt
+        self._hindered_at = -math.inf  # sim s an arm was last slowed or stopped for a person
 
     # --- what it knows --------------------------------------------------------------------
     @property
@@ -153,12 +157,22 @@ class SortingJob:
     def on_items(self, items: Sequence[sorting.SeenItem]) -> None:
         """Take the items resting on the belt now (not held, not falling, not in a bin)."""
         self.board.items = {it.id: it for it in items}
+        for it in items:
+            self._seen_at.setdefault(it.id, it.stamp)
         if self.share is not None and self.board.items:
             self.share.see(self.board.items, max(it.stamp for it in items))
 
-    def on_persons(self, persons: Sequence[ssm.Person]) -> None:
-        """Take the persons the separation monitor sees now: meetings are chosen away from them."""
+    def on_persons(self, persons: Sequence[ssm.Person], hindered: bool = False,
+                   now: Optional[float] = None) -> None:
+        """Take the persons the separation monitor sees now: meetings are chosen away from them.
+
+        :param hindered: an arm runs slowed or stopped for a person now (the monitor's
+            factors): an item missed that was on the belt meanwhile counts as the person's.
+        :param now: the monitor's sim time of it (default: the job's).
+        """
         self.moves.persons = tuple(persons)
+        if hindered:
+            self._hindered_at = self.protocol.now if now is None else float(now)
 
     def on_estop(self, on: bool) -> None:
         """Take the emergency stop: while set, nothing new is commanded."""
@@ -240,9 +254,13 @@ class SortingJob:
         if kind in sorting.GONE:
             self.board.claimed.pop(item, None)
             last = self.decisions.notes.close(item)
+            seen = self._seen_at.pop(item, math.inf)
             if kind == 'missed':
+                person = 'clear of a person' in last or self._hindered_at >= seen
+                if person and 'clear of a person' not in last:
+                    last += '; an arm was slowed or stopped for a person meanwhile'
                 self.log('warn', f'item {item} missed; last: {last}')
-                self.missed_due_to_person += 'clear of a person' in last
+                self.missed_due_to_person += person
         self.protocol.grips.confirm(self.lanes, kind, robot)
 
     # --- the clock ------------------------------------------------------------------------

@@ -97,12 +97,13 @@ class JobMoves:
 
     def _at_speed(self, lane: Lane, item: sorting.SeenItem, hit: sorting.Intercept,
                   lead: float) -> Optional[sorting.Intercept]:
-        """Return ``hit``, or a later meeting the arm can make at speed, away from the persons.
+        """Return ``hit``, or a later meeting the arm can make faster, away from the persons.
 
         A meeting the separation monitor would slow below ``person_speed`` (checked on the
         planned move, :func:`scara_collab.core.ssm.allowed_along`) is put off: the item met
-        further down the belt, later, while it stays in reach (None: it leaves first, and
-        :attr:`declined` says it was left for the person).
+        further down the belt, later, while it stays in reach, up to ``PUT_OFFS`` times; of
+        those, the fastest is taken if the monitor lets the arm move at ``person_least_speed``
+        there, else none (None: :attr:`declined` says it was left for the person).
         """
         s, arm = self.settings, self.cell.arm(lane.robot)
         # beyond the arm's reach by its largest protective separation, a person cannot slow it
@@ -113,15 +114,21 @@ class JobMoves:
         if not near:
             return hit
         q0 = self.protocol.q[lane.robot]
+        best, best_speed = None, -1.0
         for _ in range(PUT_OFFS + 1):
             if hit is None:
                 break
             samples = np.linspace(0, len(hit.traj.t) - 1, 5)[1:].round().astype(int)
-            if ssm.allowed_along(arm, hit.traj.q[samples], hit.traj.qd[samples], near,
-                                 self.people) >= s.person_speed:
+            speed = ssm.allowed_along(arm, hit.traj.q[samples], hit.traj.qd[samples], near,
+                                      self.people)
+            if speed >= s.person_speed:
                 return hit
+            if speed > best_speed:
+                best, best_speed = hit, speed
             hit = sorting.intercept(self.cell, arm, q0, item, hit.start + PUT_OFF, s.pick_z,
                                     lambda a, p: self.plan(lane.robot, a, p), lead=lead)
+        if best is not None and best_speed >= s.person_least_speed:
+            return best
         self.declined = 'person'
         return None
 

@@ -41,8 +41,11 @@ class JobSettings:
     line_cell: int = 0
     line_cells: int = 1
     line_capacity: float = 40.0
-    #: the least speed factor a meeting with an item is chosen at, near a person
+    #: the speed factor a meeting with an item is taken at without looking further, near a
+    #: person (below it, a later meeting down the belt may be faster)
     person_speed: float = 0.9
+    #: the least speed factor a meeting is taken at, near a person (below: left for the person)
+    person_least_speed: float = 0.3
     #: m kept beyond the protective separation when that meeting is chosen
     person_buffer: float = 0.3
 
@@ -85,4 +88,5 @@ class JobSettings:
             line_cell=int(cfg['line_cell']), line_cells=int(cfg['line_cells']),
             line_capacity=float(cfg['line_capacity']),
             person_speed=float(cfg['person_speed']),
+            person_least_speed=float(cfg['person_least_speed']),
             person_buffer=float(cfg['person_buffer']))

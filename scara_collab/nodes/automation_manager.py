@@ -222,8 +222,11 @@ class AutomationManager(Node):
 
     def _on_separation(self, msg: DiagnosticStatus) -> None:
         st = proto.SeparationStatus.from_msg(msg)
+        hindered = bool(st.persons) and not st.fault and any(
+            s < 1.0 for s in st.scale.values())
         self.job.on_persons([Person(np.array([p.x, p.y]), np.array([p.vx, p.vy]), p.radius,
-                                    self.column, p.id) for p in st.persons])
+                                    self.column, p.id) for p in st.persons],
+                            hindered, st.time)
 
     def _on_estop(self, kind: str, msg: Bool) -> None:
         was = any(self._stops.values())

@@ -99,6 +99,8 @@ class BridgePeople:
         #: m: an arm's true protective separation is at most this (its truth beyond: bounds)
         self.far = {a.name: ssm.true_separation_bound(a, self.params) for a in cell.arms}
         self.rate = float(cfg['scanner']['rate'])
+        #: s ahead an arm's planned speed is said for: the reaction time and a scan period
+        self.horizon = self.params.reaction_time + 1.0 / self.rate
         self.rates = rates
         self.scan_pub = node.create_publisher(LaserScan, 'safety_scanner/scan', 10)
         self.poses_pub = node.create_publisher(PoseArray, 'person/poses', 10)
@@ -170,23 +172,26 @@ class BridgePeople:
                                                       self.body.radii[:len(poses)], t))
 
     def state(self) -> None:
-        """Publish every arm's trajectory clock and the person against each arm (truth)."""
+        """Publish every arm's trajectory clock and the person against each arm (truth).
+
+        An arm's clock is said with every scan while it has a move, and once when it changes
+        otherwise (an arm at rest, as last said, says nothing).
+        """
         t = self.sim.time
         _, q, qd, _ = self.sim.joint_state()
         q, qd = q.reshape(-1, 3), qd.reshape(-1, 3)
         servo = self.sim.servo
         for a, arm in enumerate(self.cell.arms):
-            clock = servo.clocks.get(arm.name)
-            if clock is None:
-                continue  # never slowed: on sim time, at its planned speed
+            ahead = servo.planned_ahead(arm.name, t, self.horizon)
             said = (float(self.sim.motion[arm.name].lag), servo.speed(arm.name),
                     float(servo.factors[arm.name]))
-            if said[1] >= 1.0 and said == self._said.get(arm.name):
-                continue  # at full speed as last said: its measured velocity is the planned
-            self._said[arm.name] = said
+            if not servo.active(a, t) and (said, tuple(ahead)) == self._said.get(arm.name):
+                continue
+            self._said[arm.name] = (said, tuple(ahead))
             self.clock_pub[arm.name].publish(proto.TrajectoryClock(
                 arm.name, round(t, 6), *said,
-                dict(zip(arm.joint_names, (float(v) for v in servo.planned[a])))).to_msg())
+                dict(zip(arm.joint_names, (float(v) for v in servo.planned[a]))),
+                ahead=dict(zip(arm.joint_names, (float(v) for v in ahead)))).to_msg())
         self.truth_pub.publish(self._truth(t, q, qd).to_msg())
 
     def _truth(self, t: float, q: np.ndarray, qd: np.ndarray) -> proto.PersonTruth:

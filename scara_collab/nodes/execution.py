@@ -106,7 +106,9 @@ class Execution:
         """Brake ``robot`` at its acceleration limits and hold; its move is reported ``held``."""
         move = self.sim.motion.release(robot)
         self.sim.brake(robot)
-        self.report(robot, 'held', move, reason)
+        brake = self.sim.motion[robot]
+        end = None if brake.running is None else round(brake.running.end + brake.lag, 6)
+        self.report(robot, 'held', move, reason, end=end)  # at rest from ``end`` on
 
 
 class Holds:

@@ -107,7 +107,8 @@ class Planner(Node):
     def _on_own_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
         if (request := moves.request_of(self.arm.name, st.move)) is not None:  # not a hold
-            self._send(self.planner.on_own_execution(st.state, request, st.start, st.stamp))
+            self._send(self.planner.on_own_execution(st.state, request, st.start, st.stamp,
+                                                     st.end))
 
     def _on_clock(self, msg: DiagnosticStatus) -> None:
         clock = proto.TrajectoryClock.from_msg(msg)

@@ -378,7 +378,8 @@ class ExecutionStatus(_MoveStatus):
     keeps its command; ``finished``: it ran to its end; ``preempted``: a newer trajectory
     (the move ``by``) replaced it; ``held``: a protective or emergency stop, or a silent
     lockstep guard (the collision monitor, :mod:`scara_collab.nodes.lockstep`), holds the arm
-    (the move is aborted); ``cleared``: the stop was released, or the guard answers again.
+    (the move is aborted; ``end``: the sim s the arm's brake brings it to rest); ``cleared``:
+    the stop was released, or the guard answers again.
     """
 
     time: float
@@ -701,13 +702,15 @@ FLAGS = Table(BOOL)
 class TrajectoryClock(_Status):
     """One arm's trajectory clock (``/<robot>/trajectory_clock``, the bridge).
 
-    Published at the state rate while the cell scales its arms' speeds (a cell with a safety
-    scanner), never otherwise. ``lag``: sim time minus the arm's trajectory time, s (what speed
+    Published with every scan while the arm has a move, and when it changes otherwise, in a
+    cell with a safety scanner; never otherwise. ``lag``: sim time minus the arm's trajectory time, s (what speed
     scaling has cost it; the times of its moves, stamps included, are trajectory time);
     ``scale``: the factor its trajectory runs at now; ``target``: the factor asked
     (``/<robot>/speed_scaling``); ``planned``: its trajectory's velocity at the trajectory
     time, as planned (unscaled), by joint name; ``held_back``: its path-keeping stop fell
-    behind braking, so the bridge brakes it.
+    behind braking, so the bridge brakes it; ``ahead``: per joint, the planned velocity of
+    largest size from now to a reaction time ahead (what the arm may reach before a slowdown
+    decided now takes hold: the separation monitor weighs its speed by it).
     """
 
     robot: str
@@ -717,11 +720,12 @@ class TrajectoryClock(_Status):
     target: float
     planned: Dict[str, float] = field(default_factory=dict)
     held_back: bool = False
+    ahead: Dict[str, float] = field(default_factory=dict)
 
     KIND: ClassVar[str] = 'trajectory_clock'
     FIELDS: ClassVar[Dict[str, Codec]] = {
         'robot': TEXT, 'time': FLOAT, 'lag': FLOAT, 'scale': FLOAT, 'target': FLOAT,
-        'planned': FLOATS, 'held_back': BOOL}
+        'planned': FLOATS, 'held_back': BOOL, 'ahead': FLOATS}
 
     def name(self) -> str:
         """Return ``'<robot>/trajectory_clock'``."""

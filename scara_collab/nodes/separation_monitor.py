@@ -17,10 +17,12 @@ simulates the person and the safety scanners.
 - ``joint_states``: the arms' joints and measured velocities; a state refused by its stamp
   (:func:`scara_collab.nodes.conversions.admit_state`) is ignored, a non-finite one stops the
   arm it is of until a finite one comes.
-- ``<robot>/trajectory_clock`` (:class:`~scara_collab.nodes.protocol.TrajectoryClock`): the
-  planned, unscaled joint velocity of each arm's trajectory while it runs slowed (the bridge
-  says it with every scan then). At full speed, before the first one and for a joint it does
-  not name, the measured velocity stands for it: at ``s = 1`` they agree.
+- ``<robot>/trajectory_clock`` (:class:`~scara_collab.nodes.protocol.TrajectoryClock`): per
+  joint the planned, unscaled velocity of largest size the arm's trajectory reaches from now
+  to a reaction time and a scan period ahead (``ahead``; the bridge says it with every scan
+  while the arm has a move): an arm accelerating away from rest is weighed at the speed it
+  reaches before a slowdown decided now takes hold, not at the speed it has. Before the first
+  one and for a joint it does not name, the measured velocity stands for it.
 
 At each step of sim time (:func:`scara_collab.nodes.sim_timer.every`, at most the state rate)
 it observes the scans that have come and decides when there is something new to decide on:
@@ -237,10 +239,10 @@ class SeparationMonitorNode(Node):
                 continue
             q, measured = state
             clock = self._clocks.get(arm.name)
-            if clock is None or clock.scale >= 1.0:  # at full speed: measured = planned
+            if clock is None:  # never said: at full speed, measured = planned
                 qd = measured
-            else:
-                qd = np.array([clock.planned.get(j, m)
+            else:  # the fastest it is planned to go before a decision now takes hold
+                qd = np.array([clock.ahead.get(j, clock.planned.get(j, m))
                                for j, m in zip(arm.joint_names, measured)], dtype=float)
             out[arm.name] = (q, qd)
         return out

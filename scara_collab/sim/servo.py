@@ -225,6 +225,28 @@ class Servo:
         self._apart = (key, now, apart)
         return not apart
 
+    def planned_ahead(self, robot: str, now: float, horizon: float,
+                      samples: int = 5) -> np.ndarray:
+        """Return per joint the planned velocity of largest size over the next ``horizon`` s.
+
+        Unscaled, on the arm's trajectory clock (or sim time), from its running move and the
+        one waiting for its start; zeros for an arm with nothing to run. What the arm may
+        reach before a slowdown decided now takes hold, ``(3,)``.
+        """
+        motion = self.motion[robot]
+        clock = self.clocks.get(robot)
+        tau = now if clock is None else clock.tau
+        moves = [m for m in (motion.running, motion.waiting)
+                 if m is not None and m.ref is not None]
+        out = np.zeros(3)
+        for at in tau + np.linspace(0.0, horizon, samples):
+            move = next((m for m in reversed(moves) if m.start <= at), None)
+            if move is None:
+                continue
+            qd = np.asarray(move.ref.sample(at)[1], dtype=float)
+            out = np.where(np.abs(qd) > np.abs(out), qd, out)
+        return out
+
     def _idle(self, robot: str) -> bool:
         """Return True if ``robot`` has nothing committed (no move running or waiting)."""
         motion = self.motion[robot]
