@@ -176,6 +176,39 @@ def test_a_person_approaching_slows_then_stops_the_arm_and_leaving_resumes_it(ce
     assert decisions[-1].arm('scara_right').scale == 1.0  # the far arm kept working
 
 
+def test_a_person_appearing_inside_the_separation_stops_the_arm_at_the_first_scan(cell, cfg):
+    """Out of sight (behind an occlusion), then seen within S_p at standstill of a moving arm.
+
+    The first decision on the scan that shows them is a protective stop, the factor 0 at once
+    (no fall at the braking rate: a required 0 is a stop); the arm far away runs on.
+    """
+    sim = Cell(cell, cfg)
+    sim.qd['scara_left'] = np.array([1.5, -1.0, 0.0])
+    sim.run(2.0)
+    inside = legs(2.7, -2.9)  # 0.8 m from the left arm's link 1: S_p at standstill is 1.38 m
+    decisions = sim.run(0.2, lambda t: inside)
+    first = next(k for k, d in enumerate(decisions) if d.persons)
+    seen = decisions[first].arm('scara_left')
+    assert seen.stop and seen.scale == 0.0 and 'at standstill: protective stop' in seen.cause
+    assert (first + 1) * TICK <= PERIOD + 1e-9  # within the scan period it came in
+    assert decisions[-1].arm('scara_right').scale == 1.0
+
+
+def test_a_person_standing_inside_holds_the_arm_until_they_leave(cell, cfg):
+    """Standing still within S_p at standstill for 5 s: no resume; gone, full speed within 1.5 s."""
+    sim = Cell(cell, cfg)
+    sim.qd['scara_left'] = np.array([1.5, -1.0, 0.0])
+    sim.run(2.0)
+    inside = legs(2.7, -2.9)
+    standing = sim.run(5.0, lambda t: inside)
+    k = next(k for k, d in enumerate(standing) if d.persons)
+    assert all(d.arm('scara_left').scale == 0.0 and d.arm('scara_left').stop
+               for d in standing[k:])
+    away = scale(sim.run(3.0))
+    full = next(k for k, v in enumerate(away) if v >= 1.0)
+    assert full * TICK <= 1.5 + PERIOD + cfg['monitor']['track_hold']
+
+
 def test_the_monitor_reads_scans_not_where_the_person_is(cell, cfg):
     """Two persons are found where the scans put them: tracked columns, not true bodies."""
     sim = Cell(cell, cfg)

@@ -1,0 +1,84 @@
+"""The whole cell in one process with a person walking in beside an arm and out again.
+
+The bridge simulates the person and the scanners, the separation monitor slows the arm near
+the person from the scans alone, the job keeps sorting: the person is never within an arm's
+protective separation while it moves (ground truth), never touched, and once they have left,
+both arms run at full speed again and the job sorts on.
+"""
+import math
+
+import pytest
+import yaml
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from scara_collab import graph
+from scara_collab.nodes import protocol as proto
+from scara_collab.nodes.runner import InProcess
+
+DURATION = 36.0
+#: walks in beside the left arm's outer bin, stands 6 s, walks out the way it came
+VISIT = {'visits': [{'start': 4.0, 'speed': 1.4, 'waypoints': [
+    [4.5, -6.5], {'x': 4.2, 'y': -3.6, 'dwell': 6.0}, [4.5, -6.5]]}]}
+
+
+@pytest.fixture(scope='module')
+def run(tmp_path_factory):
+    """Run the collaborative job for 36 sim s with the person; return what was heard."""
+    path = tmp_path_factory.mktemp('person') / 'visit.yaml'
+    path.write_text(yaml.safe_dump(VISIT))
+    specs = graph.job_nodes(people=True)
+    params = graph.job_params('collaborative')
+    for name, values in graph.person_params(str(path), 1).items():
+        params[name].update(values)
+    params['pybullet_bridge'].update(real_time_factor=0.0, item_seed=7,
+                                     lockstep_expect=graph.lockstep_expect(specs))
+    params['automation_manager']['auto_start'] = 'true'
+    heard = {'truth': [], 'status': []}
+    with InProcess() as g:
+        nodes = {s.name: g.add(s.build(context=g.context, cli_args=graph.ros_args(
+            s.configs, params[s.name]))) for s in specs}
+        probe = g.probe('person_graph_probe')
+        probe.create_subscription(DiagnosticStatus, 'person/truth', lambda m: heard['truth']
+                                  .append(proto.PersonTruth.from_msg(m)), 100)
+        probe.create_subscription(DiagnosticStatus, 'separation_monitor/status', lambda m:
+                                  heard['status'].append(proto.SeparationStatus.from_msg(m)),
+                                  100)
+        bridge = nodes['pybullet_bridge']
+        sorted_at = []
+        while bridge.sim.time < DURATION:
+            g.spin_once(timeout_sec=0.01)
+            n = nodes['automation_manager'].job.counts.get('sorted', 0)
+            if n > len(sorted_at):
+                sorted_at.append(bridge.sim.time)
+        heard['sorted_at'] = sorted_at
+        heard['missed'] = nodes['automation_manager'].job.counts.get('missed', 0)
+        heard['guard'] = nodes['collision_monitor'].status()
+    return heard
+
+
+def test_the_arm_near_the_person_slows_and_resumes_and_the_margin_is_kept(run):
+    """Seen, slowed (not the far arm's business), back at full speed once the person left."""
+    truth, status = run['truth'], run['status']
+    present = [t.time for t in truth if t.present]
+    assert present and min(present) >= 4.0
+    slowed = [s for s in status if s.scale['scara_left'] < 1.0 and not s.fault]
+    assert slowed, 'the person beside the left arm never slowed it'
+    assert any(s.cause['scara_left'].startswith('person') for s in slowed)  # then it rises
+    left_at = max(present)
+    after = [s for s in status if s.time > left_at + 1.5]
+    assert after and all(s.scale == {'scara_left': 1.0, 'scara_right': 1.0} for s in after)
+    for t in truth:  # ground truth, at every scan: never inside S_p while moving, no contact
+        for robot, moving in t.moving.items():
+            assert not t.contact[robot]
+            if moving:
+                assert t.margin[robot] >= 0.0, (t.time, robot, t.margin[robot])
+
+
+def test_the_job_sorts_on_and_the_arms_keep_their_margin(run):
+    """Items sorted while the person is there and after; no arm-to-arm stop, margin kept."""
+    assert len(run['sorted_at']) >= 6
+    assert any(t > max(tt.time for tt in run['truth'] if tt.present) for t in run['sorted_at'])
+    guard = run['guard']
+    assert guard.emergency == 0 and guard.protective == 0
+    assert guard.minimum >= 0.1
+    assert math.isfinite(guard.minimum)
