@@ -11,12 +11,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # benchmarks/ lies beside scripts/: measured, never installed
 
 from benchmarks import (fault_matrix, job_protocol, line_scenarios,  # noqa: E402
-                        realtime_runs, results_page, soak)
+                        people, realtime_runs, results_page, soak)
 from benchmarks.util import (FIGURES, LINE_PAGE, Progress, REALTIME_PAGE,  # noqa: E402
                              RESULTS_PAGE)
 
 LAUNCHER = {'protocol': job_protocol, 'faults': fault_matrix, 'soak': soak,
-            'realtime': realtime_runs, 'line': line_scenarios}
+            'realtime': realtime_runs, 'line': line_scenarios, 'people': people}
 KEYS = [s.key for s in results_page.SECTIONS] + list(LAUNCHER)
 
 
@@ -34,9 +34,9 @@ OPTIONS = (  # flag, argparse keywords, help
     ('--out', dict(type=Path), f'folder for {RESULTS_PAGE}, {REALTIME_PAGE}, {LINE_PAGE} and '
      f'{FIGURES}/ (default docs/results/); a .md path is the real-time page'),
     ('--json', dict(type=Path), 'also write every measured value of the numbered sections here'),
-    ('--duration', dict(type=float), 'sim s per run: realtime (600), soak (3600)'),
+    ('--duration', dict(type=float), 'sim s per run: realtime (600), soak (3600), people (240)'),
     ('--seeds', dict(type=int, nargs='+'), 'seeds: realtime (1 2 3), protocol mirrored runs '
-     '(11 12 13)'),
+     '(11 12 13), people (1 2 3 4 5; the first two also in real time)'),
     ('--conditions', dict(nargs='+', choices=list(realtime_runs.CONDITIONS)),
      'realtime conditions (default all)'),
     ('--one-process', dict(action='store_true'),
@@ -47,6 +47,8 @@ OPTIONS = (  # flag, argparse keywords, help
     ('--runs', dict(type=int), 'protocol: demo runs with hogs (5)'),
     ('--hogs', dict(type=int), 'protocol: CPU hogs (2)'),
     ('--cells', dict(type=int, nargs='+'), 'line: line lengths (2 3), each beside one cell'),
+    ('--people', dict(nargs='+', choices=people.SCENARIOS),
+     'people: the scenarios (default all), each beside the same seed without a person'),
     ('--scenarios', dict(nargs='+', choices=('capacity', 'rated', 'realtime', 'kill')),
      'line: capacity (default), rated (N x the rated feed, lossy handoffs), realtime (N x the '
      'rated feed, unthrottled and at 1x), kill (cell 1 of 3 killed at 300 sim s)'))

@@ -62,6 +62,9 @@ from scara_collab.sim.scanner import SafetyScanner
 #: how the arms' factors are applied (:attr:`scara_collab.sim.servo.Servo.coupling`): each
 #: arm its own while their paths stay apart (the default), or one for both
 SCALING_MODES = ('arm', 'cell')
+#: m beyond an arm's largest protective separation its truth is a bound, not exact (so that the
+#: least margin a run reports is exact below this)
+FAR_SLACK = 1.0
 #: rad/s | m/s: an arm with a joint faster than this moves (the truth's "while it moved")
 MOVING = 1e-3
 
@@ -208,7 +211,7 @@ class BridgePeople:
         for k, arm in enumerate(arms):
             reach = arm.l1 + arm.l2 + arm.link_radius
             floor = float(np.min(np.hypot(*(caps.start[:, :2] - arm.base[:2, 3]).T))) - reach
-            if floor > self.far[arm.name]:  # nothing near: lower bounds, not worth exactness
+            if floor > self.far[arm.name] + FAR_SLACK:  # nothing near: lower bounds
                 separation[arm.name] = floor
                 margin[arm.name] = floor - self.far[arm.name]
                 continue
