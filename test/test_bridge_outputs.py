@@ -19,7 +19,7 @@ def test_the_states_stay_on_their_grid_after_an_hour_of_sim_time():
     out.next = {k: 0.0 for k in out.periods}
     out._origin = {k: 0.0 for k in out.periods}
     out._count = {k: 0 for k in out.periods}
-    out._added = []
+    out._added, out._first = [], []
     late = []
     out.state = lambda: steps[0] % 10 == 0 or late.append(steps[0])
     out.clock, out._on_clock = (lambda: None), (lambda: None)

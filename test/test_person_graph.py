@@ -7,10 +7,10 @@ both arms run at full speed again and the job sorts on.
 """
 import math
 
+from diagnostic_msgs.msg import DiagnosticStatus
 import pytest
 import yaml
 
-from diagnostic_msgs.msg import DiagnosticStatus
 from scara_collab import graph
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.runner import InProcess

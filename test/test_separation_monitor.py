@@ -195,7 +195,7 @@ def test_a_person_appearing_inside_the_separation_stops_the_arm_at_the_first_sca
 
 
 def test_a_person_standing_inside_holds_the_arm_until_they_leave(cell, cfg):
-    """Standing still within S_p at standstill for 5 s: no resume; gone, full speed within 1.5 s."""
+    """Standing within S_p at standstill for 5 s: no resume; gone, full speed within 1.5 s."""
     sim = Cell(cell, cfg)
     sim.qd['scara_left'] = np.array([1.5, -1.0, 0.0])
     sim.run(2.0)

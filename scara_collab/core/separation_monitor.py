@@ -245,8 +245,8 @@ class SeparationMonitor:
     :param settings: the monitor's numbers.
     :param scanners: the scanners, in the order their scans are given.
 
-    Example: the empty cell taught and scanned; the factor rises after the dwell, then stops
-    on a silent scanner::
+    Example: the empty cell taught and scanned; the first look allows full speed at once (the
+    cell starts at rest), a silent scanner stops it::
 
         >>> from scara_collab.core.config import load_config
         >>> from scara_collab.core.model import load_cell
@@ -259,11 +259,11 @@ class SeparationMonitor:
         >>> monitor.teach([[r] for r in empty])
         >>> monitor.observe(0.0, empty, {})
         >>> rest = {a.name: (np.zeros(3), np.zeros(3)) for a in cell.arms}
-        >>> monitor.decide(0.0, rest).arm('scara_left').scale   # the governor starts at 0
-        0.0
+        >>> monitor.decide(0.0, rest).arm('scara_left').scale
+        1.0
         >>> monitor.observe(0.5, empty, {})
-        >>> round(monitor.decide(0.5, rest).arm('scara_left').scale, 6)   # 0.3 s after the dwell
-        0.3
+        >>> monitor.decide(0.6, rest).arm('scara_left').scale
+        0.0
         >>> monitor.decide(0.6, rest).arm('scara_left').cause
         'scanner_a: no scan for 0.100 s'
     """

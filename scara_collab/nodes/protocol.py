@@ -703,8 +703,9 @@ class TrajectoryClock(_Status):
     """One arm's trajectory clock (``/<robot>/trajectory_clock``, the bridge).
 
     Published with every scan while the arm has a move, and when it changes otherwise, in a
-    cell with a safety scanner; never otherwise. ``lag``: sim time minus the arm's trajectory time, s (what speed
-    scaling has cost it; the times of its moves, stamps included, are trajectory time);
+    cell with a safety scanner; never otherwise. ``lag``: sim time minus the arm's
+    trajectory time, s (what speed scaling has cost it; the times of its moves, stamps
+    included, are trajectory time);
     ``scale``: the factor its trajectory runs at now; ``target``: the factor asked
     (``/<robot>/speed_scaling``); ``planned``: its trajectory's velocity at the trajectory
     time, as planned (unscaled), by joint name; ``held_back``: its path-keeping stop fell

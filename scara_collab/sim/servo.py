@@ -33,8 +33,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from scara_collab.core import safety
-from scara_collab.core.model import ArmModel
 from scara_collab.core.collision import paths_apart
+from scara_collab.core.model import ArmModel
 from scara_collab.core.motion import CellMotion, Move
 from scara_collab.core.planning import Timeline
 from scara_collab.core.scaled_clock import ScaledClock
