@@ -1,13 +1,15 @@
 """A person in the cell through the launcher (``--only people``): safety, liveness, cost.
 
 Each scenario (``pass-by``, ``inlet``, ``middle``, ``random``) runs beside the same seed
-without a person, side by side (two launchers at once, each on a ROS domain of its own), at
-the rated feed: in lockstep for every seed, and with ``--lockstep off --rtf 1`` for the first
-two. Per run, from its ``summary.json``: items sorted and missed, the person block (the least
-``S - S_p`` while an arm moved and contacts, from the ground truth; protective stops,
-slow-downs, the slowest return to full speed; items missed for the person), the arms' least
-separation, emergency stops and the exit code; the CPU per sim second of the run and of its
-person-free twin. docs/people.md explains every figure; the targets are the issue's.
+without a person, at the rated feed: in lockstep for every seed, side by side (two launchers
+at once, each on a ROS domain of its own: their CPU per sim second is compared under the same
+load), and with ``--lockstep off --rtf 1`` for the first two, one after the other (two cells
+in real time on the machine's two cores would starve each other's scans). Per run, from its
+``summary.json``: items sorted and missed, the person block (the least ``S - S_p`` while an
+arm moved and contacts, from the ground truth; protective stops, slow-downs, the slowest
+return to full speed; items missed for the person), the arms' least separation, emergency
+stops and the exit code; the CPU per sim second of the run and of its person-free twin.
+docs/people.md explains every figure; the targets are the issue's.
 """
 import os
 from pathlib import Path
@@ -33,7 +35,7 @@ def pair(scenario: str, seed: int, duration: float, out: Path, realtime: bool,
     if realtime:
         flags += ['--lockstep', 'off']
     rtf = 1.0 if realtime else 0.0
-    runs = []
+    runs, done = [], []
     for k, person in enumerate((scenario, None)):
         domain = use_domain(seed * 10 + k + (5 if realtime else 0))
         env = {'ROS_DOMAIN_ID': str(domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
@@ -41,7 +43,9 @@ def pair(scenario: str, seed: int, duration: float, out: Path, realtime: bool,
         runs.append(Launch('collaborative', duration, folder, rtf, env=dict(os.environ, **env),
                            flags=flags + (
                                ['--person', person] if person else [])))
-    with_person, without = (r.finish(duration * 4 + 300) for r in runs)
+        if realtime:  # one at a time: two real-time cells on two cores starve each other
+            done.append(runs.pop().finish(duration * 4 + 300))
+    with_person, without = done or [r.finish(duration * 4 + 300) for r in runs]
     row = _row(scenario, seed, realtime, with_person, without)
     log(f'{scenario} seed {seed} {"real time" if realtime else "lockstep"}: sorted '
         f'{row["sorted"]} vs {row["sorted_without"]} without, margin {row["min_ssm_margin_m"]}, '

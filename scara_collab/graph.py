@@ -345,6 +345,7 @@ ROBOT_TOPICS: Tuple[Topic, ...] = (
     Topic('{robot}/planner_status', _STATUS, 'events'),
     Topic('{robot}/execution_status', _STATUS, 'events'),          # pybullet_bridge
     Topic('{robot}/trajectory_clock', _STATUS, 'events'),          # ... while speeds scale
+    Topic('{robot}/planned_velocity', 'sensor_msgs/msg/JointState', 'events'),  # ... moving
     Topic('{robot}/speed_scaling', 'std_msgs/msg/Float64', 'latched'),  # separation_monitor
 )
 

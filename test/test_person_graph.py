@@ -9,6 +9,7 @@ import math
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import pytest
+from sensor_msgs.msg import JointState
 import yaml
 
 from scara_collab import graph
@@ -33,7 +34,7 @@ def run(tmp_path_factory):
     params['pybullet_bridge'].update(real_time_factor=0.0, item_seed=7,
                                      lockstep_expect=graph.lockstep_expect(specs))
     params['automation_manager']['auto_start'] = 'true'
-    heard = {'truth': [], 'status': []}
+    heard = {'truth': [], 'status': [], 'clock': [], 'planned': []}
     with InProcess() as g:
         nodes = {s.name: g.add(s.build(context=g.context, cli_args=graph.ros_args(
             s.configs, params[s.name]))) for s in specs}
@@ -43,6 +44,10 @@ def run(tmp_path_factory):
         probe.create_subscription(DiagnosticStatus, 'separation_monitor/status', lambda m:
                                   heard['status'].append(proto.SeparationStatus.from_msg(m)),
                                   100)
+        probe.create_subscription(DiagnosticStatus, 'scara_left/trajectory_clock', lambda m:
+                                  heard['clock'].append(proto.TrajectoryClock.from_msg(m)), 100)
+        probe.create_subscription(JointState, 'scara_left/planned_velocity',
+                                  lambda m: heard['planned'].append(m), 100)
         bridge = nodes['pybullet_bridge']
         sorted_at = []
         while bridge.sim.time < DURATION:
@@ -82,3 +87,21 @@ def test_the_job_sorts_on_and_the_arms_keep_their_margin(run):
     assert guard.emergency == 0 and guard.protective == 0
     assert guard.minimum >= 0.1
     assert math.isfinite(guard.minimum)
+
+
+def test_what_changes_nothing_is_not_said_again(run):
+    """What has not changed is not said again: a cell without a person costs little.
+
+    The bridge says an arm's clock when it changes, its planned speed while it moves, the
+    truth of a person away once a second; the monitor its status when it changes.
+    """
+    clocks = run['clock']
+    assert clocks and any(c.scale < 1.0 for c in clocks)
+    for a, b in zip(clocks, clocks[1:]):
+        assert (a.lag, a.scale, a.target) != (b.lag, b.scale, b.target) or b.held_back
+    assert all(c.time < max(t.time for t in run['truth'] if t.present) + 5.0 for c in clocks)
+    assert len(run['planned']) > 10 * DURATION  # a move at nearly every scan (25 Hz)
+    away = [t.time for t in run['truth'] if not t.present and t.time > 20.0]
+    assert away and all(b - a >= 1.0 - 1e-6 for a, b in zip(away, away[1:]))
+    quiet = [s.time for s in run['status'] if s.time > 25.0]  # nobody in the cell
+    assert quiet and all(b - a >= 1.0 - 1e-6 for a, b in zip(quiet, quiet[1:]))

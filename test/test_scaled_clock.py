@@ -192,3 +192,28 @@ def test_stops_along_planned_lines_against_the_braking_model(cell):
     print(f'path-keeping stop / T_s: median {median:.2f}, 99th percentile {p99:.2f}, worst '
           f'{worst:.2f}; held back (braked instead): {held} of {len(ratios)}')
     assert median <= 1.2
+
+
+def test_coasting_a_steady_clock_is_ticking_it_at_full_speed_to_the_bit(move):
+    """Coasting keeps the trajectory time where a tick to 1 puts it, lag and all, to the bit.
+
+    After a slowdown and a resume to 1, :meth:`coast` (no sampling) and :meth:`tick` agree at
+    every step; a clock that is not steady refuses to coast.
+    """
+    arm, ref = move
+    ticked, coasted = (ScaledClock(0.0, arm.max_velocity, arm.max_acceleration)
+                       for _ in range(2))
+    t = 0.0
+    for target in [0.4] * 100 + [1.0] * 400:  # slowed, then back at full speed
+        t = round(t + DT, 9)
+        for clock in (ticked, coasted):
+            clock.tick(t, target, ref.sample)
+    assert ticked.steady and ticked.lag > 0.1
+    for _ in range(300):
+        t = round(t + DT, 9)
+        ticked.tick(t, 1.0, ref.sample)
+        coasted.coast(t)
+        assert (coasted.tau, coasted.time, coasted.rate) == (ticked.tau, ticked.time, 0.0)
+    coasted.tick(t + DT, 0.5, ref.sample)
+    with pytest.raises(ValueError):
+        coasted.coast(t + 2 * DT)

@@ -18,7 +18,7 @@ from scara_collab import graph
 from scara_collab.core.config import ConfigError, load_config
 from scara_collab.core.scan_tracking import scanners_from_config
 from scara_collab.nodes import conversions as conv
-from scara_collab.nodes.protocol import SeparationStatus, TrajectoryClock
+from scara_collab.nodes.protocol import SeparationStatus
 from scara_collab.nodes.qos import LATCHED
 from scara_collab.nodes.separation_monitor import SeparationMonitorNode
 
@@ -44,13 +44,12 @@ class Cell:
         self.clock = probe.create_publisher(Clock, '/clock', 10)
         self.states = probe.create_publisher(JointState, '/joint_states', 10)
         self.scans = probe.create_publisher(LaserScan, '/safety_scanner/scan', 10)
-        self.clocks = {a.name: probe.create_publisher(DiagnosticStatus,
-                                                      f'/{a.name}/trajectory_clock', 10)
-                       for a in cell.arms}
+        self.ahead = {a.name: probe.create_publisher(JointState, f'/{a.name}/planned_velocity',
+                                                     10) for a in cell.arms}
         self.scaling = {a.name: self.g.collect(Float64, f'/{a.name}/speed_scaling', LATCHED)
                         for a in cell.arms}
         self.status = self.g.collect(DiagnosticStatus, '/separation_monitor/status', 100)
-        pubs = [self.clock, self.states, self.scans, *self.clocks.values()]
+        pubs = [self.clock, self.states, self.scans, *self.ahead.values()]
         assert self.g.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs))
         self.q = {a.name: np.array([0.0, 1.2 if a.name == LEFT else -1.2, 0.1])
                   for a in cell.arms}
@@ -74,17 +73,11 @@ class Cell:
         msg.header.frame_id = geometry.name
         self.scans.publish(msg)
 
-    def planned(self, robot, qd, scale=0.5):
-        """Publish ``robot``'s trajectory clock, slowed, with the planned velocity ``qd``.
-
-        (At full speed the bridge says nothing: the measured velocity is the planned one.)
-        """
+    def planned(self, robot, qd):
+        """Publish ``robot``'s planned velocity ahead, ``qd`` (the bridge's, while it moves)."""
         arm = self.cell.arm(robot)
-        self.clocks[robot].publish(TrajectoryClock(
-            robot, self.time, 0.0, scale, scale,
-            dict(zip(arm.joint_names, map(float, qd)))).to_msg())
-        assert self.g.spin_until(lambda: robot in self.node._clocks
-                                 and self.node._clocks[robot].time == self.time)
+        self.ahead[robot].publish(conv.joint_velocities(self.time, arm.joint_names, qd))
+        assert self.g.spin_until(lambda: np.array_equal(self.node._ahead.get(robot), qd))
 
     def step(self, circles=(), scanners=None, nan=0, state=True):
         """Advance one sim step: a state, the scans due, then ``/clock``; wait for the decision.
@@ -165,7 +158,7 @@ def test_a_person_near_an_arm_slows_it_says_why_and_leaving_restores_it(sim, cel
     person = legs(*NEAR)
     at_rest = sim.run(0.5, circles=person)[-1]
     assert at_rest.arm(LEFT).scale == 1.0 and len(at_rest.persons) == 1
-    sim.qd[LEFT] = SWING  # no trajectory clock yet: the measured velocity stands for it
+    sim.qd[LEFT] = SWING  # no planned velocity yet: the measured velocity stands for it
     assert sim.run(0.5, circles=person)[-1].arm(LEFT).scale < 0.8
     sim.qd[LEFT] = np.zeros(3)  # from now on the planned velocity counts, not the measured
     sim.planned(LEFT, SWING)

@@ -156,6 +156,29 @@ class ScaledClock:
         """Run at ``s = 1`` from now, at once (a brake: it is planned from the arm's state)."""
         self.scale, self.rate, self._fall = 1.0, 0.0, None
 
+    @property
+    def steady(self) -> bool:
+        """True at full speed, no fall to keep up with: a tick to 1 changes nothing but time."""
+        return self.scale == 1.0 and self._fall is None
+
+    def coast(self, now: float) -> None:
+        """Advance a :attr:`steady` clock to ``now`` as :meth:`tick` to 1 would, without sampling.
+
+        The trajectory time runs with sim time; :attr:`planned_velocity` is not updated.
+
+        :raises ValueError: if the clock is not steady or ``now`` is before the last tick.
+        """
+        dt = float(now) - self.time
+        if dt < 0.0 or not self.steady:
+            raise ValueError(f'cannot coast to {now} s from {self.time} s at s = {self.scale}')
+        if dt > 0.0:
+            self.rate = 0.0
+            if self.tau == self.time:
+                self.tau = float(now)
+            else:
+                self.tau += dt  # what tick adds at s = 1 (0.5 * (1 + 1) * dt), to the bit
+        self.time = float(now)
+
     def restart(self, time: float) -> None:
         """Set the trajectory time to ``time`` (no lag), keeping ``s``: a new trajectory."""
         self.time = float(time)

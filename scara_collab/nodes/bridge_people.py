@@ -15,12 +15,18 @@ It publishes, on sim time:
 - ``person/poses`` (``geometry_msgs/PoseArray``, one pose per capsule centre) and
   ``person/markers`` (``visualization_msgs/MarkerArray``), at the markers' rate, and
   ``person/truth`` (:class:`~scara_collab.nodes.protocol.PersonTruth`: each arm's true
-  separation and margin, whether it moves, a contact) with every scan: ground truth, for
-  the record, viewers and tests only;
-- ``<robot>/trajectory_clock`` (:class:`~scara_collab.nodes.protocol.TrajectoryClock`) with
-  every scan while the arm runs slowed (and once when its clock changes otherwise): each
-  arm's trajectory clock, so every node predicts the arm on it, and its planned velocity for
-  the monitor (at full speed the measured one is the same).
+  separation and margin, whether it moves, a contact) with every scan while the person is in
+  the cell (away: once, then once a sim second): ground truth, for the record, viewers and
+  tests only;
+- ``<robot>/trajectory_clock`` (:class:`~scara_collab.nodes.protocol.TrajectoryClock`) at
+  a scan when the clock has changed since it was last said (its lag, its factor, the factor
+  asked: with every scan while the arm runs slowed, never while it runs on at full speed):
+  each arm's trajectory clock, so every node predicts the arm on it;
+- ``<robot>/planned_velocity`` (``sensor_msgs/JointState``, velocities only) with every scan
+  while the arm has a move, and once when it changes otherwise: per joint the planned,
+  unscaled velocity of largest size from now to a reaction time and a scan period ahead, for
+  the separation monitor alone (an arm accelerating from rest is weighed at the speed it is
+  about to reach).
 
 It takes each arm's speed factor from ``<robot>/speed_scaling`` (``std_msgs/Float64``,
 transient local: the separation monitor's) and runs the arm's trajectories at it
@@ -37,13 +43,13 @@ together the other arm too. docs/people.md, *One factor or one per arm*, has the
 behind the default.
 """
 import math
-from typing import Callable, Dict, Optional
+from typing import Callable, Dict, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseArray
 import numpy as np
 from rclpy.node import Node
-from sensor_msgs.msg import LaserScan
+from sensor_msgs.msg import JointState, LaserScan
 from std_msgs.msg import Float64
 from visualization_msgs.msg import MarkerArray
 
@@ -67,6 +73,8 @@ SCALING_MODES = ('arm', 'cell')
 FAR_SLACK = 1.0
 #: rad/s | m/s: an arm with a joint faster than this moves (the truth's "while it moved")
 MOVING = 1e-3
+#: sim s: the truth of a person away is said once, then at least this often
+HEARTBEAT = 1.0
 
 
 class BridgePeople:
@@ -112,6 +120,8 @@ class BridgePeople:
         self.clock_pub = {a.name: node.create_publisher(DiagnosticStatus,
                                                         f'{a.name}/trajectory_clock', EVENTS)
                           for a in cell.arms}
+        self.ahead_pub = {a.name: node.create_publisher(JointState, f'{a.name}/planned_velocity',
+                                                        EVENTS) for a in cell.arms}
         #: each arm's factor as heard, and when (sim s; None: never)
         self.asked: Dict[str, float] = {a.name: 0.0 for a in cell.arms}
         self.heard: Dict[str, Optional[float]] = {a.name: None for a in cell.arms}
@@ -120,6 +130,8 @@ class BridgePeople:
                 node, lambda msg, r=a.name: self._on_factor(r, msg)), LATCHED)
         self.started = sim.time
         self._said: Dict[str, tuple] = {}  # the clock each arm was last said to run at
+        self._ahead: Dict[str, tuple] = {}  # the planned velocity each arm was last said to have
+        self._truth_said: Optional[Tuple[float, bool]] = None  # (when, present) last said
         node.get_logger().info(
             f'a person in the cell: {self.scenario.name}, {len(self.geometry)} safety scanners '
             f'at {self.rate:g} Hz, speed scaling per {mode}')
@@ -157,6 +169,8 @@ class BridgePeople:
             for robot in sorted(braked):
                 self.hold(robot, 'protective stop: its path-keeping slowdown fell behind '
                           f'braking ({", ".join(late)}): braked')
+            for robot in late:
+                self._say_clock(robot, held_back=True)
             self.sim.servo.held_back = []
 
     def scan(self) -> None:
@@ -175,27 +189,40 @@ class BridgePeople:
                                                       self.body.radii[:len(poses)], t))
 
     def state(self) -> None:
-        """Publish every arm's trajectory clock and the person against each arm (truth).
+        """Publish every arm's trajectory clock and planned velocity, and the truth.
 
-        An arm's clock is said with every scan while it has a move, and once when it changes
-        otherwise (an arm at rest, as last said, says nothing).
+        An arm's clock is said when it has changed since it was last said; its planned velocity
+        with every scan while it has a move, and once when it changes otherwise.
         """
         t = self.sim.time
         _, q, qd, _ = self.sim.joint_state()
         q, qd = q.reshape(-1, 3), qd.reshape(-1, 3)
         servo = self.sim.servo
         for a, arm in enumerate(self.cell.arms):
-            ahead = servo.planned_ahead(arm.name, t, self.horizon)
             said = (float(self.sim.motion[arm.name].lag), servo.speed(arm.name),
                     float(servo.factors[arm.name]))
-            if not servo.active(a, t) and (said, tuple(ahead)) == self._said.get(arm.name):
-                continue
-            self._said[arm.name] = (said, tuple(ahead))
-            self.clock_pub[arm.name].publish(proto.TrajectoryClock(
-                arm.name, round(t, 6), *said,
-                dict(zip(arm.joint_names, (float(v) for v in servo.planned[a]))),
-                ahead=dict(zip(arm.joint_names, (float(v) for v in ahead)))).to_msg())
-        self.truth_pub.publish(self._truth(t, q, qd).to_msg())
+            if said != self._said.get(arm.name):
+                self._say_clock(arm.name)
+            ahead = tuple(float(v) for v in servo.planned_ahead(arm.name, t, self.horizon))
+            if servo.active(a, t) or ahead != self._ahead.get(arm.name):
+                self._ahead[arm.name] = ahead
+                self.ahead_pub[arm.name].publish(
+                    conv.joint_velocities(t, arm.joint_names, ahead))
+        truth = self._truth(t, q, qd)
+        said = self._truth_said
+        if truth.present or said is None or said[1] or t - said[0] >= HEARTBEAT - 1e-9:
+            self._truth_said = (t, truth.present)  # away: said once, then once a sim second
+            self.truth_pub.publish(truth.to_msg())
+
+    def _say_clock(self, robot: str, held_back: bool = False) -> None:
+        """Publish ``robot``'s trajectory clock now."""
+        servo, arm = self.sim.servo, self.cell.arm(robot)
+        said = self._said[robot] = (float(self.sim.motion[robot].lag), servo.speed(robot),
+                                    float(servo.factors[robot]))
+        planned = servo.planned[servo.names.index(robot)]
+        self.clock_pub[robot].publish(proto.TrajectoryClock(
+            robot, round(self.sim.time, 6), *said,
+            dict(zip(arm.joint_names, (float(v) for v in planned))), held_back).to_msg())
 
     def _truth(self, t: float, q: np.ndarray, qd: np.ndarray) -> proto.PersonTruth:
         caps = self.person.capsules()

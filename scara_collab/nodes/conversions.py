@@ -68,6 +68,33 @@ def joint_state(stamp: float, names: Sequence[str], position, velocity, effort) 
     return msg
 
 
+def joint_velocities(stamp: float, names: Sequence[str], velocity) -> JointState:
+    """Build a ``sensor_msgs/JointState`` of velocities alone (no positions, no efforts)."""
+    msg = JointState()
+    msg.header.stamp = to_time(stamp)
+    msg.name = list(names)
+    msg.velocity = [float(v) for v in velocity]
+    return msg
+
+
+def velocity_arrays(msg: JointState, names: Sequence[str]) -> np.ndarray:
+    """Return the velocities of ``names`` from a ``JointState`` of velocities (any order).
+
+    :raises MessageError: a name is missing, the names and velocities differ in length, or a
+        velocity is not finite.
+    """
+    if len(msg.velocity) != len(msg.name):
+        raise MessageError('velocity and name lengths differ')
+    given = dict(zip(msg.name, msg.velocity))
+    missing = [n for n in names if n not in given]
+    if missing:
+        raise MessageError(f'lacks {missing}')
+    out = np.array([given[n] for n in names], dtype=float)
+    if not np.all(np.isfinite(out)):
+        raise MessageError(f'a non-finite velocity of {list(names)}')
+    return out
+
+
 def joint_state_arrays(msg: JointState, names: Sequence[str]) -> Tuple[np.ndarray, np.ndarray]:
     """Positions and velocities of ``names`` from a ``JointState`` (any order).
 

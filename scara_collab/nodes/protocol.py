@@ -702,16 +702,14 @@ FLAGS = Table(BOOL)
 class TrajectoryClock(_Status):
     """One arm's trajectory clock (``/<robot>/trajectory_clock``, the bridge).
 
-    Published with every scan while the arm has a move, and when it changes otherwise, in a
-    cell with a safety scanner; never otherwise. ``lag``: sim time minus the arm's
-    trajectory time, s (what speed scaling has cost it; the times of its moves, stamps
-    included, are trajectory time);
-    ``scale``: the factor its trajectory runs at now; ``target``: the factor asked
+    Published in a cell with a safety scanner, at a scan when the clock has changed since it
+    was last said (with every scan while the arm runs slowed), and when the bridge brakes the
+    arm off its path; never otherwise. ``lag``: sim time minus the arm's trajectory time, s
+    (what speed scaling has cost it; the times of its moves, stamps included, are trajectory
+    time); ``scale``: the factor its trajectory runs at now; ``target``: the factor asked
     (``/<robot>/speed_scaling``); ``planned``: its trajectory's velocity at the trajectory
     time, as planned (unscaled), by joint name; ``held_back``: its path-keeping stop fell
-    behind braking, so the bridge brakes it; ``ahead``: per joint, the planned velocity of
-    largest size from now to a reaction time ahead (what the arm may reach before a slowdown
-    decided now takes hold: the separation monitor weighs its speed by it).
+    behind braking, so the bridge brakes it.
     """
 
     robot: str
@@ -721,12 +719,11 @@ class TrajectoryClock(_Status):
     target: float
     planned: Dict[str, float] = field(default_factory=dict)
     held_back: bool = False
-    ahead: Dict[str, float] = field(default_factory=dict)
 
     KIND: ClassVar[str] = 'trajectory_clock'
     FIELDS: ClassVar[Dict[str, Codec]] = {
         'robot': TEXT, 'time': FLOAT, 'lag': FLOAT, 'scale': FLOAT, 'target': FLOAT,
-        'planned': FLOATS, 'held_back': BOOL, 'ahead': FLOATS}
+        'planned': FLOATS, 'held_back': BOOL}
 
     def name(self) -> str:
         """Return ``'<robot>/trajectory_clock'``."""

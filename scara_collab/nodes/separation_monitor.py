@@ -17,31 +17,33 @@ simulates the person and the safety scanners.
 - ``joint_states``: the arms' joints and measured velocities; a state refused by its stamp
   (:func:`scara_collab.nodes.conversions.admit_state`) is ignored, a non-finite one stops the
   arm it is of until a finite one comes.
-- ``<robot>/trajectory_clock`` (:class:`~scara_collab.nodes.protocol.TrajectoryClock`): per
-  joint the planned, unscaled velocity of largest size the arm's trajectory reaches from now
-  to a reaction time and a scan period ahead (``ahead``; the bridge says it with every scan
-  while the arm has a move): an arm accelerating away from rest is weighed at the speed it
-  reaches before a slowdown decided now takes hold, not at the speed it has. Before the first
-  one and for a joint it does not name, the measured velocity stands for it.
+- ``<robot>/planned_velocity`` (``sensor_msgs/JointState``, velocities only): per joint the
+  planned, unscaled velocity of largest size the arm's trajectory reaches from now to a
+  reaction time and a scan period ahead (the bridge says it with every scan while the arm has
+  a move): an arm accelerating away from rest is weighed at the speed it reaches before a
+  slowdown decided now takes hold, not at the speed it has. Before the first one, the
+  measured velocity stands for it; a malformed one is refused with a throttled warning.
 
 At each step of sim time (:func:`scara_collab.nodes.sim_timer.every`, at most the state rate)
 it observes the scans that have come and decides when there is something new to decide on:
 scans of a new instant (at the scanners' rate), a fault, the end of one. It publishes each
 arm's factor on ``<robot>/speed_scaling`` (``std_msgs/Float64``, latched: at start 0, then at
 every decision, so the bridge hears the monitor alive), the decision on ``~/status``
-(:class:`~scara_collab.nodes.protocol.SeparationStatus`, every decision) and once a sim second
-on ``/diagnostics``, and, while something subscribes, RViz markers on ``~/markers``: each
-tracked person's column as a cylinder and per arm a ring of ``S_p`` around the column of the
-person nearest to it. It fails closed as the core does (no scan yet, a silent scanner, a ray
-that measured nothing: every arm ``s = 0`` with the reason), and logs each stop's begin and end
-(throttled). It is a lockstep participant, and the bridge's guard: while it is silent the
-arms hold.
+(:class:`~scara_collab.nodes.protocol.SeparationStatus`, at every decision that changes it,
+its time aside: with every scan while a person is seen; and at least once a sim second) and
+once a sim second on ``/diagnostics``, and, while something subscribes, RViz markers on
+``~/markers``: each tracked person's column as a cylinder and per arm a ring of ``S_p`` around
+the column of the person nearest to it. It fails closed as the core does (no scan yet, a
+silent scanner, a ray that measured nothing: every arm ``s = 0`` with the reason), and logs
+each stop's begin and end (throttled). It is a lockstep participant, and the bridge's guard:
+while it is silent the arms hold.
 
 Parameters: every key of ``config/people.yaml`` (read only), and its own ``profile`` and
 ``marker_rate`` (Hz of sim time, may change while it runs). ``docs/interface.md``,
 ``docs/people.md``.
 """
 from collections import deque
+from dataclasses import replace
 from typing import Deque, Dict, List, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -79,6 +81,8 @@ ARM_COLOURS = ((0.9, 0.47, 0.08), (0.08, 0.63, 0.78))
 STATE_HISTORY = 1.0
 #: s between two throttled warnings of one kind
 THROTTLE = 5.0
+#: sim s: ``~/status`` is said when it changes (the time aside), and at least this often
+HEARTBEAT = 1.0
 RING_POINTS = 48
 
 
@@ -116,9 +120,11 @@ class SeparationMonitorNode(Node):
         self._history: Deque[Tuple[float, Dict[str, Optional[np.ndarray]]]] = deque(
             maxlen=max(2, int(STATE_HISTORY * rate)))
         self._state: Dict[str, Optional[Tuple[np.ndarray, np.ndarray]]] = {}
-        self._clocks: Dict[str, proto.TrajectoryClock] = {}
+        self._ahead: Dict[str, np.ndarray] = {}  # each arm's planned velocity ahead
         self.decision: Optional[Decision] = None
         self.status: Optional[proto.SeparationStatus] = None
+        # (when, what) was last said on ~/status
+        self._said: Optional[Tuple[float, proto.SeparationStatus]] = None
         self._scales: Dict[str, float] = {}
         self._stopped: Dict[str, bool] = {}
         self._fault = ''
@@ -138,8 +144,8 @@ class SeparationMonitorNode(Node):
         self.create_subscription(JointState, 'joint_states', guarded(self, self._on_state),
                                  DEFAULT)
         for arm in self.cell.arms:  # only the newest planned velocity matters
-            self.create_subscription(DiagnosticStatus, f'{arm.name}/trajectory_clock',
-                                     guarded(self, self._on_clock), LATEST)
+            self.create_subscription(JointState, f'{arm.name}/planned_velocity', guarded(
+                self, lambda msg, r=arm.name: self._on_ahead(r, msg)), LATEST)
         for arm in self.cell.arms:  # held until the first decision
             self._publish_scale(arm.name, 0.0)
         every(self, 1.0 / rate, self._decide)  # on the sim clock, before the lockstep answer
@@ -220,14 +226,12 @@ class SeparationMonitorNode(Node):
         self._history.append((conv.to_sec(msg.header.stamp),
                               {r: None if s is None else s[0] for r, s in self._state.items()}))
 
-    def _on_clock(self, msg: DiagnosticStatus) -> None:
+    def _on_ahead(self, robot: str, msg: JointState) -> None:
         try:
-            clock = proto.TrajectoryClock.from_msg(msg)
-        except proto.ProtocolError as exc:
-            self.get_logger().warning(f'ignoring a trajectory clock: {exc}',
+            self._ahead[robot] = conv.velocity_arrays(msg, self.cell.arm(robot).joint_names)
+        except conv.MessageError as exc:
+            self._logs[robot].warning(f'ignoring a planned velocity: {exc}',
                                       throttle_duration_sec=THROTTLE)
-            return
-        self._clocks[clock.robot] = clock
 
     # --- the decision ------------------------------------------------------------------------
     def planned(self) -> Dict[str, Tuple[np.ndarray, np.ndarray]]:
@@ -238,13 +242,9 @@ class SeparationMonitorNode(Node):
             if state is None:
                 continue
             q, measured = state
-            clock = self._clocks.get(arm.name)
-            if clock is None:  # never said: at full speed, measured = planned
-                qd = measured
-            else:  # the fastest it is planned to go before a decision now takes hold
-                qd = np.array([clock.ahead.get(j, clock.planned.get(j, m))
-                               for j, m in zip(arm.joint_names, measured)], dtype=float)
-            out[arm.name] = (q, qd)
+            # the fastest it is planned to go before a decision now takes hold (never said:
+            # the measured velocity)
+            out[arm.name] = (q, self._ahead.get(arm.name, measured))
         return out
 
     def _decide(self) -> None:
@@ -267,7 +267,10 @@ class SeparationMonitorNode(Node):
             separation={a.robot: a.separation for a in decision.arms},
             margin={a.robot: a.margin for a in decision.arms},
             persons=tuple(PersonSeen.of(p) for p in decision.persons), fault=decision.fault)
-        self.status_pub.publish(self.status.to_msg())
+        if self._said is None or now - self._said[0] >= HEARTBEAT - 1e-9 or (
+                replace(self.status, time=0.0) != self._said[1]):
+            self._said = (now, replace(self.status, time=0.0))
+            self.status_pub.publish(self.status.to_msg())
         if now >= self._next_marker and self.marker_pub.get_subscription_count():
             self._next_marker = now + self.marker_period  # markers only for a listener
             self.marker_pub.publish(self._markers(decision))

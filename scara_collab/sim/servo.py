@@ -161,7 +161,15 @@ class Servo:
         trajectory times keep in step: what was safe between them at full speed stays so.
         """
         self.held_back = []
-        if not self.clocks and all(f >= 1.0 for f in self.factors.values()):
+        if all(f >= 1.0 for f in self.factors.values()) and all(
+                c.steady for c in self.clocks.values()):
+            for robot, clock in self.clocks.items():  # full speed asked and run: only time
+                clock.coast(now)
+                motion = self.motion[robot]
+                if self._idle(robot):
+                    clock.tau = now - motion.lag
+                    self.planned[self.names.index(robot)] = 0.0
+                motion.lag = clock.lag
             return
         ticks = []
         for a, robot in enumerate(self.names):
