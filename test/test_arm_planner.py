@@ -172,11 +172,35 @@ def test_a_resent_request_is_answered_again_not_planned_again(clock, leader):
 
 
 def test_targets_stamped_zero_are_distinct_requests_even_in_one_nanosecond(clock, leader):
-    """Each target stamped zero gets its own id: the receipt time, or one ns after the last."""
+    """Each target stamped zero gets its own id: the receipt time, or one ns after the last.
+
+    The second comes before the first has begun: it takes its place.
+    """
     a = _status(_target(leader, [3.0, -1.0, 0.3]))
-    b = _status(_target(leader, [3.3, -0.5, 0.3]))
+    out = _target(leader, [3.3, -0.5, 0.3])
+    gone, b = _of(out, Status)
     assert (a.request, b.request) == (_ns(clock.t), _ns(clock.t) + 1)
-    assert (a.state, b.state) == ('planned', 'queued')
+    assert (a.state, gone.state, gone.request, b.state) == ('planned', 'superseded', a.request,
+                                                            'planned')
+
+
+def test_a_request_before_the_sent_move_began_takes_its_place(clock, leader):
+    """A move sent for t = 11 s has not begun at 10.5 s: a new request takes its place.
+
+    The arm is held where it is (the bridge drops the waiting move), the first request is
+    superseded and the new one planned from there; once the new move has begun, a request
+    queues behind it.
+    """
+    first = _sent(_target(leader, [3.0, -1.0, 0.3], stamp=11.0))
+    clock.t = 10.5
+    out = _target(leader, [3.3, -0.5, 0.3])
+    (hold,) = _of(out, HoldArm)
+    assert_allclose(hold.q, leader.joints)
+    gone, new = _of(out, Status)
+    assert (gone.state, gone.request) == ('superseded', first.request)
+    assert new.state == 'planned' and leader.committed.request == new.request
+    clock.t = new.start + 0.05
+    assert _status(_target(leader, [3.0, -1.0, 0.3])).state == 'queued'
 
 
 def test_the_answers_keep_the_last_requests_only():

@@ -13,10 +13,11 @@ from scara_collab.core.sorting import drop_point, SeenItem
 HOME = np.array([0.0, 1.5708, 0.0])
 
 
-def make_job(cell, mode='collaborative', plan=None, **overrides):
+def make_job(cell, mode='collaborative', plan=None, people=None, **overrides):
     """Return a SortingJob on ``cell`` with the automation config (``overrides`` on top).
 
     :param plan: the job's plan function (default: the planners' line-or-joint planning).
+    :param people: the protective separation's numbers (a cell with a safety scanner).
     """
     cfg = dict(load_config('automation'), **overrides)
     settings = JobSettings.from_config(cell, cfg, mode)
@@ -26,7 +27,8 @@ def make_job(cell, mode='collaborative', plan=None, **overrides):
     plan = plan or planned
 
     logs = []
-    job = SortingJob(cell, settings, plan, lambda level, text: logs.append((level, text)))
+    job = SortingJob(cell, settings, plan, lambda level, text: logs.append((level, text)),
+                     people=people)
     job.logs = logs
     for arm, q in zip(cell.arms, (HOME, mirror_joints(HOME))):
         job.on_arm_state(arm.name, q)

@@ -2,8 +2,23 @@
 import numpy as np
 from test_job import item_on_belt, make_job
 
+from scara_collab.core import ssm
+from scara_collab.core.config import load_config
 from scara_collab.core.job import MoveCommand
+from scara_collab.core.kinematics import ik
 from scara_collab.core.sorting import drop_point
+
+
+def person(x, y, vx=0.0, vy=0.0):
+    """Return a person as the separation monitor reports one (a column 0.25 m in radius)."""
+    return ssm.Person(np.array([x, y]), np.array([vx, vy]), 0.25, 1.8)
+
+
+def people_job(cell, persons):
+    """Return a job of a cell with a safety scanner that sees ``persons`` at t = 0."""
+    job = make_job(cell, people=ssm.SsmParams.from_config(load_config('people')))
+    job.on_persons(persons, False, 0.0)
+    return job
 
 
 def test_a_park_move_goes_above_the_first_bin_and_is_booked(cell):
@@ -42,3 +57,70 @@ def test_unused_arms_are_parked_off_the_belt(cell):
                                                     cell.item_classes[0],
                                                     job.settings.drop_clearance))
     assert not [c for c in job.tick(0.02) if getattr(c, 'robot', '') == cell.follower.name]
+
+
+def test_a_meeting_where_a_walking_person_is_going_is_left_for_the_person(cell):
+    """A person walking towards a meeting is weighed where they will be, not where they are.
+
+    4 m upstream at 1.6 m/s, they would be beside the arm when it gets there: the meeting is
+    left ('person'); the same person standing where they were seen is far enough away for the
+    arm to take the item at speed.
+    """
+    item = item_on_belt(cell, x=0.0, y=-0.2)
+    standing = people_job(cell, [person(-4.0, -0.9)])
+    (cmd,) = standing.moves.meet(standing.lane(cell.leader.name), item, 0.0)
+    assert cmd.purpose == 'to_item' and standing.moves.declined == ''
+    walking = people_job(cell, [person(-4.0, -0.9, vx=1.6)])
+    assert walking.moves.meet(walking.lane(cell.leader.name), item, 0.0) == []
+    assert walking.moves.declined == 'person'
+
+
+def test_an_arm_parks_above_the_bin_it_can_reach_at_speed_when_a_person_is_near(cell):
+    """Parking goes above the first bin; with a person near that bin, above the other one.
+
+    The arm reaches the other one without the monitor slowing it as much.
+    """
+    clearance = make_job(cell).settings.drop_clearance
+    first, other = (drop_point(cell, cell.follower.name, c, clearance)
+                    for c in cell.item_classes[:2])
+    alone = make_job(cell)
+    (cmd,) = alone.moves.to_park(alone.lane(cell.follower.name), 1.0)
+    assert np.allclose(cmd.target, first)
+    near = people_job(cell, [person(0.5, -0.9)])
+    (cmd,) = near.moves.to_park(near.lane(cell.follower.name), 1.0)
+    assert np.allclose(cmd.target, other)
+
+
+def test_a_meeting_not_begun_is_given_up_when_a_person_comes_near_it(cell):
+    """A meeting asked with nobody near is weighed again when a person walks towards it.
+
+    Given up before the arm has begun it, the arm parks instead.
+    """
+    job = people_job(cell, [])
+    job.on_items([item_on_belt(cell, x=0.0, y=-0.2)])
+    (pick,) = [c for c in job.tick(0.0) if isinstance(c, MoveCommand)]
+    assert pick.purpose == 'to_item' and pick.robot == cell.leader.name
+    job.on_persons([person(-4.0, -0.9)], False, 0.02)  # standing: the meeting stands
+    assert not [c for c in job.tick(0.02) if isinstance(c, MoveCommand)]
+    job.on_persons([person(-4.0, -0.9, vx=1.6)], False, 0.3)  # walking towards it
+    (park,) = [c for c in job.tick(0.3) if isinstance(c, MoveCommand)]
+    assert park.robot == cell.leader.name and park.purpose == 'to_park'
+    assert any('a person came near the meeting' in text for _, text in job.logs)
+
+
+def test_an_arm_kept_from_every_item_by_a_person_leaves_the_bin_next_to_them(cell):
+    """Idle above its first bin with a person beside it, the arm parks above the other bin.
+
+    From there it can meet items at speed; once there it stays.
+    """
+    robot = cell.follower.name
+    clearance = make_job(cell).settings.drop_clearance
+    first, other = (drop_point(cell, robot, c, clearance) for c in cell.item_classes[:2])
+    job = people_job(cell, [person(0.0, 2.0)])
+    lane = job.lane(robot)
+    job.on_arm_state(robot, ik(cell.arm(robot), first).q)
+    (cmd,) = job.moves.away_from_person(lane, 1.0)
+    assert cmd.purpose == 'to_park' and np.allclose(cmd.target, other)
+    job.moves.free(lane)
+    job.on_arm_state(robot, ik(cell.arm(robot), other).q)
+    assert job.moves.away_from_person(lane, 2.0) == []

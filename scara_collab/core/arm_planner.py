@@ -27,7 +27,10 @@ trajectories and the bridge's statuses of them) by the priority rule of
 is sent when that move ends), ``waiting`` (the other arm's committed motion blocks it even
 after ``max_delay``: retried whenever that arm commits a new move, refused after
 ``max_wait``), ``superseded`` (a queued or waiting request replaced by a newer one),
-``refused`` (with the reason; the arm stays where it is).
+``refused`` (with the reason; the arm stays where it is). A request that comes while the
+arm's sent move has surely not begun (its start further off than the worst start lateness
+measured) supersedes that one too: the arm is held where it is, which drops the move at the
+bridge, and the new request is planned from there.
 
 **Follower re-timing.** The follower's committed move that has not started yet (its start
 is further off than the worst start lateness measured) is scheduled again when a new leader
@@ -165,11 +168,14 @@ class CommittedMove(NamedTuple):
 
     :ivar retimed: the plan this one re-times, until the bridge accepts the new one (if it
         refuses it, the move it re-timed is what the arm is committed to); None otherwise.
+    :ivar begun: the bridge is known to have begun it (it refused its re-time), whatever its
+        planned start says.
     """
 
     plan: Plan
     asked: MoveRequest
     retimed: Optional[Plan] = None
+    begun: bool = False
 
     @property
     def request(self) -> int:
@@ -467,7 +473,7 @@ class ArmPlanner:
                             self.committed.plan, '' if last is None else last.kind)
         elif state == 'refused' and retimed is not None:
             # the bridge keeps the move it was to re-time (one that had started, most likely)
-            self.committed = CommittedMove(retimed, self.committed.asked)
+            self.committed = CommittedMove(retimed, self.committed.asked, begun=True)
         elif state in NOT_RUNNING:
             self.committed = None
         return self.out.take()
@@ -490,7 +496,17 @@ class ArmPlanner:
                 self.out.report('superseded', held.request, f'replaced by request {request}')
         self.blocked = self.queued = None
         asked = MoveRequest(target, frame, stamp, offer, request)
-        if self.committed is not None and self.committed.plan.end > self._now():
+        now = self._now()
+        committed = self.committed
+        if (committed is not None and committed.retimed is None and not committed.begun
+                and self.time.ahead(committed.plan.start, now - self.lag)):
+            # sent, but surely not begun: the new request takes its place, from where the arm
+            # is (the hold drops it at the bridge, whatever becomes of the new one)
+            self.committed = None
+            self.out.send(HoldArm(self.joints.copy()))
+            self.out.report('superseded', committed.request,
+                            f'replaced by request {request} before it began')
+        if self.committed is not None and self.committed.plan.end > now:
             # the bridge replaces a running trajectory: hold this one until ours has ended
             self.queued = asked
             self.out.report('queued', request, 'behind the running move (ends '

@@ -125,7 +125,9 @@ class LaneDecisions:
 
         The arms no lane uses (``unused``) park first. Then each lane in turn: one that was
         idle picks its next item (if ``picking``, once its look is due); one whose wait ended
-        (``events[k]`` for ``lanes[k]``, None while it waits) takes its next step. Last, an
+        (``events[k]`` for ``lanes[k]``, None while it waits) takes its next step; one still
+        waiting for a meeting a person has since come near gives it up
+        (:meth:`~scara_collab.core.job_moves.JobMoves.person_in_way`). Last, an
         arm that waits for the other has its way cleared, as the belt sharing says.
         """
         out: List[Command] = list(self.moves.park_unused(list(unused), now))
@@ -135,6 +137,9 @@ class LaneDecisions:
                     out += self.pick(lane, lanes, board, now)
             elif events[k] is not None:
                 out += self.decide(events[k], lanes, board, now)
+            elif self.moves.person_in_way(lane, now):
+                out += self.give_up(lane, board, now, 'a person came near the meeting before '
+                                    'the move began')
         return out + self.clear_way(self.moves.belt.blocked(lanes, now, self.protocol.q),
                                     board, now)
 
@@ -222,6 +227,8 @@ class LaneDecisions:
             return out
         # each look plans: not at every tick; kept clear of a person, less often still
         lane.next_look = now + (PERSON_LOOK if self.moves.declined == 'person' else LOOK_AGAIN)
+        if self.moves.declined == 'person':  # every item: then not from next to the person
+            return self.moves.away_from_person(lane, now)
         return []
 
     # --- after a grip -----------------------------------------------------------------------

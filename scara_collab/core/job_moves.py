@@ -9,12 +9,14 @@ leaves its move; it times the move that meets an item
 sends a mirrored pair round a waypoint when its arms would come within the planners' margin
 (:mod:`scara_collab.core.pairing`). No ROS here.
 """
+import math
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
 from scara_collab.core import pairing, sorting, ssm
 from scara_collab.core.job_settings import JobSettings
+from scara_collab.core.kinematics import fk
 from scara_collab.core.lanes import (GripCommand, Lane, LaneProtocol, MoveCommand, Phase,
                                      PlanMemo)
 from scara_collab.core.model import CellModel
@@ -25,6 +27,12 @@ from scara_collab.core.trajectory import Trajectory
 PUT_OFF = 0.5
 #: times a meeting is put off before the item is left for the person
 PUT_OFFS = 4
+#: s between two looks at whether a person has come near a meeting that has not begun
+RECHECK = 0.2
+#: m: an idle arm kept from every item by a person parks if its park is further than this
+AWAY = 0.1
+#: a move's states (:class:`~scara_collab.core.lanes.MoveTrack`) while its planner holds it
+UNSENT = ('asked', 'queued', 'waiting')
 
 
 class JobMoves:
@@ -48,6 +56,7 @@ class JobMoves:
         self.persons: Sequence[ssm.Person] = ()
         #: why the last :meth:`meet` asked nothing: ``'person'`` if only a person was in the way
         self.declined = ''
+        self._rechecked: Dict[str, float] = {}  # sim s of each lane's last look (person_in_way)
 
     def go(self, lane: Lane, phase: Phase, target, start: float, now: float,
            traj: Optional[Trajectory] = None) -> MoveCommand:
@@ -79,7 +88,7 @@ class JobMoves:
                                 lambda q0, p: self.plan(lane.robot, q0, p), lead=lead)
         self.declined = ''
         if hit is not None and self.persons and self.people is not None:
-            hit = self._at_speed(lane, aim, hit, lead)
+            hit = self._at_speed(lane, aim, hit, lead, now)
         if hit is not None:
             hit = self.belt.unhindered(lane, aim, hit, now, q, lead)
         if hit is None:
@@ -96,21 +105,18 @@ class JobMoves:
         return [self.go(lane, Phase.TO_ITEM, hit.target, hit.start, now, hit.traj)]
 
     def _at_speed(self, lane: Lane, item: sorting.SeenItem, hit: sorting.Intercept,
-                  lead: float) -> Optional[sorting.Intercept]:
+                  lead: float, now: float) -> Optional[sorting.Intercept]:
         """Return ``hit``, or a later meeting the arm can make faster, away from the persons.
 
         A meeting the separation monitor would slow below ``person_speed`` (checked on the
-        planned move, :func:`scara_collab.core.ssm.allowed_along`) is put off: the item met
+        planned move against the persons now and where they are going,
+        :func:`scara_collab.core.ssm.allowed_along`) is put off: the item met
         further down the belt, later, while it stays in reach, up to ``PUT_OFFS`` times; of
         those, the fastest is taken if the monitor lets the arm move at ``person_least_speed``
         there, else none (None: :attr:`declined` says it was left for the person).
         """
         s, arm = self.settings, self.cell.arm(lane.robot)
-        # beyond the arm's reach by its largest protective separation, a person cannot slow it
-        reach = (arm.l1 + arm.l2 + ssm.true_separation_bound(arm, self.people)
-                 + self.people.intrusion + self.people.sensor_tolerance)
-        near = [p for p in self.persons
-                if np.hypot(*(p.position - arm.base[:2, 3])) - p.radius < reach]
+        near = self._near(arm)
         if not near:
             return hit
         q0 = self.protocol.q[lane.robot]
@@ -118,9 +124,7 @@ class JobMoves:
         for _ in range(PUT_OFFS + 1):
             if hit is None:
                 break
-            samples = np.linspace(0, len(hit.traj.t) - 1, 5)[1:].round().astype(int)
-            speed = ssm.allowed_along(arm, hit.traj.q[samples], hit.traj.qd[samples], near,
-                                      self.people)
+            speed = self._speed_along(arm, hit.traj, hit.start - now, near)
             if speed >= s.person_speed:
                 return hit
             if speed > best_speed:
@@ -131,6 +135,47 @@ class JobMoves:
             return best
         self.declined = 'person'
         return None
+
+    def person_in_way(self, lane: Lane, now: float) -> bool:
+        """Return True if a person now keeps ``lane``'s meeting from being made at speed.
+
+        A meeting asked before the person came near (or before the person was seen walking
+        towards it) that has not begun (its planner holds it, :data:`UNSENT`, or it is sent
+        and surely not begun, :meth:`~scara_collab.core.move_time.MoveTime.ahead`: a newer
+        request supersedes it either way) is weighed again as :meth:`meet` weighs a new one,
+        every :data:`RECHECK` s: below ``person_least_speed`` it had better be given up, before
+        the arm takes itself next to the person and is held there. A move that has begun runs
+        (it can only be slowed or stopped); a mirrored pair runs as one.
+        """
+        track = lane.moves.get(lane.robot)
+        if lane.phase != Phase.TO_ITEM or lane.mirrored or lane.plan is None or track is None:
+            return False
+        unsent = track.state in UNSENT
+        if not unsent and (track.start is None or not self.protocol.time.ahead(track.start, now)):
+            return False  # begun, or about to: it runs
+        near = self._near(self.cell.arm(lane.robot))
+        if not near or now < self._rechecked.get(lane.robot, -math.inf) + RECHECK:
+            return False
+        self._rechecked[lane.robot] = now
+        delay = 0.0 if unsent else track.start - now
+        speed = self._speed_along(self.cell.arm(lane.robot), lane.plan, delay, near)
+        return speed < self.settings.person_least_speed
+
+    def _near(self, arm) -> List[ssm.Person]:
+        """Return the persons who could slow ``arm``: within its reach and largest ``S_p``."""
+        if not self.persons or self.people is None:
+            return []
+        reach = (arm.l1 + arm.l2 + ssm.true_separation_bound(arm, self.people)
+                 + self.people.intrusion + self.people.sensor_tolerance)
+        return [p for p in self.persons
+                if np.hypot(*(p.position - arm.base[:2, 3])) - p.radius < reach]
+
+    def _speed_along(self, arm, traj: Trajectory, delay: float,
+                     near: Sequence[ssm.Person]) -> float:
+        """Return the factor the monitor would allow ``traj`` starting ``delay`` s from now."""
+        samples = np.linspace(0, len(traj.t) - 1, 5)[1:].round().astype(int)
+        return ssm.allowed_along(arm, traj.q[samples], traj.qd[samples], near, self.people,
+                                 ahead=delay + traj.t[samples])
 
     def to_bin(self, lane: Lane, now: float) -> List[MoveCommand]:
         """Return the move that carries the item ``lane`` holds to the bin of its class.
@@ -147,11 +192,38 @@ class JobMoves:
                              self.protocol.time.asap(now, lane.mirrored), now)
 
     def to_park(self, lane: Lane, now: float) -> List[MoveCommand]:
-        """Return the move to wait clear of the shared zone, above the first bin."""
-        park = sorting.drop_point(self.cell, lane.robot, self.cell.item_classes[0],
-                                  self.settings.drop_clearance)
-        return self.go_round(lane, Phase.TO_PARK, park,
+        """Return the move to wait clear of the shared zone, above the first bin.
+
+        Near a person, above whichever of its bins is furthest from them (a park above a bin
+        next to the person would be slowed all the way, and the arm held there).
+        """
+        return self.go_round(lane, Phase.TO_PARK, self._park_point(lane.robot),
                              self.protocol.time.asap(now, lane.mirrored), now)
+
+    def away_from_person(self, lane: Lane, now: float) -> List[MoveCommand]:
+        """Return the park of an idle ``lane`` a person keeps from every item, if elsewhere.
+
+        An arm that took an item to the bin next to a person can meet no item from there at
+        speed (every way out passes the person): rather than wait there until they leave, it
+        parks above its bin furthest from them, from where it can. Nothing if it is there.
+        """
+        arm = self.cell.arm(lane.robot)
+        point = self._park_point(lane.robot)
+        tool = fk(arm, self.protocol.q[lane.robot])
+        if not self._near(arm) or np.hypot(*(tool[:2] - point[:2])) < AWAY:
+            return []
+        return self.to_park(lane, now)
+
+    def _park_point(self, robot: str) -> np.ndarray:
+        """Return where ``robot`` parks: above its first bin, or the furthest from a person."""
+        points = [sorting.drop_point(self.cell, robot, cls, self.settings.drop_clearance)
+                  for cls in self.cell.item_classes]
+        near = self._near(self.cell.arm(robot))
+        if not near:
+            return points[0]
+        room = [min(np.hypot(*(p[:2] - person.position)) - person.radius for person in near)
+                for p in points]
+        return points[int(np.argmax(room))]
 
     def park_unused(self, robots: List[str], now: float) -> List[MoveCommand]:
         """Return the moves of the arms no lane uses to wait above their first bin."""

@@ -59,7 +59,7 @@ This is a simulation of a safety function, not a certified one.
 """
 from dataclasses import dataclass, replace
 import math
-from typing import Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -473,7 +473,7 @@ def _assess(arm: ArmModel, q: np.ndarray, qd: np.ndarray, bottom: np.ndarray, to
 
 
 def allowed_along(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[Person],
-                  params: SsmParams) -> float:
+                  params: SsmParams, ahead: Optional[ArrayLike] = None) -> float:
     """Return the least speed factor a planned move is allowed at the given samples of it.
 
     For a planner or a job that would rather choose work an arm can do at speed than work the
@@ -481,11 +481,39 @@ def allowed_along(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[
     persons).
 
     :param q, qd: ``(M, 3)`` the move's joints and planned joint velocities at M samples.
+    :param ahead: ``(M,)`` s from now to each sample, or None. Given, each sample is weighed
+        against the persons where they are now and where they will be then if they keep
+        their velocity (:func:`persons_ahead`): a person walking in is met where they are
+        going, not where they were seen.
+
+    >>> from scara_collab.core.config import load_config
+    >>> from scara_collab.core.model import load_cell
+    >>> arm, params = load_cell().leader, SsmParams.from_config(load_config('people'))
+    >>> walker = Person(np.array([-3.0, -2.0]), np.array([1.5, 0.0]), 0.2, 1.8)
+    >>> q, qd = [[2.6, 0.0, 0.0]], [[1.0, 0.0, 0.0]]   # the arm swings towards -x
+    >>> allowed_along(arm, q, qd, [walker], params)      # the person 5 m from the base now
+    1.0
+    >>> allowed_along(arm, q, qd, [walker], params, ahead=[2.0])   # and 2 s on, 2 m
+    0.0
     """
     if not persons:
         return 1.0
-    return min(assess_arm(arm, a, b, persons, params).scale
-               for a, b in zip(np.asarray(q, dtype=float), np.asarray(qd, dtype=float)))
+    q, qd = np.asarray(q, dtype=float), np.asarray(qd, dtype=float)
+    if ahead is None:
+        return min(assess_arm(arm, a, b, persons, params).scale for a, b in zip(q, qd))
+    return min(assess_arm(arm, a, b, tuple(persons) + persons_ahead(persons, dt), params).scale
+               for a, b, dt in zip(q, qd, np.asarray(ahead, dtype=float)))
+
+
+def persons_ahead(persons: Sequence[Person], dt: float) -> Tuple[Person, ...]:
+    """Return ``persons`` where they will be in ``dt`` s if they keep their velocity.
+
+    >>> p = Person(np.array([1.0, 0.0]), np.array([0.5, -1.0]), 0.2, 1.8)
+    >>> persons_ahead([p], 2.0)[0].position.tolist()
+    [2.0, -2.0]
+    """
+    return tuple(replace(p, position=p.position + p.velocity * max(0.0, float(dt)))
+                 for p in persons)
 
 
 def braking_rate(arm: ArmModel, qd: ArrayLike) -> float:
