@@ -105,8 +105,8 @@ def test_an_arm_never_slowed_has_no_clock_and_an_idle_arm_builds_no_lag(sim):
     assert sim.motion[LEFT].lag == 0.0 and sim.servo.speed(LEFT) == 1.0  # on sim time
 
 
-def test_coupled_arms_slow_in_step_so_their_schedule_against_each_other_holds(sim):
-    """One factor for both arms: their clocks take one rate, the slower arm's, to the bit."""
+def _both_move(sim):
+    """Start a line of each arm now (their paths stay apart); return the moves and the start."""
     cell = sim.cell
     sim.reset_arm(RIGHT, ik(cell.follower, [3.0, 1.3, 0.4]).q)
     moves = {LEFT: line_move(cell.leader, sim.arm_state(LEFT)[0], [2.2, -0.6, 0.4]),
@@ -114,6 +114,12 @@ def test_coupled_arms_slow_in_step_so_their_schedule_against_each_other_holds(si
     t0 = sim.time
     for robot, move in moves.items():
         sim.execute(robot, t0 + move.t, move.q, move.qd, move.qdd, robot, 0.0)
+    return moves, t0
+
+
+def test_coupled_arms_slow_in_step_so_their_schedule_against_each_other_holds(sim):
+    """One factor for both arms: their clocks take one rate, the slower arm's, to the bit."""
+    moves, t0 = _both_move(sim)
     servo = sim.servo
     servo.coupling = 'cell'
     lags = []
@@ -134,13 +140,7 @@ def test_arms_whose_paths_stay_apart_each_run_at_their_own_factor(sim):
     Their paths keep the margin at any timing, so nothing ties one arm's clock to the other's;
     the cell's margin holds however far the stopped arm falls behind.
     """
-    cell = sim.cell
-    sim.reset_arm(RIGHT, ik(cell.follower, [3.0, 1.3, 0.4]).q)
-    moves = {LEFT: line_move(cell.leader, sim.arm_state(LEFT)[0], [2.2, -0.6, 0.4]),
-             RIGHT: line_move(cell.follower, sim.arm_state(RIGHT)[0], [3.6, 0.8, 0.4])}
-    t0 = sim.time
-    for robot, move in moves.items():
-        sim.execute(robot, t0 + move.t, move.q, move.qd, move.qdd, robot, 0.0)
+    moves, t0 = _both_move(sim)
     servo = sim.servo
     servo.coupling = 'arm'
     servo.scale(RIGHT, 0.0)

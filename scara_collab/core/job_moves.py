@@ -153,12 +153,13 @@ class JobMoves:
         unsent = track.state in UNSENT
         if not unsent and (track.start is None or not self.protocol.time.ahead(track.start, now)):
             return False  # begun, or about to: it runs
-        near = self._near(self.cell.arm(lane.robot))
+        arm = self.cell.arm(lane.robot)
+        near = self._near(arm)
         if not near or now < self._rechecked.get(lane.robot, -math.inf) + RECHECK:
             return False
         self._rechecked[lane.robot] = now
         delay = 0.0 if unsent else track.start - now
-        speed = self._speed_along(self.cell.arm(lane.robot), lane.plan, delay, near)
+        speed = self._speed_along(arm, lane.plan, delay, near)
         return speed < self.settings.person_least_speed
 
     def _near(self, arm) -> List[ssm.Person]:

@@ -75,6 +75,9 @@ FAR_SLACK = 1.0
 MOVING = 1e-3
 #: sim s: the truth of a person away is said once, then at least this often
 HEARTBEAT = 1.0
+#: s (and factor): an arm's clock is said again when its lag or factors change by more (the
+#: trajectory time runs by sums of steps, so a lag at full speed moves by ulps now and then)
+LAG_TOLERANCE = 1e-9
 
 
 class BridgePeople:
@@ -199,9 +202,9 @@ class BridgePeople:
         q, qd = q.reshape(-1, 3), qd.reshape(-1, 3)
         servo = self.sim.servo
         for a, arm in enumerate(self.cell.arms):
-            said = (float(self.sim.motion[arm.name].lag), servo.speed(arm.name),
-                    float(servo.factors[arm.name]))
-            if said != self._said.get(arm.name):
+            said = self._said.get(arm.name)
+            if said is None or not np.allclose(self._clock_of(arm.name), said, rtol=0.0,
+                                               atol=LAG_TOLERANCE):
                 self._say_clock(arm.name)
             ahead = tuple(float(v) for v in servo.planned_ahead(arm.name, t, self.horizon))
             if servo.active(a, t) or ahead != self._ahead.get(arm.name):
@@ -214,11 +217,16 @@ class BridgePeople:
             self._truth_said = (t, truth.present)  # away: said once, then once a sim second
             self.truth_pub.publish(truth.to_msg())
 
+    def _clock_of(self, robot: str) -> Tuple[float, float, float]:
+        """Return ``robot``'s clock as it is said: its lag, its factor and the factor asked."""
+        servo = self.sim.servo
+        return (float(self.sim.motion[robot].lag), servo.speed(robot),
+                float(servo.factors[robot]))
+
     def _say_clock(self, robot: str, held_back: bool = False) -> None:
         """Publish ``robot``'s trajectory clock now."""
         servo, arm = self.sim.servo, self.cell.arm(robot)
-        said = self._said[robot] = (float(self.sim.motion[robot].lag), servo.speed(robot),
-                                    float(servo.factors[robot]))
+        said = self._said[robot] = self._clock_of(robot)
         planned = servo.planned[servo.names.index(robot)]
         self.clock_pub[robot].publish(proto.TrajectoryClock(
             robot, round(self.sim.time, 6), *said,

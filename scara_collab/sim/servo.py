@@ -165,11 +165,7 @@ class Servo:
                 c.steady for c in self.clocks.values()):
             for robot, clock in self.clocks.items():  # full speed asked and run: only time
                 clock.coast(now)
-                motion = self.motion[robot]
-                if self._idle(robot):
-                    clock.tau = now - motion.lag
-                    self.planned[self.names.index(robot)] = 0.0
-                motion.lag = clock.lag
+                self._keep_lag(robot, clock, now)
             return
         ticks = []
         for a, robot in enumerate(self.names):
@@ -198,14 +194,18 @@ class Servo:
             if len({c.scale for c, _ in busy}) <= 1:  # in step: one rate (else each falls)
                 rate = min((c.feasible(now, low, f) for c, f in busy), key=abs, default=None)
         for robot, clock, sample, braking in ticks:
-            motion = self.motion[robot]
             cmd = clock.tick(now, targets[robot], sample, None if braking else rate)
-            if self._idle(robot):
-                clock.tau = now - motion.lag  # nothing committed: nothing to fall behind on
-                self.planned[self.names.index(robot)] = 0.0
-            motion.lag = clock.lag
+            self._keep_lag(robot, clock, now)
             if cmd.held_back:
                 self.held_back.append(robot)
+
+    def _keep_lag(self, robot: str, clock: ScaledClock, now: float) -> None:
+        """Put ``robot``'s clock's lag in the motion model (an idle arm's clock keeps it)."""
+        motion = self.motion[robot]
+        if self._idle(robot):  # nothing committed: nothing to fall behind on
+            clock.tau = now - motion.lag
+            self.planned[self.names.index(robot)] = 0.0
+        motion.lag = clock.lag
 
     def _coupled(self, now: float) -> bool:
         """Return True if the arms' clocks must run together now.
