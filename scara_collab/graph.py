@@ -329,6 +329,7 @@ TOPICS: Tuple[Topic, ...] = (
     Topic('diagnostics', 'diagnostic_msgs/msg/DiagnosticArray'),   # bridge, monitor, managers
     Topic('robot_description', 'std_msgs/msg/String', 'latched'),  # state_publisher
     Topic('safety_scanner/scan', 'sensor_msgs/msg/LaserScan'),     # bridge, with a person
+    Topic('safety_joint_states', 'sensor_msgs/msg/JointState'),    # ... at each scan
     Topic('person/poses', 'geometry_msgs/msg/PoseArray'),          # ... ground truth,
     Topic('person/markers', 'visualization_msgs/msg/MarkerArray'),  # for records and views
     Topic('person/truth', _STATUS),                                # ... against each arm
@@ -345,7 +346,6 @@ ROBOT_TOPICS: Tuple[Topic, ...] = (
     Topic('{robot}/planner_status', _STATUS, 'events'),
     Topic('{robot}/execution_status', _STATUS, 'events'),          # pybullet_bridge
     Topic('{robot}/trajectory_clock', _STATUS, 'events'),          # ... while speeds scale
-    Topic('{robot}/planned_velocity', 'sensor_msgs/msg/JointState', 'events'),  # ... moving
     Topic('{robot}/speed_scaling', 'std_msgs/msg/Float64', 'latched'),  # separation_monitor
 )
 

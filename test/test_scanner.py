@@ -110,6 +110,42 @@ def test_noise_and_ghosts_are_seeded(sim, cfg):
     assert np.std(noisy[both] - true[both]) < 0.05
 
 
+def test_culling_casts_fewer_rays_and_changes_no_range(cfg):
+    """Casting only the rays something crossed gives every scan of casting them all, bitwise.
+
+    The arms jump between random poses at every scan (the quills through their whole stroke),
+    items come and go on the belt, a person walks to the inlet and leans over the belt; two
+    scanners in one world, one culling, one casting every ray, with the same noise.
+    """
+    rng = np.random.default_rng(5)
+    geometry = scanners_from_config(cfg)
+    with CellSim() as sim:
+        culled = SafetyScanner(sim.client, geometry, 25.0, 0.01, seed=3, ghost_probability=0.01)
+        every = SafetyScanner(sim.client, geometry, 25.0, 0.01, seed=3, ghost_probability=0.01,
+                              cull=False)
+        path = PersonPath(scenario('inlet', sim.cell, cfg, 1), Motion.from_config(cfg))
+        person = PersonSim(sim.client, BodyModel.from_config(cfg), path, sim.body,
+                           arm_link_names(sim.client, sim.body, sim.cell.arms))
+        cast = full = 0
+        try:
+            t0 = path.visits[0][0]  # as the person appears
+            for k in range(400):
+                t = t0 + k * 0.04
+                if k % 3 == 0:
+                    for a in sim.cell.arms:
+                        sim.reset_arm(a.name, rng.uniform(a.lower, a.upper))
+                sim.step(int(round(0.04 / sim.dt)))
+                person.update(t)
+                for a, b in zip(culled.scan(), every.scan()):
+                    np.testing.assert_array_equal(a, b)
+                cast += culled.cast
+                full += every.cast
+        finally:
+            person.close()
+    print(f'culled: {cast / 400:.0f} rays cast per scan of {full / 400:.0f}')
+    assert cast < 0.5 * full
+
+
 def test_a_scan_is_cheap(sim, cfg):
     """CPU per scan (both scanners) and per sim second at 25 Hz, reported; a loose bound."""
     scanner = SafetyScanner.from_config(sim.client, cfg)

@@ -1,8 +1,8 @@
 """The separation monitor node: scans, states and trajectory clocks in, speed factors out.
 
-In-process on sim time: the test publishes ``/clock``, ``/joint_states``, exact synthetic
-``LaserScan`` messages of the empty cell (its pillars) and of a person's legs, and each arm's
-``trajectory_clock``, one sim step at a time, each step waited for with a timeout.
+In-process on sim time: the test publishes ``/clock``, and at each scan instant
+``/safety_joint_states`` and exact synthetic ``LaserScan`` messages of the empty cell (its
+pillars) and of a person's legs, one sim step at a time, each step waited for with a timeout.
 """
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
@@ -31,7 +31,7 @@ NEAR = (3.5, -4.0)
 
 
 class Cell:
-    """The monitor node and a probe that plays the bridge: clock, states, scans, clocks."""
+    """The monitor node and a probe that plays the bridge: clock, safety states, scans."""
 
     def __init__(self, cell, **overrides):
         """Build the node on sim time (no lockstep) and wait for the probe's connections."""
@@ -42,18 +42,16 @@ class Cell:
         self.scanners = scanners_from_config(load_config('people'))
         probe = self.g.probe
         self.clock = probe.create_publisher(Clock, '/clock', 10)
-        self.states = probe.create_publisher(JointState, '/joint_states', 10)
+        self.states = probe.create_publisher(JointState, '/safety_joint_states', 10)
         self.scans = probe.create_publisher(LaserScan, '/safety_scanner/scan', 10)
-        self.ahead = {a.name: probe.create_publisher(JointState, f'/{a.name}/planned_velocity',
-                                                     10) for a in cell.arms}
         self.scaling = {a.name: self.g.collect(Float64, f'/{a.name}/speed_scaling', LATCHED)
                         for a in cell.arms}
         self.status = self.g.collect(DiagnosticStatus, '/separation_monitor/status', 100)
-        pubs = [self.clock, self.states, self.scans, *self.ahead.values()]
+        pubs = [self.clock, self.states, self.scans]
         assert self.g.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs))
         self.q = {a.name: np.array([0.0, 1.2 if a.name == LEFT else -1.2, 0.1])
                   for a in cell.arms}
-        self.qd = {a.name: np.zeros(3) for a in cell.arms}
+        self.qd = {a.name: np.zeros(3) for a in cell.arms}  # the velocity weighed
         self.time = 0.0
         self.rng = np.random.default_rng(3)
 
@@ -73,33 +71,28 @@ class Cell:
         msg.header.frame_id = geometry.name
         self.scans.publish(msg)
 
-    def planned(self, robot, qd):
-        """Publish ``robot``'s planned velocity ahead, ``qd`` (the bridge's, while it moves)."""
-        arm = self.cell.arm(robot)
-        self.ahead[robot].publish(conv.joint_velocities(self.time, arm.joint_names, qd))
-        assert self.g.spin_until(lambda: np.array_equal(self.node._ahead.get(robot), qd))
-
     def step(self, circles=(), scanners=None, nan=0, state=True):
         """Advance one sim step: a state, the scans due, then ``/clock``; wait for the decision.
 
         :param scanners: the names of the scanners that scan (default: every one).
         """
         t = self.time = round(self.time + TICK, 9)
-        if state:
-            names = [j for a in self.cell.arms for j in a.joint_names]
-            self.states.publish(conv.joint_state(
-                t, names, np.concatenate([self.q[a.name] for a in self.cell.arms]),
-                np.concatenate([self.qd[a.name] for a in self.cell.arms]), [0.0] * 6))
-            assert self.g.spin_until(lambda: self.node._history
-                                     and abs(self.node._history[-1][0] - t) < 1e-9)
         due = [g for g in self.scanners if scanners is None or g.name in scanners]
-        if due and abs(t / PERIOD - round(t / PERIOD)) < 1e-6:
+        if abs(t / PERIOD - round(t / PERIOD)) < 1e-6:  # a scan instant
+            stamp = int(round(t * 1e9))
+            if state:  # the arms' state of the instant, before its scans (as the bridge does)
+                names = [j for a in self.cell.arms for j in a.joint_names]
+                self.states.publish(conv.joint_state(
+                    t, names, np.concatenate([self.q[a.name] for a in self.cell.arms]),
+                    np.concatenate([self.qd[a.name] for a in self.cell.arms]), ()))
+                assert self.g.spin_until(lambda: self.node._history
+                                         and self.node._history[-1][0] == stamp)
             for geometry in due:
                 self.scan(geometry, t, circles, nan)
-            stamp = int(round(t * 1e9))
-            assert self.g.spin_until(lambda: self.node.observed == stamp or (
-                stamp in self.node._groups and sum(r is not None for r in
-                                                   self.node._groups[stamp]) == len(due)))
+            if due:
+                assert self.g.spin_until(lambda: self.node.observed == stamp or (
+                    stamp in self.node._groups and sum(r is not None for r in
+                                                       self.node._groups[stamp]) == len(due)))
         self.clock.publish(Clock(clock=conv.to_time(t)))
         # looked at this instant: decided anew (new scans, a fault), or the last one stands
         assert self.g.spin_until(lambda: self.node.decision is not None
@@ -149,19 +142,14 @@ def test_it_holds_the_arms_until_the_empty_cell_is_taught_then_releases_them(cel
 def test_a_person_near_an_arm_slows_it_says_why_and_leaving_restores_it(sim, cell):
     """A person stands near the left arm, which swings as planned: it slows, the right does not.
 
-    At rest the same separation allows full speed. The speed weighed is the measured one until
-    a trajectory clock comes, then the planned one (the clock's) whatever the arm measures.
-    The status names the person and the arm; the markers show the person's column and each
-    arm's ring. Gone, the arm is back at full speed after the track's hold, the dwell and the
-    rise, and not sooner than the dwell.
+    At rest the same separation allows full speed. The status names the person and the arm;
+    the markers show the person's column and each arm's ring. Gone, the arm is back at full
+    speed after the track's hold, the dwell and the rise, and not sooner than the dwell.
     """
     person = legs(*NEAR)
     at_rest = sim.run(0.5, circles=person)[-1]
     assert at_rest.arm(LEFT).scale == 1.0 and len(at_rest.persons) == 1
-    sim.qd[LEFT] = SWING  # no planned velocity yet: the measured velocity stands for it
-    assert sim.run(0.5, circles=person)[-1].arm(LEFT).scale < 0.8
-    sim.qd[LEFT] = np.zeros(3)  # from now on the planned velocity counts, not the measured
-    sim.planned(LEFT, SWING)
+    sim.qd[LEFT] = SWING  # the velocity it is weighed at (the bridge's, planned or measured)
     markers = sim.g.collect(MarkerArray, '/separation_monitor/markers')
     slowed = sim.run(1.0, circles=person)[-1]
     left = slowed.arm(LEFT)

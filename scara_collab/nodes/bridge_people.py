@@ -22,11 +22,12 @@ It publishes, on sim time:
   a scan when the clock has changed since it was last said (its lag, its factor, the factor
   asked: with every scan while the arm runs slowed, never while it runs on at full speed):
   each arm's trajectory clock, so every node predicts the arm on it;
-- ``<robot>/planned_velocity`` (``sensor_msgs/JointState``, velocities only) with every scan
-  while the arm has a move, and once when it changes otherwise: per joint the planned,
-  unscaled velocity of largest size from now to a reaction time and a scan period ahead, for
-  the separation monitor alone (an arm accelerating from rest is weighed at the speed it is
-  about to reach).
+- ``safety_joint_states`` (``sensor_msgs/JointState``, every arm's joints) with every scan,
+  stamped as the scan: per joint its measured position and, as its velocity, the one of
+  largest size of the measured velocity and the planned, unscaled ones from now to a reaction
+  time and a scan period ahead; for the separation monitor alone (what a robot controller's
+  safe interface gives a safety controller, once a safety cycle: an arm accelerating from rest
+  is weighed at the speed it is about to reach, a braking one at the speed it has).
 
 It takes each arm's speed factor from ``<robot>/speed_scaling`` (``std_msgs/Float64``,
 transient local: the separation monitor's) and runs the arm's trajectories at it
@@ -116,6 +117,7 @@ class BridgePeople:
         #: s ahead an arm's planned speed is said for: the reaction time and a scan period
         self.horizon = self.params.reaction_time + 1.0 / self.rate
         self.rates = rates
+        self.names = [n for a in cell.arms for n in a.joint_names]
         self.scan_pub = node.create_publisher(LaserScan, 'safety_scanner/scan', 10)
         self.poses_pub = node.create_publisher(PoseArray, 'person/poses', 10)
         self.markers_pub = node.create_publisher(MarkerArray, 'person/markers', 10)
@@ -123,8 +125,7 @@ class BridgePeople:
         self.clock_pub = {a.name: node.create_publisher(DiagnosticStatus,
                                                         f'{a.name}/trajectory_clock', EVENTS)
                           for a in cell.arms}
-        self.ahead_pub = {a.name: node.create_publisher(JointState, f'{a.name}/planned_velocity',
-                                                        EVENTS) for a in cell.arms}
+        self.safety_pub = node.create_publisher(JointState, 'safety_joint_states', 10)
         #: each arm's factor as heard, and when (sim s; None: never)
         self.asked: Dict[str, float] = {a.name: 0.0 for a in cell.arms}
         self.heard: Dict[str, Optional[float]] = {a.name: None for a in cell.arms}
@@ -133,7 +134,6 @@ class BridgePeople:
                 node, lambda msg, r=a.name: self._on_factor(r, msg)), LATCHED)
         self.started = sim.time
         self._said: Dict[str, tuple] = {}  # the clock each arm was last said to run at
-        self._ahead: Dict[str, tuple] = {}  # the planned velocity each arm was last said to have
         self._truth_said: Optional[Tuple[float, bool]] = None  # (when, present) last said
         node.get_logger().info(
             f'a person in the cell: {self.scenario.name}, {len(self.geometry)} safety scanners '
@@ -177,11 +177,11 @@ class BridgePeople:
             self.sim.servo.held_back = []
 
     def scan(self) -> None:
-        """Cast the scanners' rays now and publish each scan; the clocks and the truth with it."""
+        """Publish the arms' safety state, the clocks and the truth; then the scans."""
         t = self.sim.time
+        self.state()  # the arms' state of the instant before its scans: observed with them
         for geometry, ranges in zip(self.geometry, self.scanner.scan()):
             self.scan_pub.publish(conv.laser_scan(geometry, ranges, t, 1.0 / self.rate))
-        self.state()
 
     def ground_truth(self) -> None:
         """Publish the person's capsules as poses and markers (ground truth)."""
@@ -192,25 +192,23 @@ class BridgePeople:
                                                       self.body.radii[:len(poses)], t))
 
     def state(self) -> None:
-        """Publish every arm's trajectory clock and planned velocity, and the truth.
+        """Publish the arms' safety joint states, every arm's trajectory clock, and the truth.
 
-        An arm's clock is said when it has changed since it was last said; its planned velocity
-        with every scan while it has a move, and once when it changes otherwise.
+        An arm's clock is said when it has changed since it was last said.
         """
         t = self.sim.time
         _, q, qd, _ = self.sim.joint_state()
         q, qd = q.reshape(-1, 3), qd.reshape(-1, 3)
-        servo = self.sim.servo
+        weighed = []
         for a, arm in enumerate(self.cell.arms):
             said = self._said.get(arm.name)
             if said is None or not np.allclose(self._clock_of(arm.name), said, rtol=0.0,
                                                atol=LAG_TOLERANCE):
                 self._say_clock(arm.name)
-            ahead = tuple(float(v) for v in servo.planned_ahead(arm.name, t, self.horizon))
-            if servo.active(a, t) or ahead != self._ahead.get(arm.name):
-                self._ahead[arm.name] = ahead
-                self.ahead_pub[arm.name].publish(
-                    conv.joint_velocities(t, arm.joint_names, ahead))
+            ahead = self.sim.servo.planned_ahead(arm.name, t, self.horizon)
+            weighed.append(np.where(np.abs(qd[a]) > np.abs(ahead), qd[a], ahead))
+        self.safety_pub.publish(conv.joint_state(t, self.names, q.ravel(),
+                                                 np.concatenate(weighed), ()))
         truth = self._truth(t, q, qd)
         said = self._truth_said
         if truth.present or said is None or said[1] or t - said[0] >= HEARTBEAT - 1e-9:

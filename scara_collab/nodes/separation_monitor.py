@@ -11,18 +11,19 @@ simulates the person and the safety scanners.
   with a throttled warning (a scanner whose scans are all refused falls silent, and every arm
   stops). The first ``monitor.teach_scans`` usable scans of every scanner are taught as the
   empty cell's contour. The scans of one instant (one ``header.stamp``) are observed together,
-  with the arms' joints at that instant, once every scanner's has come, or without the missing
-  ones at the first decision half a scan period after that instant; a scan of an instant
+  with the arms' joints at that instant, once every scanner's and the arms' state of that
+  instant have come, or without what is missing at the first decision half a scan period after
+  that instant (the newest state before it standing for a late one); a scan of an instant
   already observed is refused (its scanner looks silent for it).
-- ``joint_states``: the arms' joints and measured velocities; a state refused by its stamp
-  (:func:`scara_collab.nodes.conversions.admit_state`) is ignored, a non-finite one stops the
-  arm it is of until a finite one comes.
-- ``<robot>/planned_velocity`` (``sensor_msgs/JointState``, velocities only): per joint the
-  planned, unscaled velocity of largest size the arm's trajectory reaches from now to a
-  reaction time and a scan period ahead (the bridge says it with every scan while the arm has
-  a move): an arm accelerating away from rest is weighed at the speed it reaches before a
-  slowdown decided now takes hold, not at the speed it has. Before the first one, the
-  measured velocity stands for it; a malformed one is refused with a throttled warning.
+- ``safety_joint_states`` (``sensor_msgs/JointState``, the bridge's, with every scan, stamped
+  as the scan): per arm joint its measured position and, as its velocity, the one of largest
+  size of the measured and the planned, unscaled ones a reaction time and a scan period ahead
+  (an arm accelerating away from rest is weighed at the speed it reaches before a slowdown
+  decided now takes hold, not at the speed it has). A state refused by its stamp
+  (:func:`scara_collab.nodes.conversions.admit_state`) is ignored; a non-finite one, or one
+  lacking an arm's joints, stops the arm it is of until a good one comes. The monitor takes no
+  ``joint_states`` (100 Hz): what it weighs comes once a scan, as a safety controller reads a
+  robot's safe interface once a cycle.
 
 At each step of sim time (:func:`scara_collab.nodes.sim_timer.every`, at most the state rate)
 it observes the scans that have come and decides when there is something new to decide on:
@@ -64,7 +65,7 @@ from scara_collab.nodes import conversions as conv, lockstep, protocol as proto
 from scara_collab.nodes.diagnostics import Diagnostics
 from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.params import declare_checked, declare_config
-from scara_collab.nodes.qos import DEFAULT, LATCHED, LATEST
+from scara_collab.nodes.qos import DEFAULT, LATCHED
 from scara_collab.nodes.runner import run_node
 from scara_collab.nodes.sim_timer import every
 
@@ -77,7 +78,7 @@ RULES = (Rule('profile', 'text'), Rule('marker_rate', 'positive'))
 DYNAMIC = ('marker_rate',)
 #: ring colour per arm, by its index in ``cell.arms`` (the viewer's planned-path colours)
 ARM_COLOURS = ((0.9, 0.47, 0.08), (0.08, 0.63, 0.78))
-#: s of joint states kept, to mute the quills where they were when a scan was taken
+#: s of safety joint states kept, to mute the quills where they were when a scan was taken
 STATE_HISTORY = 1.0
 #: s between two throttled warnings of one kind
 THROTTLE = 5.0
@@ -116,11 +117,11 @@ class SeparationMonitorNode(Node):
         self.observed: Optional[int] = None  # the newest instant observed, ns
         self._half_period = int(round(self.settings.scan_period * 0.5e9))
         rate = float(load_config('simulation')['state_rate'])
-        # (stamp, {robot: joints or None}) of the recent states, newest last
-        self._history: Deque[Tuple[float, Dict[str, Optional[np.ndarray]]]] = deque(
-            maxlen=max(2, int(STATE_HISTORY * rate)))
+        # (stamp in ns, {robot: joints or None}) of the recent states, newest last
+        self._history: Deque[Tuple[int, Dict[str, Optional[np.ndarray]]]] = deque(
+            maxlen=max(2, int(STATE_HISTORY / self.settings.scan_period)))
+        # each arm's joints and the velocity it is weighed at (None: refused, it stops)
         self._state: Dict[str, Optional[Tuple[np.ndarray, np.ndarray]]] = {}
-        self._ahead: Dict[str, np.ndarray] = {}  # each arm's planned velocity ahead
         self.decision: Optional[Decision] = None
         self.status: Optional[proto.SeparationStatus] = None
         # (when, what) was last said on ~/status
@@ -141,11 +142,8 @@ class SeparationMonitorNode(Node):
         # every scan and every state, in turn (two scanners' scans come at each instant)
         self.create_subscription(LaserScan, 'safety_scanner/scan',
                                  guarded(self, self._on_scan), DEFAULT)
-        self.create_subscription(JointState, 'joint_states', guarded(self, self._on_state),
-                                 DEFAULT)
-        for arm in self.cell.arms:  # only the newest planned velocity matters
-            self.create_subscription(JointState, f'{arm.name}/planned_velocity', guarded(
-                self, lambda msg, r=arm.name: self._on_ahead(r, msg)), LATEST)
+        self.create_subscription(JointState, 'safety_joint_states',
+                                 guarded(self, self._on_state), DEFAULT)
         for arm in self.cell.arms:  # held until the first decision
             self._publish_scale(arm.name, 0.0)
         every(self, 1.0 / rate, self._decide)  # on the sim clock, before the lockstep answer
@@ -182,8 +180,15 @@ class SeparationMonitorNode(Node):
         self._learn(index, ranges)
         group = self._groups.setdefault(stamp, [None] * len(self.scanners))
         group[index] = ranges
-        if all(r is not None for r in group):
-            self._observe_until(stamp)
+        self._observe_ready()
+
+    def _observe_ready(self) -> None:
+        """Observe the instants whose scans have all come, with the arms' state at them."""
+        have = self._history[-1][0] if self._history else -1
+        ready = [t for t, group in self._groups.items()
+                 if t <= have and all(r is not None for r in group)]
+        if ready:
+            self._observe_until(max(ready))
 
     def _learn(self, index: int, ranges: np.ndarray) -> None:
         """Keep a usable scan for the contour until every scanner has ``teach_scans``."""
@@ -201,11 +206,11 @@ class SeparationMonitorNode(Node):
         """Observe every instant up to ``stamp`` (ns) whose scans are waiting, oldest first."""
         for t in sorted(k for k in self._groups if k <= stamp):
             scans = self._groups.pop(t)
-            self.monitor.observe(t * 1e-9, scans, self._joints_at(t * 1e-9))
+            self.monitor.observe(t * 1e-9, scans, self._joints_at(t))
             self.observed = t
 
-    def _joints_at(self, t: float) -> Dict[str, np.ndarray]:
-        """Return the arms' finite joints of the newest state at or before ``t`` (s)."""
+    def _joints_at(self, t: int) -> Dict[str, np.ndarray]:
+        """Return the arms' finite joints of the newest state at or before ``t`` (ns)."""
         chosen = None
         for stamp, joints in reversed(self._history):
             chosen = joints
@@ -218,34 +223,21 @@ class SeparationMonitorNode(Node):
             return
         for arm in self.cell.arms:
             try:
+                if len(msg.velocity) != len(msg.name):  # no speed: never taken as rest
+                    raise conv.MessageError('velocity and name lengths differ')
                 self._state[arm.name] = conv.joint_state_arrays(msg, arm.joint_names)
-            except conv.MessageError as exc:  # fail closed: the arm stops until a finite one
+            except conv.MessageError as exc:  # fail closed: the arm stops until a good one
                 self._state[arm.name] = None
                 self._logs[arm.name].warning(
                     f'refusing its joint state ({exc}); it stops', throttle_duration_sec=THROTTLE)
-        self._history.append((conv.to_sec(msg.header.stamp),
+        self._history.append((_ns(msg.header.stamp),
                               {r: None if s is None else s[0] for r, s in self._state.items()}))
-
-    def _on_ahead(self, robot: str, msg: JointState) -> None:
-        try:
-            self._ahead[robot] = conv.velocity_arrays(msg, self.cell.arm(robot).joint_names)
-        except conv.MessageError as exc:
-            self._logs[robot].warning(f'ignoring a planned velocity: {exc}',
-                                      throttle_duration_sec=THROTTLE)
+        self._observe_ready()
 
     # --- the decision ------------------------------------------------------------------------
     def planned(self) -> Dict[str, Tuple[np.ndarray, np.ndarray]]:
-        """Return ``{robot: (q, planned qd)}`` of the arms with a finite state (others stop)."""
-        out = {}
-        for arm in self.cell.arms:
-            state = self._state.get(arm.name)
-            if state is None:
-                continue
-            q, measured = state
-            # the fastest it is planned to go before a decision now takes hold (never said:
-            # the measured velocity)
-            out[arm.name] = (q, self._ahead.get(arm.name, measured))
-        return out
+        """Return ``{robot: (q, qd weighed)}`` of the arms with a good state (others stop)."""
+        return {r: state for r, state in self._state.items() if state is not None}
 
     def _decide(self) -> None:
         now = self.checked = conv.now(self)
