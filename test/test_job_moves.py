@@ -6,6 +6,7 @@ from scara_collab.core import ssm
 from scara_collab.core.config import load_config
 from scara_collab.core.job import MoveCommand
 from scara_collab.core.kinematics import ik
+from scara_collab.core.lanes import GripCommand
 from scara_collab.core.sorting import drop_point
 
 
@@ -124,3 +125,48 @@ def test_an_arm_kept_from_every_item_by_a_person_leaves_the_bin_next_to_them(cel
     job.moves.free(lane)
     job.on_arm_state(robot, ik(cell.arm(robot), other).q)
     assert job.moves.away_from_person(lane, 2.0) == []
+
+
+def test_an_item_whose_bin_is_next_to_a_person_is_left_to_the_other_arm(cell):
+    """The meeting and the carry to the bin are weighed as one cycle.
+
+    A person stands beyond the leader's red bin, far from the belt: a red item downstream is
+    met at speed but would be carried to the person, so it is left ('person'); a blue one,
+    met at the same place, goes to the other bin, and is taken.
+    """
+    red, blue = cell.item_classes[:2]
+    for cls, taken in ((red, False), (blue, True)):
+        job = people_job(cell, [person(-0.5, -3.0)])
+        out = job.moves.meet(job.lane(cell.leader.name),
+                             item_on_belt(cell, x=2.5, y=-0.2, cls=cls), 0.0)
+        assert bool(out) == taken
+        assert job.moves.declined == ('' if taken else 'person')
+
+
+def test_an_item_grasped_as_a_person_came_by_its_bin_goes_back_on_the_belt(cell):
+    """Grasped with nobody near; a person beyond its bin by then: the arm lets it go there.
+
+    It goes on along the belt (for the other arm, or this one once the person has left), and
+    this arm takes it no sooner than any other item it failed; a blue item goes to its bin.
+    """
+    robot = cell.leader.name
+    red, blue = cell.item_classes[:2]
+    for cls in (red, blue):
+        job = people_job(cell, [])
+        lane = job.lane(robot)
+        item = item_on_belt(cell, x=2.5, y=-0.2, cls=cls)
+        job.on_items([item])
+        (pick,) = [c for c in job.tick(0.0) if isinstance(c, MoveCommand)]
+        job.on_arm_state(robot, ik(cell.arm(robot), pick.target).q)
+        (grasp,) = job.protocol.grips.ask(lane, True, 2.0)
+        job.on_grip(grasp.token, True, 'grasped')
+        job.on_persons([person(-0.5, -3.0)], False, 2.0)
+        out = job.tick(2.0)
+        if cls == red:
+            (release,) = [c for c in out if isinstance(c, GripCommand)]
+            assert release.robot == robot and not release.grasp
+            assert lane.phase == 'releasing' and lane.failures[item.id] == 1
+            assert any('puts item 1 back on the belt' in text for _, text in job.logs)
+        else:
+            (carry,) = [c for c in out if isinstance(c, MoveCommand)]
+            assert carry.purpose == 'to_bin'

@@ -233,7 +233,12 @@ class LaneDecisions:
 
     # --- after a grip -----------------------------------------------------------------------
     def gripped(self, lane: Lane, board: ItemBoard, now: float) -> List[Command]:
-        """Go on after every gripper of ``lane`` answered: carry, lift first, or try again."""
+        """Go on after every gripper of ``lane`` answered: carry, lift first, or try again.
+
+        An item grasped just as a person came near its bin is let go where it was grasped, on
+        the belt (:meth:`~scara_collab.core.job_moves.JobMoves.bin_kept`): it goes on to the
+        other arm, or to this one once the person has left.
+        """
         s = self.settings
         main = lane.grips[lane.robot]
         for robot, track in lane.grips.items():
@@ -254,6 +259,13 @@ class LaneDecisions:
             self.moves.free(lane)
             return []
         lane.bin_tries, lane.holding = 0, True
+        if not lane.mirrored and self.moves.bin_kept(lane):  # let it go on along the belt
+            item = lane.item
+            lane.failures[item.id] = lane.failures.get(item.id, 0) + 1
+            self.notes.note(item.id, now, f'{lane.robot} put it back: a person is by its bin')
+            self.log('info', f'{lane.robot}: puts item {item.id} back on the belt: a person '
+                     'came near its bin')
+            return self.moves.call_grippers(lane, False, now)
         if s.carry_z > s.pick_z + 1e-6 and self.moves.would_sweep(lane, board.items, now):
             up = np.array([lane.target[0], lane.target[1], s.carry_z])
             return [self.moves.go(lane, Phase.LIFT, up,

@@ -109,8 +109,9 @@ class JobMoves:
         """Return ``hit``, or a later meeting the arm can make faster, away from the persons.
 
         A meeting the separation monitor would slow below ``person_speed`` (checked on the
-        planned move against the persons now and where they are going,
-        :func:`scara_collab.core.ssm.allowed_along`) is put off: the item met
+        planned move and on the carry from there to the item's bin, against the persons now
+        and where they are going, :func:`scara_collab.core.ssm.allowed_along`; an item whose
+        bin is next to a person is left to the other arm) is put off: the item met
         further down the belt, later, while it stays in reach, up to ``PUT_OFFS`` times; of
         those, the fastest is taken if the monitor lets the arm move at ``person_least_speed``
         there, else none (None: :attr:`declined` says it was left for the person).
@@ -124,7 +125,8 @@ class JobMoves:
         for _ in range(PUT_OFFS + 1):
             if hit is None:
                 break
-            speed = self._speed_along(arm, hit.traj, hit.start - now, near)
+            speed = self._cycle_speed(arm, lane.robot, item.cls, hit.traj, hit.start - now,
+                                      near)
             if speed >= s.person_speed:
                 return hit
             if speed > best_speed:
@@ -159,8 +161,28 @@ class JobMoves:
             return False
         self._rechecked[lane.robot] = now
         delay = 0.0 if unsent else track.start - now
-        speed = self._speed_along(arm, lane.plan, delay, near)
+        speed = self._cycle_speed(arm, lane.robot, lane.item.cls if lane.item else None,
+                                  lane.plan, delay, near)
         return speed < self.settings.person_least_speed
+
+    def bin_kept(self, lane: Lane) -> bool:
+        """Return True if a person keeps the item ``lane`` just grasped from its bin.
+
+        The carry from here to the bin, starting now, weighed as :meth:`meet` weighs a cycle:
+        below ``person_least_speed`` the arm would be held with the item next to the person
+        (for as long as they stay), so it had better let the item go on along the belt.
+        """
+        arm = self.cell.arm(lane.robot)
+        near = self._near(arm)
+        if not near or lane.item is None:
+            return False
+        drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls,
+                                  self.settings.drop_clearance)
+        try:
+            carry = self.plan(lane.robot, self.protocol.q[lane.robot], drop)
+        except ValueError:
+            return False
+        return self._speed_along(arm, carry, 0.0, near) < self.settings.person_least_speed
 
     def _near(self, arm) -> List[ssm.Person]:
         """Return the persons who could slow ``arm``: within its reach and largest ``S_p``."""
@@ -177,6 +199,24 @@ class JobMoves:
         samples = np.linspace(0, len(traj.t) - 1, 5)[1:].round().astype(int)
         return ssm.allowed_along(arm, traj.q[samples], traj.qd[samples], near, self.people,
                                  ahead=delay + traj.t[samples])
+
+    def _cycle_speed(self, arm, robot: str, cls: Optional[str], traj: Trajectory,
+                     delay: float, near: Sequence[ssm.Person]) -> float:
+        """Return the factor the monitor would allow a meeting and the carry to ``cls``'s bin.
+
+        The meeting ``traj`` starting ``delay`` s from now, then the move from where it ends to
+        the bin's drop point, as soon as it ends (the grasp's time aside): an arm that met an
+        item at speed only to be held with it next to a person's bin has done no good.
+        """
+        speed = self._speed_along(arm, traj, delay, near)
+        if cls is None or speed <= 0.0:
+            return speed
+        drop = sorting.drop_point(self.cell, robot, cls, self.settings.drop_clearance)
+        try:
+            carry = self.plan(robot, traj.q[-1], drop)
+        except ValueError:
+            return speed  # the bin move will be planned (and refused) as it is asked
+        return min(speed, self._speed_along(arm, carry, delay + float(traj.t[-1]), near))
 
     def to_bin(self, lane: Lane, now: float) -> List[MoveCommand]:
         """Return the move that carries the item ``lane`` holds to the bin of its class.
