@@ -49,6 +49,8 @@ OPTIONS = (  # flag, argparse keywords, help
     ('--cells', dict(type=int, nargs='+'), 'line: line lengths (2 3), each beside one cell'),
     ('--people', dict(nargs='+', choices=people.SCENARIOS),
      'people: the scenarios (default all), each beside the same seed without a person'),
+    ('--realtime-seeds', dict(type=int), 'people: how many of the seeds also run in real time '
+     '(2; after every lockstep run)'),
     ('--scenarios', dict(nargs='+', choices=('capacity', 'rated', 'realtime', 'kill')),
      'line: capacity (default), rated (N x the rated feed, lossy handoffs), realtime (N x the '
      'rated feed, unthrottled and at 1x), kill (cell 1 of 3 killed at 300 sim s)'))
