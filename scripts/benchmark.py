@@ -47,8 +47,10 @@ OPTIONS = (  # flag, argparse keywords, help
     ('--runs', dict(type=int), 'protocol: demo runs with hogs (5)'),
     ('--hogs', dict(type=int), 'protocol: CPU hogs (2)'),
     ('--cells', dict(type=int, nargs='+'), 'line: line lengths (2 3), each beside one cell'),
-    ('--people', dict(nargs='+', choices=people.SCENARIOS),
-     'people: the scenarios (default all), each beside the same seed without a person'),
+    ('--people', dict(nargs='+', choices=people.CHOICES),
+     'people: the scenarios (default pass-by inlet middle random; nobody: the scanners and the '
+     'monitor alone), each beside the same seed without a person; other than the default, '
+     'a block of their own'),
     ('--realtime-seeds', dict(type=int), 'people: how many of the seeds also run in real time '
      '(2; after every lockstep run)'),
     ('--scenarios', dict(nargs='+', choices=('capacity', 'rated', 'realtime', 'kill')),

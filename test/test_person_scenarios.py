@@ -13,6 +13,9 @@ from scara_collab.sim.person import body_capsules, BodyModel
 from scara_collab.sim.person_scenarios import (
     BUILTIN, load_scenario, Motion, PersonPath, scenario, scenario_from_dict)
 
+#: the built-in scenarios in which somebody comes
+WALKING = tuple(n for n in BUILTIN if n != 'nobody')
+
 
 @pytest.fixture(scope='module')
 def cfg():
@@ -34,10 +37,12 @@ def samples(path, step=0.02):
 
 def test_every_builtin_scenario_compiles(cell, cfg):
     """The built-in names give scenarios; none gives none; an unknown name is refused."""
-    for name in BUILTIN:
+    for name in WALKING:
         path = compiled(cell, cfg, name)
         assert len(path.visits) >= 1 and path.end > path.times[0]
         assert path.times[0] >= cfg['person']['earliest']  # the empty cell is taught first
+    nobody = compiled(cell, cfg, 'nobody')  # the scanners and the monitor, nobody comes
+    assert not nobody.visits and not nobody.present(np.arange(0.0, 100.0, 0.5)).any()
     assert scenario('none', cell, cfg) is None
     with pytest.raises(ConfigError, match='unknown person scenario'):
         scenario('dance', cell, cfg)
@@ -122,7 +127,7 @@ def test_random_visits_keep_clear_of_the_belt_bins_and_pillars(cell, cfg, seed):
     assert np.all((states[:, 1] >= y0) & (states[:, 1] <= y1))
 
 
-@pytest.mark.parametrize('name', BUILTIN)
+@pytest.mark.parametrize('name', WALKING)
 def test_walking_and_reaching_stay_within_their_speeds(cell, cfg, name):
     """The body's centre moves at walking speed at most, the hands at reaching speed at most."""
     path = compiled(cell, cfg, name, 4)

@@ -157,9 +157,10 @@ def parser() -> argparse.ArgumentParser:
                    'than the arms can take (capacity runs)')
     p.add_argument('--person', default=None, metavar='SCENARIO|FILE',
                    help='a person walks through the cell: a built-in scenario (pass-by, inlet, '
-                   'middle, random) or a YAML file of waypoints (docs/people.md); the bridge '
-                   'simulates the person and the safety scanners, the separation monitor scales '
-                   "the arms' speeds; seeded by --seed (default: none, no person)")
+                   'middle, random; nobody: the scanners and the monitor with no person) or a '
+                   'YAML file of waypoints (docs/people.md); the bridge simulates the person and '
+                   "the safety scanners, the separation monitor scales the arms' speeds; seeded "
+                   'by --seed (default: none, no person)')
     p.add_argument('--person-cell', type=int, default=None, metavar='K',
                    help='with --cells N and --person: the person in cell K only (default: in '
                    'every cell)')

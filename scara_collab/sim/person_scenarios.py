@@ -13,7 +13,9 @@ leaning over and reaching out again and again), and vanishes at its last waypoin
 - ``middle``: enters between a left bin and the left pillar to the belt's middle, works there
   20 s, then leaves the same way;
 - ``random``: seeded arrivals (exponential intervals), entry points on the floor's edges,
-  goals at the belt, at a bin or across the floor, dwell times and speeds.
+  goals at the belt, at a bin or across the floor, dwell times and speeds;
+- ``nobody``: no visit: the safety scanners and the separation monitor run and nobody comes
+  (what the safety function costs, and whether it slows an arm for nothing).
 
 A YAML file gives a scenario of one's own (:func:`load_scenario`)::
 
@@ -42,7 +44,7 @@ import yaml
 from scara_collab.core.config import ConfigError
 from scara_collab.core.model import CellModel
 
-BUILTIN = ('pass-by', 'inlet', 'middle', 'random')
+BUILTIN = ('pass-by', 'inlet', 'middle', 'random', 'nobody')
 #: the keyframe columns of :class:`PersonPath`
 COLUMNS = ('x', 'y', 'heading', 'lean', 'reach', 'phase')
 #: s the torso takes to lean over (or straighten), an assumption
@@ -346,6 +348,8 @@ def scenario(spec: str, cell: CellModel, cfg: dict, seed: Optional[int] = None
         return middle(cell, cfg)
     if spec == 'random':
         return random_scenario(cell, cfg, int(cfg['person']['seed'] if seed is None else seed))
+    if spec == 'nobody':
+        return Scenario('nobody', ())
     if spec.endswith(('.yaml', '.yml')) or Path(spec).exists():
         return load_scenario(spec, float(cfg['person']['earliest']))
     raise ConfigError(f'unknown person scenario {spec!r}; expected none, one of {BUILTIN} '
