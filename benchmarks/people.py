@@ -3,10 +3,11 @@
 Each scenario (``pass-by``, ``inlet``, ``middle``, ``random``) runs beside the same seed
 without a person, at the rated feed: in lockstep for every seed, side by side (two launchers
 at once, each on a ROS domain of its own: their CPU per sim second is compared under the same
-load), and with ``--lockstep off --rtf 1`` for the first two (``--realtime-seeds``), after
-every lockstep pair and one after the other (two cells in real time on the machine's two cores
-would starve each other's scans). Per run, from its
-``summary.json``: items sorted and missed, the person block (the least ``S - S_p`` while an
+load), and with ``--lockstep off --rtf 1`` for the first two (``--realtime-seeds``), once
+every lockstep pair has run, one after the other (two cells in real time on the machine's two
+cores would starve each other's scans). ``--people nobody`` runs the scanners and the monitor
+with nobody in the cell (their cost alone). Per run, from its ``summary.json``: items sorted
+and missed, the person block (the least ``S - S_p`` while an
 arm moved and contacts, from the ground truth; protective stops, slow-downs, the slowest
 return to full speed; items missed for the person), the arms' least separation, emergency
 stops and the exit code; the CPU per sim second of the run and of its person-free twin.
@@ -116,7 +117,13 @@ def verdict(rows: Sequence[Dict[str, object]]) -> List[str]:
 
 
 def section(args, page: Path, command: str, log: Log) -> bool:
-    """Run the scenarios into the ``people`` block of ``page``; True if every target was met."""
+    """Run the scenarios into a block of ``page``; True if every target was met.
+
+    The default scenarios write the ``people`` block; another set (``--people``) a block of its
+    own beside it (``people-nobody``), so a partial run never replaces the full table.
+
+    :raises ValueError: for a negative ``--realtime-seeds``.
+    """
     out = Path(tempfile.mkdtemp(prefix='scara_people_'))
     duration = args.duration or 240.0
     seeds = args.seeds or [1, 2, 3, 4, 5]
@@ -124,6 +131,8 @@ def section(args, page: Path, command: str, log: Log) -> bool:
     start = time.monotonic()
     realtime = getattr(args, 'realtime_seeds', None)
     realtime = REALTIME_SEEDS if realtime is None else realtime
+    if realtime < 0:
+        raise ValueError(f'--realtime-seeds must be 0 or more, got {realtime}')
     rows = [pair(scenario, seed, duration, out, False, log)
             for scenario in scenarios for seed in seeds]
     # the real-time runs last, one after the other: nothing else then loads the cores

@@ -330,6 +330,7 @@ TOPICS: Tuple[Topic, ...] = (
     Topic('robot_description', 'std_msgs/msg/String', 'latched'),  # state_publisher
     Topic('safety_scanner/scan', 'sensor_msgs/msg/LaserScan'),     # bridge, with a person
     Topic('safety_joint_states', 'sensor_msgs/msg/JointState'),    # ... at each scan
+    Topic('planned_velocity', 'sensor_msgs/msg/JointState'),       # ... at each scan
     Topic('person/poses', 'geometry_msgs/msg/PoseArray'),          # ... ground truth,
     Topic('person/markers', 'visualization_msgs/msg/MarkerArray'),  # for records and views
     Topic('person/truth', _STATUS),                                # ... against each arm

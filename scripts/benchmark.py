@@ -52,7 +52,7 @@ OPTIONS = (  # flag, argparse keywords, help
      'monitor alone), each beside the same seed without a person; other than the default, '
      'a block of their own'),
     ('--realtime-seeds', dict(type=int), 'people: how many of the seeds also run in real time '
-     '(2; after every lockstep run)'),
+     '(2; once every lockstep pair has run)'),
     ('--scenarios', dict(nargs='+', choices=('capacity', 'rated', 'realtime', 'kill')),
      'line: capacity (default), rated (N x the rated feed, lossy handoffs), realtime (N x the '
      'rated feed, unthrottled and at 1x), kill (cell 1 of 3 killed at 300 sim s)'))

@@ -35,7 +35,7 @@ def run(tmp_path_factory):
     params['pybullet_bridge'].update(real_time_factor=0.0, item_seed=7,
                                      lockstep_expect=graph.lockstep_expect(specs))
     params['automation_manager']['auto_start'] = 'true'
-    heard = {'truth': [], 'status': [], 'clock': [], 'safety': [], 'states': {}}
+    heard = {'truth': [], 'status': [], 'clock': [], 'safety': [], 'planned': [], 'states': {}}
     with InProcess() as g:
         nodes = {s.name: g.add(s.build(context=g.context, cli_args=graph.ros_args(
             s.configs, params[s.name]))) for s in specs}
@@ -49,6 +49,8 @@ def run(tmp_path_factory):
                                   heard['clock'].append(proto.TrajectoryClock.from_msg(m)), 100)
         probe.create_subscription(JointState, 'safety_joint_states',
                                   lambda m: heard['safety'].append(m), 100)
+        probe.create_subscription(JointState, 'planned_velocity',
+                                  lambda m: heard['planned'].append(m), 100)
         probe.create_subscription(JointState, 'joint_states', lambda m: heard['states'].update(
             {conv.to_sec(m.header.stamp): m}), 1000)
         bridge = nodes['pybullet_bridge']
@@ -92,38 +94,41 @@ def test_the_job_sorts_on_and_the_arms_keep_their_margin(run):
     assert math.isfinite(guard.minimum)
 
 
-def test_the_monitor_weighs_each_joint_at_least_at_its_measured_speed(run):
-    """The safety state is the state of its instant, each joint weighed at least as measured.
+def test_the_monitor_is_told_the_arms_state_and_planned_speed_at_each_scan(run):
+    """At every scan: the arms' joint state of that instant, and their planned speed ahead.
 
-    The planned speed ahead when larger: an arm about to speed up.
+    The safety state is the bridge's joint state of its instant to the bit; the planned speed
+    ahead is now and then faster than the arm moves (an arm about to speed up).
     """
-    ahead = 0
-    for m in run['safety']:
+    safety = [conv.to_sec(m.header.stamp) for m in run['safety']]
+    planned = [conv.to_sec(m.header.stamp) for m in run['planned']]
+    assert safety == planned and len(safety) == pytest.approx(25 * DURATION, abs=2)
+    assert all(round(t * 25.0, 6).is_integer() for t in safety)  # once a scan
+    compared = ahead = 0
+    for m, p in zip(run['safety'], run['planned']):
         state = run['states'].get(conv.to_sec(m.header.stamp))
         if state is None:
             continue
-        assert list(m.name) == list(state.name)
+        compared += 1
+        assert list(m.name) == list(state.name) == list(p.name)
         assert list(m.position) == list(state.position)
-        assert np.all(np.abs(m.velocity) >= np.abs(state.velocity))
-        ahead += bool(np.any(np.abs(m.velocity) > np.abs(state.velocity)))
-    assert ahead > 0
+        assert list(m.velocity) == list(state.velocity)
+        ahead += bool(np.any(np.abs(p.velocity) > np.abs(m.velocity) + 1e-3))
+    assert compared > 20 * DURATION and ahead > 0
 
 
 def test_what_changes_nothing_is_not_said_again(run):
     """What has not changed is not said again: a cell without a person costs little.
 
     The bridge says an arm's clock when it changes, the arms' safety state once a scan (not at
-    the state rate), the truth of a person away once a second; the monitor its status when it
-    changes.
+    the state rate: the test above), the truth of a person away once a second; the monitor its
+    status when it changes.
     """
     clocks = run['clock']
     assert clocks and any(c.scale < 1.0 for c in clocks)
     for a, b in zip(clocks, clocks[1:]):
         assert (a.lag, a.scale, a.target) != (b.lag, b.scale, b.target) or b.held_back
     assert all(c.time < max(t.time for t in run['truth'] if t.present) + 5.0 for c in clocks)
-    safety = [conv.to_sec(m.header.stamp) for m in run['safety']]
-    assert len(safety) == pytest.approx(25 * DURATION, abs=2)  # once a scan
-    assert all(round(t * 25.0, 6).is_integer() for t in safety)
     away = [t.time for t in run['truth'] if not t.present and t.time > 20.0]
     assert away and all(b - a >= 1.0 - 1e-6 for a, b in zip(away, away[1:]))
     quiet = [s.time for s in run['status'] if s.time > 25.0]  # nobody in the cell

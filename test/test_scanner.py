@@ -146,6 +146,33 @@ def test_culling_casts_fewer_rays_and_changes_no_range(cfg):
     assert cast < 0.5 * full
 
 
+def test_culling_sees_a_body_that_goes_and_one_that_takes_its_id(sim, cfg):
+    """A body removed is cast through again; a new one that takes its id is seen where it is."""
+    geometry = scanners_from_config(cfg)
+    culled = SafetyScanner(sim.client, geometry, 25.0)
+    every = SafetyScanner(sim.client, geometry, 25.0, cull=False)
+    pb = sim.client
+    column = pb.createCollisionShape(pb.GEOM_CYLINDER, radius=0.2, height=1.0)
+
+    def same():
+        for a, b in zip(culled.scan(), every.scan()):
+            np.testing.assert_array_equal(a, b)
+
+    same()
+    first = pb.createMultiBody(0.0, column, -1, [-3.0, -5.0, 0.5])
+    same()
+    pb.removeBody(first)
+    same()
+    second = pb.createMultiBody(0.0, column, -1, [5.0, 5.0, 0.5])
+    try:
+        assert second == first  # PyBullet gives the id again
+        same()
+        assert culled.cast > 0
+    finally:
+        pb.removeBody(second)
+    same()
+
+
 def test_a_scan_is_cheap(sim, cfg):
     """CPU per scan (both scanners) and per sim second at 25 Hz, reported; a loose bound.
 
@@ -165,6 +192,7 @@ def test_a_scan_is_cheap(sim, cfg):
                 scanner.scan()
             best = min(best, (time.process_time() - t0) / 50)
         rays = sum(g.count for g in scanner.scanners)
+        assert scanner.cast == (0 if cull else rays)  # the still cell: nothing to cast again
         print(f'scan of {rays} rays, {"culled" if cull else "every ray cast"}: '
               f'{best * 1e3:.2f} ms CPU; at {sc["rate"]:.0f} Hz '
               f'{best * sc["rate"] * 1e3:.1f} ms per sim second')

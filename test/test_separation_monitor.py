@@ -280,3 +280,28 @@ def test_governor_does_not_chatter(level, wobble, seed):
         out.append(gov.update(k * TICK, required, relaxed, 3.0))
     turns = np.count_nonzero(np.diff(np.sign(np.diff(out))[np.diff(out) != 0]))
     assert turns <= 2
+
+
+def test_an_arm_is_weighed_at_its_planned_and_its_measured_speed_the_lower_factor_taken(cell,
+                                                                                        cfg):
+    """The speed towards a person is directed: neither velocity bounds the other.
+
+    A person stands near the left arm. Swinging one way the arm is allowed less than the other
+    way; planned one way and measured the other (a reversal after a hold), it is allowed the
+    lower of the two, and a velocity of one of them alone is weighed as before.
+    """
+    sim = Cell(cell, cfg)
+    sim.run(2.0)
+    sim.run(0.5, lambda t: legs(3.5, -4.0))
+    robot, q = 'scara_left', sim.q['scara_left']
+    swing = np.array([1.5, -1.0, 0.0])
+
+    def required(*velocities):
+        d = sim.monitor.decide(sim.time, {robot: (q, *velocities)})
+        return d.arm(robot).required
+
+    one, other = required(swing), required(-swing)
+    assert one != other and min(one, other) < 1.0
+    assert required(swing, -swing) == required(-swing, swing) == min(one, other)
+    assert required(swing, np.zeros(3)) == one  # measured at rest: the planned one counts
+    assert required(np.zeros(3), swing) == one  # nothing planned, still moving: the measured

@@ -1,8 +1,9 @@
 """The separation monitor node: scans, states and trajectory clocks in, speed factors out.
 
 In-process on sim time: the test publishes ``/clock``, and at each scan instant
-``/safety_joint_states`` and exact synthetic ``LaserScan`` messages of the empty cell (its
-pillars) and of a person's legs, one sim step at a time, each step waited for with a timeout.
+``/safety_joint_states``, ``/planned_velocity`` and exact synthetic ``LaserScan`` messages of
+the empty cell (its pillars) and of a person's legs, one sim step at a time, each step waited
+for with a timeout.
 """
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
@@ -43,15 +44,17 @@ class Cell:
         probe = self.g.probe
         self.clock = probe.create_publisher(Clock, '/clock', 10)
         self.states = probe.create_publisher(JointState, '/safety_joint_states', 10)
+        self.planned = probe.create_publisher(JointState, '/planned_velocity', 10)
         self.scans = probe.create_publisher(LaserScan, '/safety_scanner/scan', 10)
         self.scaling = {a.name: self.g.collect(Float64, f'/{a.name}/speed_scaling', LATCHED)
                         for a in cell.arms}
         self.status = self.g.collect(DiagnosticStatus, '/separation_monitor/status', 100)
-        pubs = [self.clock, self.states, self.scans]
+        pubs = [self.clock, self.states, self.planned, self.scans]
         assert self.g.spin_until(lambda: all(p.get_subscription_count() > 0 for p in pubs))
         self.q = {a.name: np.array([0.0, 1.2 if a.name == LEFT else -1.2, 0.1])
                   for a in cell.arms}
-        self.qd = {a.name: np.zeros(3) for a in cell.arms}  # the velocity weighed
+        self.qd = {a.name: np.zeros(3) for a in cell.arms}  # measured
+        self.ahead = {a.name: np.zeros(3) for a in cell.arms}  # planned ahead
         self.time = 0.0
         self.rng = np.random.default_rng(3)
 
@@ -71,33 +74,48 @@ class Cell:
         msg.header.frame_id = geometry.name
         self.scans.publish(msg)
 
-    def step(self, circles=(), scanners=None, nan=0, state=True):
-        """Advance one sim step: a state, the scans due, then ``/clock``; wait for the decision.
+    def step(self, circles=(), scanners=None, nan=0, state=True, scans_first=False):
+        """Advance one sim step: the arms' state and the scans due, then ``/clock``; wait.
 
         :param scanners: the names of the scanners that scan (default: every one).
+        :param state: False: no safety state nor planned velocity at this instant.
+        :param scans_first: the scans before the state (as the bridge never sends them).
         """
         t = self.time = round(self.time + TICK, 9)
         due = [g for g in self.scanners if scanners is None or g.name in scanners]
         if abs(t / PERIOD - round(t / PERIOD)) < 1e-6:  # a scan instant
             stamp = int(round(t * 1e9))
-            if state:  # the arms' state of the instant, before its scans (as the bridge does)
-                names = [j for a in self.cell.arms for j in a.joint_names]
-                self.states.publish(conv.joint_state(
-                    t, names, np.concatenate([self.q[a.name] for a in self.cell.arms]),
-                    np.concatenate([self.qd[a.name] for a in self.cell.arms]), ()))
-                assert self.g.spin_until(lambda: self.node._history
-                                         and self.node._history[-1][0] == stamp)
+            if state and not scans_first:
+                self.say_state(t)
             for geometry in due:
                 self.scan(geometry, t, circles, nan)
             if due:
                 assert self.g.spin_until(lambda: self.node.observed == stamp or (
                     stamp in self.node._groups and sum(r is not None for r in
                                                        self.node._groups[stamp]) == len(due)))
+            if state and scans_first:
+                self.say_state(t)
         self.clock.publish(Clock(clock=conv.to_time(t)))
         # looked at this instant: decided anew (new scans, a fault), or the last one stands
         assert self.g.spin_until(lambda: self.node.decision is not None
                                  and self.node.checked == pytest.approx(t, abs=1e-9))
         return self.node.decision
+
+    def say_state(self, t, velocities=True):
+        """Publish the arms' safety state and planned velocity of ``t``; wait for both."""
+        stamp = int(round(t * 1e9))
+        names = [j for a in self.cell.arms for j in a.joint_names]
+        self.states.publish(conv.joint_state(
+            t, names, np.concatenate([self.q[a.name] for a in self.cell.arms]),
+            np.concatenate([self.qd[a.name] for a in self.cell.arms]) if velocities else (),
+            ()))
+        self.planned.publish(conv.joint_velocities(
+            t, names, np.concatenate([self.ahead[a.name] for a in self.cell.arms])))
+        assert self.g.spin_until(lambda: self.node._history
+                                 and self.node._history[-1][0] == stamp
+                                 and all(a is None or a[0] == stamp
+                                         for a in self.node._ahead.values())
+                                 and len(self.node._ahead) == len(self.cell.arms))
 
     def run(self, seconds, **kwargs):
         """Run ``seconds`` of sim time; return the decisions."""
@@ -149,7 +167,7 @@ def test_a_person_near_an_arm_slows_it_says_why_and_leaving_restores_it(sim, cel
     person = legs(*NEAR)
     at_rest = sim.run(0.5, circles=person)[-1]
     assert at_rest.arm(LEFT).scale == 1.0 and len(at_rest.persons) == 1
-    sim.qd[LEFT] = SWING  # the velocity it is weighed at (the bridge's, planned or measured)
+    sim.ahead[LEFT] = SWING  # planned: weighed at it while it stands still
     markers = sim.g.collect(MarkerArray, '/separation_monitor/markers')
     slowed = sim.run(1.0, circles=person)[-1]
     left = slowed.arm(LEFT)
@@ -240,6 +258,48 @@ def test_an_arm_with_a_non_finite_joint_state_stops_alone(sim, cell):
     assert d.arm(LEFT).scale == 1.0
     sim.q[RIGHT] = np.array([0.0, -1.2, 0.1])
     assert sim.run(2.0)[-1].arm(RIGHT).scale == 1.0
+
+
+def test_the_scans_of_an_instant_wait_for_the_arms_state_of_that_instant(sim):
+    """Scans that come before the arms' state of their instant are observed once it comes."""
+    t = round(sim.time + PERIOD, 9)
+    stamp = int(round(t * 1e9))
+    sim.run(PERIOD - TICK)  # up to the step before the scan instant
+    sim.time = t
+    for geometry in sim.scanners:
+        sim.scan(geometry, t)
+    assert sim.g.spin_until(lambda: stamp in sim.node._groups
+                            and all(r is not None for r in sim.node._groups[stamp]))
+    assert sim.node.observed < stamp  # every scan in, the state not yet
+    sim.say_state(t)
+    assert sim.node.observed == stamp
+    sim.clock.publish(Clock(clock=conv.to_time(t)))
+    sim.run(PERIOD - TICK)
+    assert sim.step(scans_first=True).arm(LEFT).scale == 1.0  # the next instant likewise
+    assert sim.node.observed == int(round(sim.time * 1e9))
+
+
+def test_an_arm_without_a_recent_state_stops_until_one_comes(sim):
+    """No safety state nor planned velocity for longer than a scanner may be silent: stop.
+
+    The scans keep coming; each instant is observed half a period late with the last state
+    there is. A state without velocities is refused likewise. Good states again: full speed.
+    """
+    stale = load_config('people')['monitor']['stale_after']
+    decisions = sim.run(2 * PERIOD + stale, state=False)
+    assert sim.node.observed >= int(round((sim.time - PERIOD) * 1e9))  # without their state
+    last = decisions[-1]
+    assert all(last.arm(r).stop and 'no finite joint state' in last.arm(r).cause
+               for r in (LEFT, RIGHT))
+    assert sim.run(2.0)[-1].arm(LEFT).scale == 1.0
+    sim.time = round(sim.time + PERIOD, 9)  # a state without velocities: refused
+    sim.say_state(sim.time, velocities=False)
+    for geometry in sim.scanners:
+        sim.scan(geometry, sim.time)
+    sim.clock.publish(Clock(clock=conv.to_time(sim.time)))
+    assert sim.g.spin_until(lambda: sim.node.checked == pytest.approx(sim.time, abs=1e-9)
+                            and sim.node.decision.arm(LEFT).stop)
+    assert sim.run(2.0)[-1].arm(LEFT).scale == 1.0
 
 
 def test_bad_parameters_are_refused(cell):

@@ -237,7 +237,8 @@ class LaneDecisions:
 
         An item grasped just as a person came near its bin is let go where it was grasped, on
         the belt (:meth:`~scara_collab.core.job_moves.JobMoves.bin_kept`): it goes on to the
-        other arm, or to this one once the person has left.
+        other arm, or to this one once the person has left (a failed try: an arm tries an item
+        twice at most).
         """
         s = self.settings
         main = lane.grips[lane.robot]

@@ -32,7 +32,7 @@ by itself: once the separation allows motion again, the factor rises from 0 afte
 
 This is a simulation of a safety function, not a certified one.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 from typing import List, Mapping, NamedTuple, Optional, Sequence, Tuple
 
@@ -357,15 +357,18 @@ class SeparationMonitor:
                 return fault
         return ''
 
-    def decide(self, now: float,
-               planned: Mapping[str, Tuple[ArrayLike, ArrayLike]]) -> Decision:
+    def decide(self, now: float, planned: Mapping[str, Tuple[ArrayLike, ...]]) -> Decision:
         """Return the decision at ``now``.
 
         :param now: sim time, s.
-        :param planned: ``{robot: (q, qd)}``: each arm's joints and its *planned* joint
-            velocities (the trajectory's at the arm's trajectory time, unscaled:
-            :meth:`ScaledClock.planned_velocity
-            <scara_collab.core.scaled_clock.ScaledClock.planned_velocity>`). An arm left out
+        :param planned: ``{robot: (q, qd)}`` or ``{robot: (q, qd, measured)}``: each arm's
+            joints and its *planned* joint velocities, unscaled (the bridge's
+            ``Servo.planned_ahead``: the fastest the trajectory goes within a reaction time and
+            a scan period; :meth:`ScaledClock.planned_velocity
+            <scara_collab.core.scaled_clock.ScaledClock.planned_velocity>` at an instant), the
+            factor scales them; with ``measured``, the arm is weighed at each and the lower
+            factor taken (an arm braking from a hold has nothing planned but still moves; the
+            speed towards a person is directed, so neither bounds the other). An arm left out
             is stopped.
         :return: the :class:`Decision`.
         """
@@ -375,16 +378,19 @@ class SeparationMonitor:
         for arm in self.cell.arms:
             gov = self.governors[arm.name]
             state = planned.get(arm.name)
-            q, qd = (None, None) if state is None else (np.asarray(state[0], dtype=float),
-                                                        np.asarray(state[1], dtype=float))
+            vectors = [] if state is None else [np.asarray(v, dtype=float) for v in state]
             why = fault
-            if not why and (q is None or q.shape != (3,) or qd.shape != (3,)
-                            or not (np.all(np.isfinite(q)) and np.all(np.isfinite(qd)))):
+            if not why and (len(vectors) < 2 or any(
+                    v.shape != (3,) or not np.all(np.isfinite(v)) for v in vectors)):
                 why = f'{arm.name}: no finite joint state'
             if why:
                 arms.append(ArmDecision(arm.name, gov.halt(now), True, why, required=0.0))
                 continue
-            assessed = assess_arm(arm, q, qd, persons, self.settings.ssm)
+            q, qd = vectors[0], vectors[1]
+            each = [assess_arm(arm, q, v, persons, self.settings.ssm) for v in vectors[1:]]
+            assessed = replace(min(each, key=lambda a: a.scale),
+                               relaxed=min(a.relaxed for a in each),
+                               stop=any(a.stop for a in each))
             s = gov.update(now, assessed.scale, assessed.relaxed, braking_rate(arm, qd))
             cause = assessed.cause
             if s < assessed.scale and not cause:

@@ -351,9 +351,12 @@ def assess_arm(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[Per
 
     :param arm: the arm.
     :param q: ``(3,)`` its joint positions.
-    :param qd: ``(3,)`` its *planned* joint velocities: the trajectory's velocity at the arm's
-        trajectory time, unscaled (:meth:`ScaledClock.planned_velocity
-        <scara_collab.core.scaled_clock.ScaledClock.planned_velocity>`).
+    :param qd: ``(3,)`` the joint velocities it is weighed at, the speed factor's reference:
+        its *planned* ones, unscaled (the trajectory's at the arm's trajectory time,
+        :meth:`ScaledClock.planned_velocity
+        <scara_collab.core.scaled_clock.ScaledClock.planned_velocity>`, or the fastest within
+        a horizon), or its measured ones (the monitor weighs it at both,
+        :meth:`scara_collab.core.separation_monitor.SeparationMonitor.decide`).
     :param persons: the persons, as columns.
     :param params: the protective separation's numbers.
     :return: the :class:`ArmSeparation`.

@@ -22,12 +22,15 @@ It publishes, on sim time:
   a scan when the clock has changed since it was last said (its lag, its factor, the factor
   asked: with every scan while the arm runs slowed, never while it runs on at full speed):
   each arm's trajectory clock, so every node predicts the arm on it;
-- ``safety_joint_states`` (``sensor_msgs/JointState``, every arm's joints) with every scan,
-  stamped as the scan: per joint its measured position and, as its velocity, the one of
-  largest size of the measured velocity and the planned, unscaled ones from now to a reaction
-  time and a scan period ahead; for the separation monitor alone (what a robot controller's
-  safe interface gives a safety controller, once a safety cycle: an arm accelerating from rest
-  is weighed at the speed it is about to reach, a braking one at the speed it has).
+- ``safety_joint_states`` (``sensor_msgs/JointState``, every arm's joints: measured positions
+  and velocities) and ``planned_velocity`` (``sensor_msgs/JointState``, every arm's joints,
+  velocities only: per joint the planned, unscaled velocity of largest size from now to a
+  reaction time and a scan period ahead), both with every scan, stamped as the scan and before
+  it: what the separation monitor weighs each arm by (what a robot controller's safe interface
+  gives a safety controller once a safety cycle; the monitor takes the slower of the two
+  decisions, so an arm accelerating from rest is weighed at the speed it is about to reach, a
+  braking one at the speed it has). The monitor alone takes them; it takes no
+  ``joint_states``.
 
 It takes each arm's speed factor from ``<robot>/speed_scaling`` (``std_msgs/Float64``,
 transient local: the separation monitor's) and runs the arm's trajectories at it
@@ -126,6 +129,7 @@ class BridgePeople:
                                                         f'{a.name}/trajectory_clock', EVENTS)
                           for a in cell.arms}
         self.safety_pub = node.create_publisher(JointState, 'safety_joint_states', 10)
+        self.planned_pub = node.create_publisher(JointState, 'planned_velocity', 10)
         #: each arm's factor as heard, and when (sim s; None: never)
         self.asked: Dict[str, float] = {a.name: 0.0 for a in cell.arms}
         self.heard: Dict[str, Optional[float]] = {a.name: None for a in cell.arms}
@@ -192,23 +196,22 @@ class BridgePeople:
                                                       self.body.radii[:len(poses)], t))
 
     def state(self) -> None:
-        """Publish the arms' safety joint states, every arm's trajectory clock, and the truth.
+        """Publish the arms' safety state and planned velocity, every arm's clock, and the truth.
 
         An arm's clock is said when it has changed since it was last said.
         """
         t = self.sim.time
         _, q, qd, _ = self.sim.joint_state()
         q, qd = q.reshape(-1, 3), qd.reshape(-1, 3)
-        weighed = []
-        for a, arm in enumerate(self.cell.arms):
+        ahead = []
+        for arm in self.cell.arms:
             said = self._said.get(arm.name)
             if said is None or not np.allclose(self._clock_of(arm.name), said, rtol=0.0,
                                                atol=LAG_TOLERANCE):
                 self._say_clock(arm.name)
-            ahead = self.sim.servo.planned_ahead(arm.name, t, self.horizon)
-            weighed.append(np.where(np.abs(qd[a]) > np.abs(ahead), qd[a], ahead))
-        self.safety_pub.publish(conv.joint_state(t, self.names, q.ravel(),
-                                                 np.concatenate(weighed), ()))
+            ahead.append(self.sim.servo.planned_ahead(arm.name, t, self.horizon))
+        self.safety_pub.publish(conv.joint_state(t, self.names, q.ravel(), qd.ravel(), ()))
+        self.planned_pub.publish(conv.joint_velocities(t, self.names, np.concatenate(ahead)))
         truth = self._truth(t, q, qd)
         said = self._truth_said
         if truth.present or said is None or said[1] or t - said[0] >= HEARTBEAT - 1e-9:

@@ -16,14 +16,17 @@ simulates the person and the safety scanners.
   that instant (the newest state before it standing for a late one); a scan of an instant
   already observed is refused (its scanner looks silent for it).
 - ``safety_joint_states`` (``sensor_msgs/JointState``, the bridge's, with every scan, stamped
-  as the scan): per arm joint its measured position and, as its velocity, the one of largest
-  size of the measured and the planned, unscaled ones a reaction time and a scan period ahead
-  (an arm accelerating away from rest is weighed at the speed it reaches before a slowdown
-  decided now takes hold, not at the speed it has). A state refused by its stamp
-  (:func:`scara_collab.nodes.conversions.admit_state`) is ignored; a non-finite one, or one
-  lacking an arm's joints, stops the arm it is of until a good one comes. The monitor takes no
-  ``joint_states`` (100 Hz): what it weighs comes once a scan, as a safety controller reads a
-  robot's safe interface once a cycle.
+  as the scan): each arm joint's measured position and velocity; and ``planned_velocity``
+  (``sensor_msgs/JointState``, velocities only, likewise): per arm joint the planned, unscaled
+  velocity of largest size a reaction time and a scan period ahead. Each arm is weighed at both
+  and the lower factor taken: an arm accelerating away from rest at the speed it reaches before
+  a slowdown decided now takes hold, a braking one at the speed it has. A message refused by
+  its stamp (:func:`scara_collab.nodes.conversions.admit_state`) is ignored; a non-finite one,
+  one lacking an arm's joints or a state without velocities stops the arm it is of until a
+  good one comes, and so does an arm whose newest state or planned velocity is older than
+  ``stale_after`` (a scanner's silence). The monitor takes no ``joint_states`` (100 Hz): what
+  it weighs comes once a scan, as a safety controller reads a robot's safe interface once a
+  cycle.
 
 At each step of sim time (:func:`scara_collab.nodes.sim_timer.every`, at most the state rate)
 it observes the scans that have come and decides when there is something new to decide on:
@@ -120,8 +123,12 @@ class SeparationMonitorNode(Node):
         # (stamp in ns, {robot: joints or None}) of the recent states, newest last
         self._history: Deque[Tuple[int, Dict[str, Optional[np.ndarray]]]] = deque(
             maxlen=max(2, int(STATE_HISTORY / self.settings.scan_period)))
-        # each arm's joints and the velocity it is weighed at (None: refused, it stops)
-        self._state: Dict[str, Optional[Tuple[np.ndarray, np.ndarray]]] = {}
+        # each arm's (stamp in ns, joints, measured velocity), and (stamp, planned velocity)
+        # (None: refused, it stops)
+        self._state: Dict[str, Optional[Tuple[int, np.ndarray, np.ndarray]]] = {}
+        self._ahead: Dict[str, Optional[Tuple[int, np.ndarray]]] = {}
+        self.planned_stamps = conv.StampGate()
+        self._stale = int(round(self.settings.stale_after * 1e9))
         self.decision: Optional[Decision] = None
         self.status: Optional[proto.SeparationStatus] = None
         # (when, what) was last said on ~/status
@@ -144,6 +151,8 @@ class SeparationMonitorNode(Node):
                                  guarded(self, self._on_scan), DEFAULT)
         self.create_subscription(JointState, 'safety_joint_states',
                                  guarded(self, self._on_state), DEFAULT)
+        self.create_subscription(JointState, 'planned_velocity',
+                                 guarded(self, self._on_planned), DEFAULT)
         for arm in self.cell.arms:  # held until the first decision
             self._publish_scale(arm.name, 0.0)
         every(self, 1.0 / rate, self._decide)  # on the sim clock, before the lockstep answer
@@ -221,23 +230,47 @@ class SeparationMonitorNode(Node):
     def _on_state(self, msg: JointState) -> None:
         if not conv.admit_state(self, self.stamps, msg):
             return
+        stamp = _ns(msg.header.stamp)
         for arm in self.cell.arms:
             try:
                 if len(msg.velocity) != len(msg.name):  # no speed: never taken as rest
                     raise conv.MessageError('velocity and name lengths differ')
-                self._state[arm.name] = conv.joint_state_arrays(msg, arm.joint_names)
+                self._state[arm.name] = (stamp, *conv.joint_state_arrays(msg, arm.joint_names))
             except conv.MessageError as exc:  # fail closed: the arm stops until a good one
                 self._state[arm.name] = None
                 self._logs[arm.name].warning(
                     f'refusing its joint state ({exc}); it stops', throttle_duration_sec=THROTTLE)
-        self._history.append((_ns(msg.header.stamp),
-                              {r: None if s is None else s[0] for r, s in self._state.items()}))
+        self._history.append((stamp, {r: None if s is None else s[1]
+                                      for r, s in self._state.items()}))
         self._observe_ready()
 
+    def _on_planned(self, msg: JointState) -> None:
+        if not conv.admit_state(self, self.planned_stamps, msg):
+            return
+        for arm in self.cell.arms:
+            try:
+                self._ahead[arm.name] = (_ns(msg.header.stamp),
+                                         conv.velocity_arrays(msg, arm.joint_names))
+            except conv.MessageError as exc:  # fail closed: the arm stops until a good one
+                self._ahead[arm.name] = None
+                self._logs[arm.name].warning(f'refusing its planned velocity ({exc}); it stops',
+                                             throttle_duration_sec=THROTTLE)
+
     # --- the decision ------------------------------------------------------------------------
-    def planned(self) -> Dict[str, Tuple[np.ndarray, np.ndarray]]:
-        """Return ``{robot: (q, qd weighed)}`` of the arms with a good state (others stop)."""
-        return {r: state for r, state in self._state.items() if state is not None}
+    def planned(self, now: float) -> Dict[str, Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Return ``{robot: (q, planned qd, measured qd)}`` of the arms weighed at ``now``.
+
+        An arm without a good state and planned velocity, both said within ``stale_after`` of
+        ``now``, is left out (it stops).
+        """
+        since = int(round(now * 1e9)) - self._stale
+        out = {}
+        for arm in self.cell.arms:
+            state, ahead = self._state.get(arm.name), self._ahead.get(arm.name)
+            if state is None or ahead is None or min(state[0], ahead[0]) < since:
+                continue
+            out[arm.name] = (state[1], ahead[1], state[2])
+        return out
 
     def _decide(self) -> None:
         now = self.checked = conv.now(self)
@@ -247,7 +280,7 @@ class SeparationMonitorNode(Node):
         if self.observed == self._decided and fault == self._fault and self.decision:
             return  # nothing new since the last decision: it stands
         self._decided = self.observed
-        decision = self.monitor.decide(now, self.planned())
+        decision = self.monitor.decide(now, self.planned(now))
         self.decision = decision
         for arm in decision.arms:
             self._publish_scale(arm.robot, arm.scale)
@@ -315,7 +348,7 @@ class SeparationMonitorNode(Node):
             s_p = arm_decision.separation - arm_decision.margin
             if state is None or not np.isfinite(s_p):
                 continue
-            person = nearest_person(arm, state[0], decision.persons)
+            person = nearest_person(arm, state[1], decision.persons)
             if person is None:
                 continue
             r, g, b = ARM_COLOURS[k % len(ARM_COLOURS)]
@@ -325,7 +358,7 @@ class SeparationMonitorNode(Node):
             m.scale.x = 0.03
             m.pose.orientation.w = 1.0
             radius = person.radius + s_p  # S_p from the column's surface
-            z = float(arm_capsules(arm, state[0])[0][1, 2])  # at link 2's height
+            z = float(arm_capsules(arm, state[1])[0][1, 2])  # at link 2's height
             a = np.linspace(0.0, 2.0 * np.pi, RING_POINTS + 1)
             m.points = [Point(x=float(person.position[0] + radius * np.cos(t)),
                               y=float(person.position[1] + radius * np.sin(t)), z=z) for t in a]
