@@ -176,13 +176,9 @@ class JobMoves:
         near = self._near(arm)
         if not near or lane.item is None:
             return False
-        drop = sorting.drop_point(self.cell, lane.robot, lane.item.cls,
-                                  self.settings.drop_clearance)
-        try:
-            carry = self.plan(lane.robot, self.protocol.q[lane.robot], drop)
-        except ValueError:
-            return False
-        return self._speed_along(arm, carry, 0.0, near) < self.settings.person_least_speed
+        speed = self._carry_speed(arm, lane.robot, lane.item.cls, self.protocol.q[lane.robot],
+                                  0.0, near)
+        return speed < self.settings.person_least_speed
 
     def _near(self, arm) -> List[ssm.Person]:
         """Return the persons who could slow ``arm``: within its reach and largest ``S_p``."""
@@ -211,12 +207,22 @@ class JobMoves:
         speed = self._speed_along(arm, traj, delay, near)
         if cls is None or speed <= 0.0:
             return speed
+        return min(speed, self._carry_speed(arm, robot, cls, traj.q[-1],
+                                            delay + float(traj.t[-1]), near))
+
+    def _carry_speed(self, arm, robot: str, cls: str, q0, delay: float,
+                     near: Sequence[ssm.Person]) -> float:
+        """Return the factor the monitor would allow the carry from ``q0`` to ``cls``'s bin.
+
+        Starting ``delay`` s from now; 1 if it cannot be planned (the bin move is planned,
+        and refused with the reason, when it is asked).
+        """
         drop = sorting.drop_point(self.cell, robot, cls, self.settings.drop_clearance)
         try:
-            carry = self.plan(robot, traj.q[-1], drop)
+            carry = self.plan(robot, q0, drop)
         except ValueError:
-            return speed  # the bin move will be planned (and refused) as it is asked
-        return min(speed, self._speed_along(arm, carry, delay + float(traj.t[-1]), near))
+            return 1.0
+        return self._speed_along(arm, carry, delay, near)
 
     def to_bin(self, lane: Lane, now: float) -> List[MoveCommand]:
         """Return the move that carries the item ``lane`` holds to the bin of its class.
