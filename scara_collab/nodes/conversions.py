@@ -3,6 +3,7 @@
 Also the node clock in seconds (:func:`now`). The statuses the nodes exchange
 (DiagnosticStatus key-values) are :mod:`scara_collab.nodes.protocol`'s, not this module's.
 """
+import array
 import math
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
@@ -458,7 +459,8 @@ def laser_scan(geometry, ranges: np.ndarray, stamp: float, period: float) -> Las
     msg.angle_max = float(geometry.angle_min + geometry.angle_increment * (geometry.count - 1))
     msg.scan_time = float(period)
     msg.range_min, msg.range_max = float(geometry.range_min), float(geometry.range_max)
-    msg.ranges = np.asarray(ranges, dtype=np.float32).tolist()
+    # an array.array('f') is taken as it is; a list is checked float by float (7x the cost)
+    msg.ranges = array.array('f', np.asarray(ranges, dtype=np.float32).tobytes())
     return msg
 
 

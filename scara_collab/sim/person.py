@@ -205,7 +205,7 @@ class PersonSim:
 
     def update(self, t: float) -> bool:
         """Pose the body for sim time ``t`` (or park it); return whether the person is there."""
-        present = bool(self.path.present(t))
+        present = self.path.is_present(float(t))
         if present:
             self._caps = body_capsules(self.body, self.path.state(t))
             for uid, pose in zip(self.bodies, capsule_poses(self._caps).tolist()):

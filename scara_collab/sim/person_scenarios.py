@@ -376,6 +376,7 @@ class PersonPath:
         self.times = table[:, 0]
         self.frames = table[:, 1:]
         self._spans = np.array(self.visits, dtype=float).reshape(-1, 2)
+        self._span_list = [tuple(v) for v in self._spans.tolist()]
 
     # --- compiling ---------------------------------------------------------------------------
     def _visit(self, visit: Visit, rows: List[List[float]]) -> None:
@@ -444,6 +445,10 @@ class PersonPath:
         t = np.asarray(t, dtype=float)
         inside = (t[..., None] >= self._spans[:, 0]) & (t[..., None] <= self._spans[:, 1])
         return inside.any(axis=-1)
+
+    def is_present(self, t: float) -> bool:
+        """Return :meth:`present` at one time ``t``, in plain floats (every step of the bridge)."""
+        return any(start <= t <= end for start, end in self._span_list)
 
     def state(self, t: ArrayLike) -> np.ndarray:
         """Return the keyframe columns (:data:`COLUMNS`) at time(s) ``t``: ``(..., 6)``.

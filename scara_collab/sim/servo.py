@@ -246,14 +246,19 @@ class Servo:
         tau = now if clock is None else clock.tau
         moves = [m for m in (motion.running, motion.waiting)
                  if m is not None and m.ref is not None]
-        out = np.zeros(3)
-        for at in tau + np.linspace(0.0, horizon, samples):
+        out = [0.0, 0.0, 0.0]
+        if not moves:
+            return np.array(out)
+        step = horizon / (samples - 1) if samples > 1 else 0.0
+        for k in range(samples):  # plain floats: the times of tau + np.linspace(0, horizon)
+            at = tau + (horizon if k == samples - 1 else k * step)
             move = next((m for m in reversed(moves) if m.start <= at), None)
             if move is None:
                 continue
-            qd = np.asarray(move.ref.sample(at)[1], dtype=float)
-            out = np.where(np.abs(qd) > np.abs(out), qd, out)
-        return out
+            for j, v in enumerate(np.asarray(move.ref.sample(at)[1], dtype=float).tolist()):
+                if abs(v) > abs(out[j]):  # the first of largest size
+                    out[j] = v
+        return np.array(out)
 
     def _idle(self, robot: str) -> bool:
         """Return True if ``robot`` has nothing committed (no move running or waiting)."""
