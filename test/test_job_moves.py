@@ -2,9 +2,10 @@
 import numpy as np
 from test_job import item_on_belt, make_job
 
-from scara_collab.core import ssm
+from scara_collab.core import sorting, ssm
 from scara_collab.core.config import load_config
 from scara_collab.core.job import MoveCommand
+from scara_collab.core.job_moves import NEAR_AHEAD
 from scara_collab.core.kinematics import ik
 from scara_collab.core.lanes import GripCommand
 from scara_collab.core.sorting import drop_point
@@ -74,6 +75,48 @@ def test_a_meeting_where_a_walking_person_is_going_is_left_for_the_person(cell):
     walking = people_job(cell, [person(-4.0, -0.9, vx=1.6)])
     assert walking.moves.meet(walking.lane(cell.leader.name), item, 0.0) == []
     assert walking.moves.declined == 'person'
+
+
+def test_a_person_walking_towards_an_arm_is_near_it_before_they_are_in_its_reach(cell):
+    """A person beyond an arm's reach counts as near if their way leads into it (5 s ahead).
+
+    Standing there, or walking away, they do not: the job weighs moves against the persons
+    near only, and a move that has begun cannot be given up.
+    """
+    job = people_job(cell, [])
+    arm = cell.leader
+    params = job.moves.people
+    reach = (arm.l1 + arm.l2 + ssm.true_separation_bound(arm, params) + params.intrusion
+             + params.sensor_tolerance)
+    base = arm.base[:2, 3]
+    x = base[0] - reach - 0.25 - 2.0  # 2 m beyond the reach (0.25: the column's radius)
+    assert 1.0 * NEAR_AHEAD > 2.0  # walking in at 1 m/s, they are in reach within it
+    for vx, near in ((0.0, False), (-1.0, False), (1.0, True)):
+        job.on_persons([person(x, base[1], vx=vx)], False, 0.0)
+        assert bool(job.moves._near(arm)) is near, vx
+
+
+def test_a_slowed_move_is_weighed_again_where_the_person_will_be_when_it_gets_there(cell):
+    """A move slowed to s takes 1 / s as long: a person walking in has come closer by then.
+
+    Weighed on its planned times, a meeting with a person 4.5 m upstream walking at 1.6 m/s
+    would run at 0.76 of its speed; on the times it would then take, the person is beside the
+    arm when it gets there, and it could not run at all. With nobody near, nothing changes.
+    """
+    arm = cell.leader
+    job = people_job(cell, [])
+    moves = job.moves
+    hit = sorting.intercept(cell, arm, job.protocol.q[arm.name], item_on_belt(cell, x=0.0,
+                                                                              y=-0.2),
+                            0.0, job.settings.pick_z, lambda a, p: moves.plan(arm.name, a, p))
+    traj = hit.traj
+    k = np.linspace(0, len(traj.t) - 1, 5)[1:].round().astype(int)
+    walker = [person(-4.5, -0.9, vx=1.6)]
+    planned = ssm.allowed_along(arm, traj.q[k], traj.qd[k], walker, moves.people, ahead=traj.t[k])
+    assert 0.3 < planned < 0.9
+    assert moves._speed_along(arm, traj, 0.0, walker) == 0.0
+    far = [person(-20.0, -0.9)]
+    assert moves._speed_along(arm, traj, 0.0, far) == 1.0
 
 
 def test_an_arm_parks_above_the_bin_it_can_reach_at_speed_when_a_person_is_near(cell):

@@ -29,6 +29,9 @@ PUT_OFF = 0.5
 PUT_OFFS = 4
 #: s between two looks at whether a person has come near a meeting that has not begun
 RECHECK = 0.2
+#: s ahead a walking person counts as near an arm if their way leads into its reach: a meeting
+#: and the carry to the bin take about this long, and a move that has begun cannot be given up
+NEAR_AHEAD = 5.0
 #: m: an idle arm kept from every item by a person parks if its park is further than this
 AWAY = 0.1
 #: a move's states (:class:`~scara_collab.core.lanes.MoveTrack`) while its planner holds it
@@ -181,34 +184,52 @@ class JobMoves:
         return speed < self.settings.person_least_speed
 
     def _near(self, arm) -> List[ssm.Person]:
-        """Return the persons who could slow ``arm``: within its reach and largest ``S_p``."""
+        """Return the persons who could slow ``arm``: within its reach and largest ``S_p``.
+
+        Now, or on their way within :data:`NEAR_AHEAD` s at the velocity they are seen
+        walking at (:func:`~scara_collab.core.ssm.persons_ahead` extrapolates the same way): a
+        person walking in is weighed before the arm begins a move towards where they are
+        going, not once it is under way and can only be stopped next to them.
+        """
         if not self.persons or self.people is None:
             return []
         reach = (arm.l1 + arm.l2 + ssm.true_separation_bound(arm, self.people)
                  + self.people.intrusion + self.people.sensor_tolerance)
-        return [p for p in self.persons
-                if np.hypot(*(p.position - arm.base[:2, 3])) - p.radius < reach]
+        base = arm.base[:2, 3]
+        return [p for p in self.persons if _closest(base, p.position,
+                                                    p.velocity * NEAR_AHEAD) - p.radius < reach]
 
     def _speed_along(self, arm, traj: Trajectory, delay: float,
                      near: Sequence[ssm.Person]) -> float:
-        """Return the factor the monitor would allow ``traj`` starting ``delay`` s from now."""
+        """Return the factor the monitor would allow ``traj`` starting ``delay`` s from now.
+
+        Each sample weighed against the persons where they will be when the arm gets there.
+        A move slowed to ``s`` takes ``1 / s`` as long, and a person walking in has come that
+        much closer by then: a slowed move is weighed once more on its slowed times, and the
+        lower factor taken (at speed nothing changes).
+        """
         samples = np.linspace(0, len(traj.t) - 1, 5)[1:].round().astype(int)
-        return ssm.allowed_along(arm, traj.q[samples], traj.qd[samples], near, self.people,
-                                 ahead=delay + traj.t[samples])
+        q, qd, t = traj.q[samples], traj.qd[samples], traj.t[samples]
+        speed = ssm.allowed_along(arm, q, qd, near, self.people, ahead=delay + t)
+        if 0.0 < speed < 1.0:
+            speed = min(speed, ssm.allowed_along(arm, q, qd, near, self.people,
+                                                 ahead=delay + t / speed))
+        return speed
 
     def _cycle_speed(self, arm, robot: str, cls: Optional[str], traj: Trajectory,
                      delay: float, near: Sequence[ssm.Person]) -> float:
         """Return the factor the monitor would allow a meeting and the carry to ``cls``'s bin.
 
         The meeting ``traj`` starting ``delay`` s from now, then the move from where it ends to
-        the bin's drop point, as soon as it ends (the grasp's time aside): an arm that met an
-        item at speed only to be held with it next to a person's bin has done no good.
+        the bin's drop point, as soon as it ends at the meeting's factor (the grasp's time
+        aside): an arm that met an item at speed only to be held with it next to a person's
+        bin has done no good.
         """
         speed = self._speed_along(arm, traj, delay, near)
         if cls is None or speed <= 0.0:
             return speed
         return min(speed, self._carry_speed(arm, robot, cls, traj.q[-1],
-                                            delay + float(traj.t[-1]), near))
+                                            delay + float(traj.t[-1]) / speed, near))
 
     def _carry_speed(self, arm, robot: str, cls: str, q0, delay: float,
                      near: Sequence[ssm.Person]) -> float:
@@ -327,3 +348,17 @@ class JobMoves:
         return bool(others) and sorting.carry_sweeps(
             self.cell, traj.p, self.protocol.time.asap(now, lane.mirrored) + traj.t, others,
             s.pick_z, spare, mirrored=lane.mirrored, late=self.protocol.time.late.worst)
+
+
+def _closest(point: np.ndarray, start: np.ndarray, way: np.ndarray) -> float:
+    """Return the distance from ``point`` to the segment from ``start`` along ``way`` (2D).
+
+    >>> _closest(np.zeros(2), np.array([-3.0, 1.0]), np.array([6.0, 0.0]))
+    1.0
+    >>> _closest(np.zeros(2), np.array([3.0, 4.0]), np.array([3.0, 0.0]))
+    5.0
+    """
+    w = np.asarray(way, dtype=float)
+    length2 = float(w @ w)
+    t = 0.0 if length2 <= 0.0 else min(max(float((point - start) @ w) / length2, 0.0), 1.0)
+    return float(np.hypot(*(start + t * w - point)))
