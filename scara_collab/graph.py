@@ -475,7 +475,8 @@ def job_params(mode: str, lockstep: bool = True) -> Dict[str, Dict[str, str]]:
     ``lockstep`` the clock waits for nobody (the bridge's ``lockstep_window`` 0), as on
     hardware, the planners send their moves :data:`REALTIME_SEND_MARGIN` ahead, and the
     automation manager decides on the newest joint state instead of waiting for the state of
-    its tick's instant (``state_sync``).
+    its tick's instant (``state_sync``), the separation monitor on the scans it has instead of
+    waiting for those of a scan instant (``scan_sync``).
 
     >>> job_params('collaborative', lockstep=False)['left_planner']
     {'send_margin': '0.05'}
@@ -495,6 +496,7 @@ def job_params(mode: str, lockstep: bool = True) -> Dict[str, Dict[str, str]]:
         for planner in (n.name for n in NODES if n.component == _n('planner:Planner')):
             out[planner]['send_margin'] = repr(REALTIME_SEND_MARGIN)
         out['automation_manager']['state_sync'] = 'false'
+        out['separation_monitor']['scan_sync'] = 'false'
     return out
 
 

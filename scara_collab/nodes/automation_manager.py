@@ -10,7 +10,9 @@ retries, :mod:`scara_collab.nodes.protocol` for the statuses):
   ``/<robot>/planner_status`` and ``/<robot>/execution_status`` (about its moves, by request
   id), ``/<robot>/joint_trajectory`` (the planners' moves: the other arm's booked motion),
   ``/conveyor/events`` (counts; confirms grasps and releases), ``/emergency_stop`` and
-  ``/protective_stop`` (the job pauses while either stands);
+  ``/protective_stop`` (the job pauses while either stands); with a person in the cell
+  ``/separation_monitor/status`` (the persons it sees: a tick at T takes the statuses of the
+  instants before T, which came before its clock) and ``/<robot>/trajectory_clock``;
 * out: a move as the job planned it on ``/<robot>/target_trajectory`` (JointTrajectory: the
   planner takes it instead of planning the move again), or as a point on ``/<robot>/target``
   (PointStamped) when the job has no plan of it; in mirrored mode on
@@ -34,7 +36,8 @@ starts once the graph is connected); ``~/stats`` (:class:`~scara_collab.nodes.pr
 preferring its half of the belt), ``mirrored`` (items arrive in mirror pairs; the leader's moves
 go through the replication manager so the follower replicates them).
 """
-from typing import Callable, List
+from collections import deque
+from typing import Callable, Deque, List
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PointStamped
@@ -142,7 +145,10 @@ class AutomationManager(Node):
                                      guarded(self, self._on_event), 100),
             self.create_subscription(JointState, 'joint_states', guarded(self, self._on_state),
                                      DEFAULT))
-        # with a person in the cell: the persons the separation monitor sees (not waited for)
+        # with a person in the cell: the persons the separation monitor sees (not waited for).
+        # A tick at T takes those of the instants before T: the monitor says the status of T
+        # after the clock of T, so whether it comes before the tick of T would be timing
+        self.separations: Deque[proto.SeparationStatus] = deque()
         self.create_subscription(DiagnosticStatus, 'separation_monitor/status',
                                  guarded(self, self._on_separation), DEFAULT)
         self._stops = {'emergency': False, 'protective': False}  # the job pauses under either
@@ -221,7 +227,14 @@ class AutomationManager(Node):
             self.job.on_clock(clock.robot, clock.lag)
 
     def _on_separation(self, msg: DiagnosticStatus) -> None:
-        st = proto.SeparationStatus.from_msg(msg)
+        self.separations.append(proto.SeparationStatus.from_msg(msg))
+
+    def _take_separations(self, now: float) -> None:
+        """Hand the job the monitor's statuses of the instants before ``now``, in order."""
+        while self.separations and self.separations[0].time < now - 1e-9:
+            self._separation(self.separations.popleft())
+
+    def _separation(self, st: proto.SeparationStatus) -> None:
         hindered = bool(st.persons) and not st.fault and any(
             s < 1.0 for s in st.scale.values())
         self.job.on_persons([Person(np.array([p.x, p.y]), np.array([p.vx, p.vy]), p.radius,
@@ -286,6 +299,7 @@ class AutomationManager(Node):
     # --- the job ----------------------------------------------------------------------------
     def _decide(self) -> None:
         """Run the job's tick and send what it decided."""
+        self._take_separations(self._now())
         if self.start_pending:
             missing = self.missing_links()
             if missing:

@@ -30,21 +30,25 @@ simulates the person and the safety scanners.
 
 At each step of sim time (:func:`scara_collab.nodes.sim_timer.every`, at most the state rate)
 it observes the scans that have come and decides when there is something new to decide on:
-scans of a new instant (at the scanners' rate), a fault, the end of one. It publishes each
-arm's factor on ``<robot>/speed_scaling`` (``std_msgs/Float64``, latched: at start 0, then at
-every decision, so the bridge hears the monitor alive), the decision on ``~/status``
-(:class:`~scara_collab.nodes.protocol.SeparationStatus`, at every decision that changes it,
-its time aside: with every scan while a person is seen; and at least once a sim second) and
-once a sim second on ``/diagnostics``, and, while something subscribes, RViz markers on
-``~/markers``: each tracked person's column as a cylinder and per arm a ring of ``S_p`` around
-the column of the person nearest to it. It fails closed as the core does (no scan yet, a
-silent scanner, a ray that measured nothing: every arm ``s = 0`` with the reason), and logs
-each stop's begin and end (throttled). It is a lockstep participant, and the bridge's guard:
-while it is silent the arms hold.
+scans of a new instant (at the scanners' rate), a fault, the end of one. At a scan instant
+the decision (and the lockstep answer) waits for that instant's scans and states when they
+come after its clock (:class:`scara_collab.nodes.scan_sync.ScanSync`, parameter ``scan_sync``,
+on by default; the launcher turns it off in real time): the same seed, the same run.
 
-Parameters: every key of ``config/people.yaml`` (read only), and its own ``profile`` and
-``marker_rate`` (Hz of sim time, may change while it runs). ``docs/interface.md``,
-``docs/people.md``.
+It publishes each arm's factor on ``<robot>/speed_scaling`` (``std_msgs/Float64``, latched: at
+start 0, then at every decision, so the bridge hears the monitor alive), the decision on
+``~/status`` (:class:`~scara_collab.nodes.protocol.SeparationStatus`, at every decision that
+changes it, its time aside: with every scan while a person is seen; and at least once a sim
+second) and once a sim second on ``/diagnostics``, and, while something subscribes, RViz
+markers on ``~/markers``: each tracked person's column as a cylinder and per arm a ring of
+``S_p`` around the column of the person nearest to it. It fails closed as the core does (no
+scan yet, a silent scanner, a ray that measured nothing: every arm ``s = 0`` with the reason),
+and logs each stop's begin and end (throttled). It is a lockstep participant, and the bridge's
+guard: while it is silent the arms hold.
+
+Parameters: every key of ``config/people.yaml`` (read only), and its own ``profile``,
+``marker_rate`` (Hz of sim time, may change while it runs) and ``scan_sync``.
+``docs/interface.md``, ``docs/people.md``.
 """
 from collections import deque
 from dataclasses import replace
@@ -70,14 +74,16 @@ from scara_collab.nodes.guarded import guarded
 from scara_collab.nodes.params import declare_checked, declare_config
 from scara_collab.nodes.qos import DEFAULT, LATCHED
 from scara_collab.nodes.runner import run_node
+from scara_collab.nodes.scan_sync import ScanSync
 from scara_collab.nodes.sim_timer import every
 
 #: the monitor's own parameters and their defaults (the rest is config/people.yaml)
 PARAMETERS = {
     'profile': '',
     'marker_rate': 10.0,  # Hz of sim time, at most, for ~/markers
+    'scan_sync': True,  # a scan instant's decision waits for its inputs (lockstep)
 }
-RULES = (Rule('profile', 'text'), Rule('marker_rate', 'positive'))
+RULES = (Rule('profile', 'text'), Rule('marker_rate', 'positive'), Rule('scan_sync', 'bool'))
 DYNAMIC = ('marker_rate',)
 #: ring colour per arm, by its index in ``cell.arms`` (the viewer's planned-path colours)
 ARM_COLOURS = ((0.9, 0.47, 0.08), (0.08, 0.63, 0.78))
@@ -155,9 +161,12 @@ class SeparationMonitorNode(Node):
                                  guarded(self, self._on_planned), DEFAULT)
         for arm in self.cell.arms:  # held until the first decision
             self._publish_scale(arm.name, 0.0)
-        every(self, 1.0 / rate, self._decide)  # on the sim clock, before the lockstep answer
+        # each decision on the sim clock, before the lockstep answer; at a scan instant on
+        # that instant's scans and states, however the middleware ordered them and the clock
+        self.sync = ScanSync(self._decide, self.settings.scan_period, params['scan_sync'])
+        every(self, 1.0 / rate, lambda: self.sync.on_tick(self.get_clock().now().nanoseconds))
         every(self, 1.0, self._publish_diagnostics)
-        lockstep.join(self)  # sim time waits while this node decides
+        self.sync.lockstep = lockstep.join(self)  # sim time waits while this node decides
         self.get_logger().info(
             f'watching {", ".join(a.name for a in self.cell.arms)} with '
             f'{", ".join(g.name for g in self.scanners)}; teaching the empty cell from '
@@ -190,6 +199,7 @@ class SeparationMonitorNode(Node):
         group = self._groups.setdefault(stamp, [None] * len(self.scanners))
         group[index] = ranges
         self._observe_ready()
+        self.sync.on_input(msg.header.frame_id, stamp)
 
     def _observe_ready(self) -> None:
         """Observe the instants whose scans have all come, with the arms' state at them."""
@@ -243,6 +253,7 @@ class SeparationMonitorNode(Node):
         self._history.append((stamp, {r: None if s is None else s[1]
                                       for r, s in self._state.items()}))
         self._observe_ready()
+        self.sync.on_input('safety_joint_states', stamp)
 
     def _on_planned(self, msg: JointState) -> None:
         if not conv.admit_state(self, self.planned_stamps, msg):
@@ -255,6 +266,7 @@ class SeparationMonitorNode(Node):
                 self._ahead[arm.name] = None
                 self._logs[arm.name].warning(f'refusing its planned velocity ({exc}); it stops',
                                              throttle_duration_sec=THROTTLE)
+        self.sync.on_input('planned_velocity', _ns(msg.header.stamp))
 
     # --- the decision ------------------------------------------------------------------------
     def planned(self, now: float) -> Dict[str, Tuple[np.ndarray, np.ndarray, np.ndarray]]:
