@@ -170,6 +170,38 @@ def test_the_job_starts_only_once_every_endpoint_it_uses_is_matched():
         rclpy.try_shutdown(context=ctx)
 
 
+def test_a_tick_takes_the_monitors_statuses_of_the_instants_before_it():
+    """The monitor says the status of T after the clock of T: the tick of T takes only earlier.
+
+    Taken as they came, a status of T reached the tick of T or the next one by timing, and
+    two runs of a seed with a person parted.
+    """
+    import rclpy
+
+    from scara_collab.core.separation_monitor import PersonSeen
+    from scara_collab.graph import ros_args
+    from scara_collab.nodes.automation_manager import AutomationManager
+    from scara_collab.nodes.protocol import SeparationStatus
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        node = AutomationManager(context=ctx, cli_args=ros_args(('automation', 'controllers')))
+        for t, x in ((1.0, 2.0), (1.04, 2.5)):
+            node._on_separation(SeparationStatus(
+                t, persons=(PersonSeen(1, x, -3.0, 0.3, 0.0, 0.0),)).to_msg())
+        assert node.job.moves.persons == ()  # nothing before a tick
+        node._take_separations(1.0)
+        assert node.job.moves.persons == ()  # the status of 1.0 is not the tick of 1.0's
+        node._take_separations(1.02)
+        assert [p.position[0] for p in node.job.moves.persons] == [2.0]
+        node._take_separations(1.06)
+        assert [p.position[0] for p in node.job.moves.persons] == [2.5]
+        assert not node.separations
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
 class _Injector:
     """Injects a fault into an in-process job at given sim times, and watches what follows.
 

@@ -83,3 +83,28 @@ def test_the_launcher_turns_it_off_in_real_time():
     assert graph.job_params('collaborative', lockstep=False)['separation_monitor'] == {
         'scan_sync': 'false'}
     assert 'scan_sync' not in graph.job_params('collaborative')['separation_monitor']
+
+
+def test_the_inputs_named_at_the_start_are_awaited_at_the_first_scan_instant():
+    """The bridge's scans of sim time 0 go out before the graph runs: the first instant waits."""
+    decided = []
+    sync = ScanSync(lambda: decided.append(dict(sync.seen)), 0.04, inputs=INPUTS)
+    sync.lockstep = Participant()
+    sync.on_tick(20 * MS)  # off the grid
+    sync.on_tick(40 * MS)
+    assert len(decided) == 1 and sync.lockstep.awaited == [('scan', 1)]
+    scan(sync, 40)
+    assert decided[-1] == {name: 1 for name in INPUTS}
+
+
+def test_a_decision_that_fails_still_answers_the_lockstep():
+    """The node logs a failed decision; sim time must not wait for it."""
+    def fail():
+        raise RuntimeError('boom')
+
+    sync = ScanSync(fail, 0.04, inputs=('scanner_a',))
+    sync.lockstep = Participant()
+    sync.on_tick(40 * MS)
+    with pytest.raises(RuntimeError):
+        sync.on_input('scanner_a', 40 * MS)
+    assert sync.lockstep.replies == [('scan', 1)] and sync.due is None

@@ -11,14 +11,14 @@ import pytest
 from ros_harness import Graph, params_args
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, LaserScan
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, Header
 from synthetic_scans import legs, pillars, scan_circles
 from visualization_msgs.msg import Marker, MarkerArray
 
 from scara_collab import graph
 from scara_collab.core.config import ConfigError, load_config
 from scara_collab.core.scan_tracking import scanners_from_config
-from scara_collab.nodes import conversions as conv
+from scara_collab.nodes import conversions as conv, lockstep
 from scara_collab.nodes.protocol import SeparationStatus
 from scara_collab.nodes.qos import LATCHED
 from scara_collab.nodes.separation_monitor import SeparationMonitorNode
@@ -327,3 +327,39 @@ def test_the_graph_starts_it_with_a_person_and_the_bridge_guards_it():
     assert graph.lockstep_guards(graph.job_nodes(people=True)) == [
         'collision_monitor', 'separation_monitor']
     assert graph.topic('separation_monitor/markers').type == 'visualization_msgs/msg/MarkerArray'
+
+
+def test_in_lockstep_a_scan_instant_decides_on_its_scans_even_when_its_clock_comes_first(cell):
+    """The clock of a scan instant overtakes its scans and state: the decision and the answer wait.
+
+    A person stands near the swinging left arm from that instant on. Decided at the clock, the
+    monitor would weigh the empty cell of 40 ms before (full speed) and slow the arm a clock
+    later; it waits, answers the lockstep only after, and slows the arm at that very instant.
+    """
+    c = Cell(cell, lockstep='true')
+    try:
+        answers = c.g.collect(Header, '/sim/lockstep', lockstep.QOS)
+        c.run(2.0)
+        assert c.last(LEFT) == 1.0
+        c.ahead[LEFT] = SWING
+        c.run(PERIOD - TICK)  # to the step before the next scan instant
+        t = c.time = round(c.time + TICK, 9)
+        stamp = int(round(t * 1e9))
+        c.clock.publish(Clock(clock=conv.to_time(t)))  # the clock first
+        assert c.g.spin_until(lambda: c.node.sync.due is not None)
+        c.g.spin_until(lambda: False, timeout=0.3)
+        assert c.node.checked < t and c.node.observed < stamp  # waiting, not decided
+        assert all(conv.to_sec(a.stamp) < t for a in answers)  # nor answered
+        c.say_state(t)
+        for geometry in c.scanners[:-1]:
+            c.scan(geometry, t, legs(*NEAR))
+        c.g.spin_until(lambda: False, timeout=0.3)
+        assert c.node.sync.due is not None  # one scanner still to come
+        c.scan(c.scanners[-1], t, legs(*NEAR))
+        assert c.g.spin_until(lambda: c.node.checked == pytest.approx(t, abs=1e-9))
+        assert c.node.observed == stamp and c.node.sync.due is None
+        assert c.g.spin_until(lambda: any(conv.to_sec(a.stamp) == pytest.approx(t, abs=1e-9)
+                                          for a in answers))
+        assert len(c.node.decision.persons) == 1 and c.node.decision.time == pytest.approx(t)
+    finally:
+        c.close()

@@ -10,13 +10,22 @@ the arms' speed factors change one clock earlier or later, and two runs of the s
 
 :class:`ScanSync` holds the decision of a scan instant (and the node's lockstep answer with
 it: the bridge cannot step on meanwhile) until every input that came at the previous scan
-instant has come for this one too. An input silent at the previous instant is not waited for
+instant has come for this one too. The inputs named at the start count as come at sim time 0
+(the bridge's first scans go out before the graph runs), so the first scan instant waits for
+them too. An input silent at the previous instant is not waited for
 (a silent scanner is the monitor's to judge, not to wait for); one that stops now is waited
 for once, at most :data:`scara_collab.nodes.lockstep.REPLY_WAIT` wall seconds. In real time
 (``enabled`` false) the clock waits for nobody and the decision runs at once, as the inputs
 have come.
+
+It assumes the lockstep's window is one clock period (the bridge's ``lockstep_window``
+default): the bridge then stands at a scan instant until the decision there is taken, and an
+input of the next scan instant cannot come first. A wait that runs out (an input that stopped,
+or one the node refused without saying so) costs ``REPLY_WAIT`` wall seconds and the run's
+repeatability; the node therefore hands every input it refuses to :meth:`ScanSync.on_input`
+too, as come.
 """
-from typing import Callable, Dict, Hashable, Optional
+from typing import Callable, Dict, Hashable, Iterable, Optional
 
 #: ns: a stamp within this of a scan instant is of that instant
 ON_GRID = 100_000
@@ -28,17 +37,20 @@ class ScanSync:
     :param decide: the decision's work.
     :param period: s between scan instants (the scanners' period; instants at its multiples).
     :param enabled: wait for the inputs at all (lockstep); else decide at once.
+    :param inputs: the inputs expected from the start (counted as come at sim time 0).
     :ivar lockstep: the node's lockstep participant (set once it has joined; None: none).
     """
 
-    def __init__(self, decide: Callable[[], None], period: float, enabled: bool = True):
-        """No input yet, no decision waiting."""
+    def __init__(self, decide: Callable[[], None], period: float, enabled: bool = True,
+                 inputs: Iterable[Hashable] = ()):
+        """Count the ``inputs`` as come at instant 0; no decision waiting."""
         if not period > 0:
             raise ValueError(f'scan period must be > 0 s, got {period}')
         self.decide, self.enabled = decide, bool(enabled)
         self.period_ns = int(round(period * 1e9))
         self.lockstep = None
-        self.seen: Dict[Hashable, int] = {}  # input -> the newest scan instant it came at
+        # input -> the newest scan instant it came at
+        self.seen: Dict[Hashable, int] = {name: 0 for name in inputs}
         self.due: Optional[int] = None  # the scan instant whose decision waits for its inputs
 
     def instant(self, ns: int) -> Optional[int]:
@@ -79,5 +91,7 @@ class ScanSync:
 
     def _decide_due(self) -> None:
         key, self.due = ('scan', self.due), None
-        self.decide()
-        self.lockstep.reply(key)
+        try:
+            self.decide()
+        finally:  # a decision that failed (logged by the node) must not hold sim time 2 s
+            self.lockstep.reply(key)

@@ -94,6 +94,8 @@ THROTTLE = 5.0
 #: sim s: ``~/status`` is said when it changes (the time aside), and at least this often
 HEARTBEAT = 1.0
 RING_POINTS = 48
+#: the inputs besides the scans a scan instant's decision waits for (:class:`ScanSync`)
+STATE_INPUTS = ('safety_joint_states', 'planned_velocity')
 
 
 def _ns(stamp) -> int:
@@ -163,7 +165,8 @@ class SeparationMonitorNode(Node):
             self._publish_scale(arm.name, 0.0)
         # each decision on the sim clock, before the lockstep answer; at a scan instant on
         # that instant's scans and states, however the middleware ordered them and the clock
-        self.sync = ScanSync(self._decide, self.settings.scan_period, params['scan_sync'])
+        self.sync = ScanSync(self._decide, self.settings.scan_period, params['scan_sync'],
+                             [g.name for g in self.scanners] + list(STATE_INPUTS))
         every(self, 1.0 / rate, lambda: self.sync.on_tick(self.get_clock().now().nanoseconds))
         every(self, 1.0, self._publish_diagnostics)
         self.sync.lockstep = lockstep.join(self)  # sim time waits while this node decides
@@ -184,12 +187,13 @@ class SeparationMonitorNode(Node):
                 f'ignoring a scan of frame {msg.header.frame_id!r}: not a scanner of '
                 f'config/people.yaml ({", ".join(self._index)})', throttle_duration_sec=THROTTLE)
             return
+        stamp = _ns(msg.header.stamp)
         try:
             ranges = conv.scan_ranges(msg, self.scanners[index])
         except conv.MessageError as exc:
             self.get_logger().warning(f'ignoring a scan: {exc}', throttle_duration_sec=THROTTLE)
+            self.sync.on_input(msg.header.frame_id, stamp)  # come, and refused: not awaited
             return
-        stamp = _ns(msg.header.stamp)
         if self.observed is not None and stamp <= self.observed:
             self.get_logger().warning(
                 f'ignoring a late scan of {msg.header.frame_id} at t={stamp * 1e-9:.3f} s: its '
@@ -239,6 +243,7 @@ class SeparationMonitorNode(Node):
 
     def _on_state(self, msg: JointState) -> None:
         if not conv.admit_state(self, self.stamps, msg):
+            self.sync.on_input(STATE_INPUTS[0], _ns(msg.header.stamp))  # refused: not awaited
             return
         stamp = _ns(msg.header.stamp)
         for arm in self.cell.arms:
@@ -253,10 +258,11 @@ class SeparationMonitorNode(Node):
         self._history.append((stamp, {r: None if s is None else s[1]
                                       for r, s in self._state.items()}))
         self._observe_ready()
-        self.sync.on_input('safety_joint_states', stamp)
+        self.sync.on_input(STATE_INPUTS[0], stamp)
 
     def _on_planned(self, msg: JointState) -> None:
         if not conv.admit_state(self, self.planned_stamps, msg):
+            self.sync.on_input(STATE_INPUTS[1], _ns(msg.header.stamp))  # refused: not awaited
             return
         for arm in self.cell.arms:
             try:
@@ -266,7 +272,7 @@ class SeparationMonitorNode(Node):
                 self._ahead[arm.name] = None
                 self._logs[arm.name].warning(f'refusing its planned velocity ({exc}); it stops',
                                              throttle_duration_sec=THROTTLE)
-        self.sync.on_input('planned_velocity', _ns(msg.header.stamp))
+        self.sync.on_input(STATE_INPUTS[1], _ns(msg.header.stamp))
 
     # --- the decision ------------------------------------------------------------------------
     def planned(self, now: float) -> Dict[str, Tuple[np.ndarray, np.ndarray, np.ndarray]]:
