@@ -8,15 +8,14 @@ decision run straight from the clock then weighs the scans of T or of T - 40 ms 
 the arms' speed factors change one clock earlier or later, and two runs of the same seed part
 (docs/realtime.md, *Repeatable runs*).
 
-:class:`ScanSync` holds the decision of a scan instant (and the node's lockstep answer with
-it: the bridge cannot step on meanwhile) until every input that came at the previous scan
-instant has come for this one too. The inputs named at the start count as come at sim time 0
-(the bridge's first scans go out before the graph runs), so the first scan instant waits for
-them too. An input silent at the previous instant is not waited for
-(a silent scanner is the monitor's to judge, not to wait for); one that stops now is waited
-for once, at most :data:`scara_collab.nodes.lockstep.REPLY_WAIT` wall seconds. In real time
-(``enabled`` false) the clock waits for nobody and the decision runs at once, as the inputs
-have come.
+:class:`ScanSync` holds the decision of a scan instant (and the node's lockstep answer with it:
+the bridge cannot step on meanwhile) until every input that came at the previous scan instant
+has come for this one too. The inputs named at the start count as come at sim time 0 (the
+bridge's first scans go out before the graph runs), so the first scan instant waits for them
+too. An input silent at the previous instant is not waited for (a silent scanner is the
+monitor's to judge, not to wait for); one that stops now is waited for once, at most
+:data:`scara_collab.nodes.lockstep.REPLY_WAIT` wall seconds. In real time (``enabled`` false)
+the clock waits for nobody and the decision runs at once, as the inputs have come.
 
 It assumes the lockstep's window is one clock period (the bridge's ``lockstep_window``
 default): the bridge then stands at a scan instant until the decision there is taken, and an
