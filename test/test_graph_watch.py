@@ -48,3 +48,19 @@ def test_backward_jumps_are_counted_and_the_first_kept():
     assert len(summary['clock_jumps_back']) == KEEP_JUMPS
     assert summary['clock_jumps_back'][0] == {'time': 10.0, 'to': 0.5}
     assert full_name('/', 'a') == '/a' and full_name('/ns', 'a') == '/ns/a'
+
+
+def test_a_publisher_named_a_moment_late_is_one_foreign_clock():
+    """A publisher the middleware knows before its node is the same one when its name comes.
+
+    The entry takes the name; the node leaving before its publisher is no new entry either.
+    """
+    unknown = '/_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_'
+    watch = GraphWatch([])
+    watch.look(1.0, 1.0, ['/pybullet_bridge', unknown], CELL)
+    watch.look(2.0, 2.0, ['/pybullet_bridge', '/rogue_clock'], CELL)
+    watch.look(3.0, 3.0, ['/pybullet_bridge', unknown], CELL)    # its node left first
+    watch.look(4.0, 4.0, ['/pybullet_bridge', '/player'], CELL)   # another one: an entry
+    assert [(c['time'], c['nodes']) for c in watch.summary()['foreign_clocks']] == [
+        (1.0, ['/pybullet_bridge', '/rogue_clock']),
+        (4.0, ['/player', '/pybullet_bridge'])]

@@ -36,6 +36,7 @@ def test_a_second_clock_publisher_mid_run_fails_the_run(launch, tmp_path):  # no
     assert summary['exit_code'] == 6 and summary['end_reason'] == 'duration reached'
     assert summary['exit_reason'].startswith('a second /clock publisher at sim t=')
     assert summary['interrupted'] is False
+    assert len(summary['foreign_clocks']) == 1, summary['foreign_clocks']
     (seen,) = summary['foreign_clocks']
     assert seen['publishers'] == 2 and seen['nodes'] == ['/pybullet_bridge', '/rogue_clock']
     assert 0.0 < seen['time'] < 6.0

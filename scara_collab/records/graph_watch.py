@@ -7,7 +7,10 @@ The bridge is the run's only clock and each run has one of each of its nodes, so
 
 - a second ``/clock`` publisher (whoever it is: another bridge, ``ros2 bag play --clock``, a
   test tool) is a *foreign clock*, named with when it was seen, how many publishers there were
-  and their nodes, once per change of that set;
+  and their nodes, once per change of that set. The middleware can know a publisher a moment
+  before it knows its node (and a moment after the node left): its name is then
+  ``_NODE_NAME_UNKNOWN_``; such a look is the same set as the look before or after that knows
+  the name, and the entry takes the name once it is known;
 - sim time that goes backwards is a foreign clock too (the bridge's never does; a clock that
   only repeats the bridge's time is seen as its publisher);
 - two nodes of the same name among the cell's (two bridges, two automation managers, two run
@@ -35,6 +38,27 @@ from typing import Dict, Iterable, List, Optional, Sequence
 
 #: backward jumps kept in the summary (all are counted)
 KEEP_JUMPS = 20
+#: the node name rmw gives an endpoint whose node it does not know (yet, or any more)
+UNNAMED = '_NODE_NAME_UNKNOWN_'
+
+
+def same_publishers(a: Sequence[str], b: Sequence[str]) -> bool:
+    """Return whether two looks at a topic's publishers can be the same set of publishers.
+
+    They are when they count the same and the names one knows are among the other's (a
+    publisher whose node is not known yet, or any more, is ``UNNAMED``).
+
+    >>> same_publishers(['/bridge', '/_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_'],
+    ...                 ['/bridge', '/rogue'])
+    True
+    >>> same_publishers(['/bridge', '/rogue'], ['/bridge', '/player'])
+    False
+    """
+    if len(a) != len(b):
+        return False
+    named_a = Counter(n for n in a if not n.endswith(UNNAMED))
+    named_b = Counter(n for n in b if not n.endswith(UNNAMED))
+    return not (named_a - named_b) or not (named_b - named_a)
 
 
 def full_name(namespace: str, name: str) -> str:
@@ -72,7 +96,13 @@ class GraphWatch:
         """
         self.looks += 1
         clocks = tuple(sorted(clock_publishers))
-        if len(clocks) > 1 and clocks != self._clocks:
+        last = self.foreign_clocks[-1] if self.foreign_clocks else None
+        if (len(clocks) > 1 and self._clocks is not None
+                and same_publishers(clocks, last['nodes'])):
+            unnamed = sum(n.endswith(UNNAMED) for n in clocks)
+            if unnamed < sum(n.endswith(UNNAMED) for n in last['nodes']):
+                last['nodes'] = list(clocks)           # the same publishers, better named
+        elif len(clocks) > 1:
             self.foreign_clocks.append({'time': t, 'wall_s': round(wall, 3),
                                         'publishers': len(clocks), 'nodes': list(clocks)})
         self._clocks = clocks if len(clocks) > 1 else None
