@@ -357,7 +357,7 @@ def _columns(persons: Sequence[Person]):
 
 
 def assess_arm(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[Person],
-               params: SsmParams) -> ArmSeparation:
+               params: SsmParams, refine: Optional[int] = None) -> ArmSeparation:
     """Return the separation of one arm from the persons and the speed factor it allows.
 
     The module docstring says which points count, at which speeds, and how far they stop.
@@ -372,6 +372,8 @@ def assess_arm(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[Per
         :meth:`scara_collab.core.separation_monitor.SeparationMonitor.decide`).
     :param persons: the persons, as columns.
     :param params: the protective separation's numbers.
+    :param refine: how often at most the factor is checked where it slows the arm (default
+        :data:`REFINE_STEPS`; 0: the quadratic's root, as :func:`allowed_along` weighs).
     :return: the :class:`ArmSeparation`.
     """
     q = np.asarray(q, dtype=float)
@@ -382,7 +384,7 @@ def assess_arm(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[Per
     bottom, top, v_person, r_person = _columns(persons)
     return _assess(arm, q, qd, bottom, top, v_person, r_person, params,
                    [f'person {p.id} at ({p.position[0]:.2f}, {p.position[1]:.2f})'
-                    for p in persons], REFINE_STEPS)
+                    for p in persons], REFINE_STEPS if refine is None else refine)
 
 
 def true_margin(arm: ArmModel, q: ArrayLike, qd: ArrayLike, starts: ArrayLike, ends: ArrayLike,
@@ -504,7 +506,11 @@ def allowed_along(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[
 
     For a planner or a job that would rather choose work an arm can do at speed than work the
     monitor will slow: :func:`assess_arm` at each sample, the smallest factor (1 without
-    persons).
+    persons). A preference, not the safety function: it weighs the quadratic's root without
+    the monitor's check where the factor slows the arm (``refine=0``), a little above what the
+    monitor may allow. The job's thresholds were set on it: with the check, inlet seeds 1 and
+    2 sorted 112 and 114 (the job declined meetings just above ``person_speed``), without it
+    116 and 117 (docs/people.md).
 
     :param q, qd: ``(M, 3)`` the move's joints and planned joint velocities at M samples.
     :param ahead: ``(M,)`` s from now to each sample, or None. Given, each sample is weighed
@@ -526,8 +532,9 @@ def allowed_along(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[
         return 1.0
     q, qd = np.asarray(q, dtype=float), np.asarray(qd, dtype=float)
     if ahead is None:
-        return min(assess_arm(arm, a, b, persons, params).scale for a, b in zip(q, qd))
-    return min(assess_arm(arm, a, b, tuple(persons) + persons_ahead(persons, dt), params).scale
+        return min(assess_arm(arm, a, b, persons, params, 0).scale for a, b in zip(q, qd))
+    return min(assess_arm(arm, a, b, tuple(persons) + persons_ahead(persons, dt), params,
+                          0).scale
                for a, b, dt in zip(q, qd, np.asarray(ahead, dtype=float)))
 
 
