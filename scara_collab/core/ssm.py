@@ -510,7 +510,7 @@ def allowed_along(arm: ArmModel, q: ArrayLike, qd: ArrayLike, persons: Sequence[
     the monitor's check where the factor slows the arm (``refine=0``), a little above what the
     monitor may allow. The job's thresholds were set on it: with the check, inlet seeds 1 and
     2 sorted 112 and 114 (the job declined meetings just above ``person_speed``), without it
-    116 and 117 (docs/people.md).
+    115 and 117 (docs/people.md).
 
     :param q, qd: ``(M, 3)`` the move's joints and planned joint velocities at M samples.
     :param ahead: ``(M,)`` s from now to each sample, or None. Given, each sample is weighed
