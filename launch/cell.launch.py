@@ -20,7 +20,9 @@ bridge's line parameters and its upstream cells' handoff remaps, only cell 0 fed
 ``person`` (a person in every cell: a built-in scenario, ``pass-by``, ``inlet``, ``middle`` or
 ``random``, or a YAML file's path; the bridge simulates it and the safety scanners, and the
 separation monitor scales the arms' speeds: :func:`scara_collab.graph.person_params`; default
-none), ``person_seed`` (the person's seed; default the bridge's).
+none), ``person_seed`` (the person's seed; default the bridge's), ``monitor_link`` (with a
+person: ``wired``, the separation monitor in the bridge's process, the default; ``topics``, a
+node of its own after the bridge, among its guards).
 """
 import os
 
@@ -35,7 +37,7 @@ from scara_collab import graph
 PACKAGE = 'scara_collab'
 ARGUMENTS = {'mode': 'collaborative', 'tf': 'false', 'viewer': 'false', 'rviz': 'false',
              'auto_start': 'true', 'lockstep': 'true', 'namespace': '', 'cells': '1',
-             'cell': '', 'person': '', 'person_seed': ''}
+             'cell': '', 'person': '', 'person_seed': '', 'monitor_link': 'wired'}
 
 
 def _typed(value: str):
@@ -80,7 +82,11 @@ def nodes(context):
         except ValueError:
             raise ValueError(
                 f"person_seed must be an integer, got {arg['person_seed']!r}") from None
-    people = graph.person_params(person, seed)
+    link = arg['monitor_link']
+    if link not in graph.MONITOR_LINKS:
+        raise ValueError(f'monitor_link must be one of {", ".join(graph.MONITOR_LINKS)}, '
+                         f'got {link!r}')
+    people = graph.person_params(person, seed, link)
     out = []
     for k in which:
         namespace = base + graph.cell_namespace(k, cells)
@@ -91,7 +97,7 @@ def nodes(context):
         for spec in graph.job_nodes(automation=arg['mode'] != 'idle',
                                     viewer=arg['viewer'].lower() == 'true' and k == 0,
                                     transforms=rviz or arg['tf'].lower() == 'true',
-                                    people=person is not None):
+                                    people=person is not None, monitor_link=link):
             files = [os.path.join(share, 'config', f'{c}.yaml') for c in spec.configs]
             own = dict(params.get(spec.name, {}), **line.get(spec.name, {}),
                        **people.get(spec.name, {}))

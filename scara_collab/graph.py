@@ -30,7 +30,7 @@ the tests' graphs (``test/ros_harness.py``). In launch order::
     replication_manager  collab/target(_trajectory) -> both arms, mirrored   ready: service
     collision_monitor    arm-to-arm distance, e-stop                         ready: service
     automation_manager   the sorting job                                     ready: service
-    separation_monitor   scans -> each arm's speed factor (with a person)    ready: subscribed
+    separation_monitor   scans -> each arm's speed factor (a person, topics) ready: subscribed
     cell_viewer          live 3D view (optional)                             ready: page answers
 
 >>> [n.name for n in job_nodes()][:3]
@@ -53,6 +53,10 @@ from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 PACKAGE = 'scara_collab'
 JOB_MODES = ('single', 'collaborative', 'mirrored')
+#: where the speed and separation monitor runs with a person: in the bridge's process, handed
+#: the scans and states and handing back the factors directly (a real cell's safety wiring),
+#: or as a node of its own over topics (scara_collab.nodes.bridge_people)
+MONITOR_LINKS = ('wired', 'topics')
 LAUNCH_MODES = ('idle',) + JOB_MODES  # idle: the graph without the sorting job
 ROBOTS = ('scara_left', 'scara_right')  # the arms' namespaces (config/cell.yaml), leader first
 CLOCK = 'clock'  # the bridge's sim clock, relative: a cell's clock is in its namespace
@@ -399,17 +403,28 @@ def node(name: str) -> NodeSpec:
 
 
 def job_nodes(automation: bool = True, viewer: bool = False,
-              transforms: bool = False, people: bool = False) -> List[NodeSpec]:
+              transforms: bool = False, people: bool = False,
+              monitor_link: str = 'wired') -> List[NodeSpec]:
     """Return the nodes a run starts, in launch order.
 
     :param automation: with the job (the automation manager).
     :param viewer: with the live 3D view (``cell_viewer``).
     :param transforms: with ``state_publisher`` (``/robot_description``, ``/tf``).
-    :param people: with the speed and separation monitor (a person in the cell:
-        ``separation_monitor``; the bridge simulates the person and the safety scanner).
+    :param people: a person in the cell (the bridge simulates the person and the safety
+        scanners).
+    :param monitor_link: with a person, where the speed and separation monitor runs: in the
+        bridge's process (``wired``: no node to start) or as ``separation_monitor`` of its own,
+        over topics (``topics``) (:data:`MONITOR_LINKS`).
+
+    >>> [n.name for n in job_nodes(people=True)][-1]
+    'automation_manager'
+    >>> [n.name for n in job_nodes(people=True, monitor_link='topics')][-1]
+    'separation_monitor'
     """
+    if monitor_link not in MONITOR_LINKS:
+        raise ValueError(f'monitor_link must be one of {MONITOR_LINKS}, got {monitor_link!r}')
     wanted = {'cell_viewer': viewer, 'state_publisher': transforms,
-              'separation_monitor': people}
+              'separation_monitor': people and monitor_link == 'topics'}
     return [n for n in NODES if (automation or n.name != 'automation_manager')
             and (not n.optional or wanted.get(n.name, False))]
 
@@ -428,31 +443,36 @@ def lockstep_expect(nodes: Sequence[NodeSpec]) -> List[str]:
 def lockstep_guards(nodes: Sequence[NodeSpec]) -> List[str]:
     """Return the bridge's ``lockstep_guards`` for a run of ``nodes``: the arms hold without them.
 
-    >>> lockstep_guards(job_nodes()), lockstep_guards(job_nodes(people=True))
-    (['collision_monitor'], ['collision_monitor', 'separation_monitor'])
+    >>> lockstep_guards(job_nodes(people=True, monitor_link='topics'))
+    ['collision_monitor', 'separation_monitor']
     """
     return [n.name for n in nodes if n.guard]
 
 
-def person_params(person: Optional[str], seed: Optional[int]) -> Dict[str, Dict[str, str]]:
+def person_params(person: Optional[str], seed: Optional[int],
+                  monitor_link: str = 'wired') -> Dict[str, Dict[str, str]]:
     """Return the parameters of a run with a person, per node (none without one).
 
     The bridge simulates the person ``person`` (a scenario's name or a YAML file's path,
     :func:`scara_collab.sim.person_scenarios.scenario`) seeded by ``seed``, with the safety
-    scanners, and holds the arms while the separation monitor is silent, as while the
-    collision monitor is (:func:`lockstep_guards`).
+    scanners, and runs the separation monitor in its process (``monitor_link`` ``wired``), or
+    holds the arms while the separation monitor node is silent, as while the collision monitor
+    is (``topics``: :func:`lockstep_guards`).
 
     >>> person_params(None, 7)
     {}
     >>> person_params('inlet', 7)['pybullet_bridge']['person_seed']
     '7'
-    >>> person_params('inlet', 7)['pybullet_bridge']['lockstep_guards']
+    >>> person_params('inlet', 7)['pybullet_bridge']['monitor_link']
+    'wired'
+    >>> person_params('inlet', 7, 'topics')['pybullet_bridge']['lockstep_guards']
     "['collision_monitor','separation_monitor']"
     """
     if person is None:
         return {}
-    bridge = {'person': person,
-              'lockstep_guards': param_value(lockstep_guards(job_nodes(people=True)))}
+    guards = lockstep_guards(job_nodes(people=True, monitor_link=monitor_link))
+    bridge = {'person': person, 'monitor_link': monitor_link,
+              'lockstep_guards': param_value(guards)}
     if seed is not None:
         bridge['person_seed'] = str(int(seed))
     return {'pybullet_bridge': bridge}

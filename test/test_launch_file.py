@@ -158,9 +158,10 @@ def test_cells_3_starts_a_line_of_cells_in_their_namespaces(monkeypatch):
 
 
 def test_a_person_starts_the_separation_monitor_and_gives_the_bridge_the_scenario(monkeypatch):
-    """``person:=inlet``: the monitor after the bridge, which simulates it and is guarded by it.
+    """``person:=inlet``: the bridge simulates the person and runs the monitor in its process.
 
-    Without ``person`` the cell is today's: no monitor, no new bridge parameter.
+    With ``monitor_link:=topics`` the monitor is a node after the bridge, guarding it. Without
+    ``person`` the cell is today's: no monitor, no new bridge parameter.
     """
     module = load(monkeypatch)
     opaque = module.generate_launch_description().args[0][-1]
@@ -168,9 +169,18 @@ def test_a_person_starts_the_separation_monitor_and_gives_the_bridge_the_scenari
     nodes = opaque.kwargs['function'](dict(module.ARGUMENTS, person='inlet', person_seed='4'))
     names = [n.kwargs['name'] for n in nodes]
     assert names == [n.name for n in graph.job_nodes(people=True)]
+    assert 'separation_monitor' not in names
     bridge = nodes[0].kwargs['parameters'][-1]
     assert (bridge['person'], bridge['person_seed']) == ('inlet', 4)
+    assert (bridge['monitor_link'], bridge['lockstep_guards']) == ('wired', ['collision_monitor'])
+    nodes = opaque.kwargs['function'](dict(module.ARGUMENTS, person='inlet', person_seed='4',
+                                           monitor_link='topics'))
+    names = [n.kwargs['name'] for n in nodes]
+    assert names == [n.name for n in graph.job_nodes(people=True, monitor_link='topics')]
+    bridge = nodes[0].kwargs['parameters'][-1]
     assert bridge['lockstep_guards'] == ['collision_monitor', 'separation_monitor']
+    with pytest.raises(ValueError, match='monitor_link must be one of'):
+        opaque.kwargs['function'](dict(module.ARGUMENTS, person='inlet', monitor_link='x'))
     monitor = nodes[names.index('separation_monitor')].kwargs['parameters']
     assert [Path(f).stem for f in monitor[:-1]] == ['people']
     plain = opaque.kwargs['function'](dict(module.ARGUMENTS))

@@ -445,9 +445,10 @@ def test_the_lockstep_flag_sets_the_bridges_window():
 
 
 def test_a_person_starts_the_separation_monitor_and_sets_the_bridges_person():
-    """``--person``: the monitor in the plan, the bridge's scenario, seed and guards.
+    """``--person``: the bridge's scenario, seed and link; over topics the monitor and guards.
 
-    Without it the plan is today's: no monitor and none of those parameters. In a line,
+    Wired (the default) the bridge runs the monitor: no process of its own. Without
+    ``--person`` the plan is today's: no monitor and none of those parameters. In a line,
     ``--person-cell K`` keeps the person (and the monitor) to cell K.
     """
     from scara_collab import graph
@@ -460,14 +461,22 @@ def test_a_person_starts_the_separation_monitor_and_sets_the_bridges_person():
     assert 'separation_monitor' not in plain
     assert not {'person', 'person_seed', 'lockstep_guards'} & set(
         plain['pybullet_bridge'].params)
-    person = plan(['--person', 'inlet', '--seed', '3'])
-    assert list(person) == [n.name for n in graph.job_nodes(people=True)]
-    bridge = person['pybullet_bridge'].params
+    wired = plan(['--person', 'inlet', '--seed', '3'])
+    assert list(wired) == [n.name for n in graph.job_nodes(people=True)]
+    assert 'separation_monitor' not in wired
+    bridge = wired['pybullet_bridge'].params
     assert (bridge['person'], bridge['person_seed']) == ('inlet', '3')
+    assert (bridge['monitor_link'], bridge['lockstep_guards']) == ('wired',
+                                                                   "['collision_monitor']")
+    assert 'separation_monitor' not in bridge['lockstep_expect']
+    person = plan(['--person', 'inlet', '--seed', '3', '--monitor-link', 'topics'])
+    assert list(person) == [n.name for n in graph.job_nodes(people=True, monitor_link='topics')]
+    bridge = person['pybullet_bridge'].params
     assert bridge['lockstep_guards'] == "['collision_monitor','separation_monitor']"
     assert 'separation_monitor' in bridge['lockstep_expect']
     assert person['separation_monitor'].configs == ('people',)
-    line = ['--person', 'inlet', '--cells', '2', '--person-cell', '1', '--line-cell']
+    line = ['--person', 'inlet', '--monitor-link', 'topics', '--cells', '2', '--person-cell',
+            '1', '--line-cell']
     assert 'separation_monitor' not in plan(line + ['0'])
     assert plan(line + ['1'])['pybullet_bridge'].params['person'] == 'inlet'
 

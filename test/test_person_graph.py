@@ -23,14 +23,19 @@ VISIT = {'visits': [{'start': 4.0, 'speed': 1.4, 'waypoints': [
     [4.5, -6.5], {'x': 4.2, 'y': -3.6, 'dwell': 6.0}, [4.5, -6.5]]}]}
 
 
-@pytest.fixture(scope='module')
-def run(tmp_path_factory):
-    """Run the collaborative job for 36 sim s with the person; return what was heard."""
+@pytest.fixture(scope='module', params=graph.MONITOR_LINKS)
+def run(request, tmp_path_factory):
+    """Run the collaborative job for 36 sim s with the person; return what was heard.
+
+    Once with the separation monitor wired into the bridge's process, once as a node of its own
+    over topics.
+    """
     path = tmp_path_factory.mktemp('person') / 'visit.yaml'
     path.write_text(yaml.safe_dump(VISIT))
-    specs = graph.job_nodes(people=True)
+    link = request.param
+    specs = graph.job_nodes(people=True, monitor_link=link)
     params = graph.job_params('collaborative')
-    for name, values in graph.person_params(str(path), 1).items():
+    for name, values in graph.person_params(str(path), 1, link).items():
         params[name].update(values)
     params['pybullet_bridge'].update(real_time_factor=0.0, item_seed=7,
                                      lockstep_expect=graph.lockstep_expect(specs))
@@ -63,6 +68,11 @@ def run(tmp_path_factory):
         heard['sorted_at'] = sorted_at
         heard['missed'] = nodes['automation_manager'].job.counts.get('missed', 0)
         heard['guard'] = nodes['collision_monitor'].status()
+        heard['link'] = link
+        heard['wired'] = bridge.people.monitor
+        heard['monitors'] = probe.get_node_names().count('separation_monitor')
+        heard['scaling_subscribed'] = bridge.count_subscribers('scara_left/speed_scaling')
+        heard['factor'] = (bridge.people.heard['scara_left'], bridge.sim.time)
     return heard
 
 
@@ -133,3 +143,20 @@ def test_what_changes_nothing_is_not_said_again(run):
     assert away and all(b - a >= 1.0 - 1e-6 for a, b in zip(away, away[1:]))
     quiet = [s.time for s in run['status'] if s.time > 25.0]  # nobody in the cell
     assert quiet and all(b - a >= 1.0 - 1e-6 for a, b in zip(quiet, quiet[1:]))
+
+
+def test_the_monitor_wired_into_the_bridge_decides_at_the_scan_it_is_handed(run):
+    """Wired, the monitor is a node in the bridge's process, and its factors reach no topic.
+
+    One ``separation_monitor`` on the graph either way. Wired: built by the bridge, handed
+    each scan and state, its factors handed straight back (the bridge subscribes none; the
+    newest was heard within one state step); over topics: a node of its own.
+    """
+    assert run['monitors'] == 1
+    heard, now = run['factor']
+    if run['link'] == 'wired':
+        assert run['wired'] is not None and run['wired'].wired is not None
+        assert run['scaling_subscribed'] == 0
+        assert now - heard <= 0.01 + 1e-9
+    else:
+        assert run['wired'] is None and run['scaling_subscribed'] >= 1

@@ -315,17 +315,24 @@ def test_bad_parameters_are_refused(cell):
         g.close()
 
 
-def test_the_graph_starts_it_with_a_person_and_the_bridge_guards_it():
-    """``job_nodes(people=True)`` starts the monitor after the bridge; it answers lockstep."""
-    names = [n.name for n in graph.job_nodes(people=True)]
+def test_the_graph_starts_it_over_topics_and_the_bridge_guards_it():
+    """Linked over topics the monitor starts after the bridge and answers lockstep; wired not.
+
+    Wired (the default) the bridge builds it in its own process: no node to start, no guard.
+    """
+    topics = graph.job_nodes(people=True, monitor_link='topics')
+    names = [n.name for n in topics]
     assert 'separation_monitor' in names
     assert names.index('separation_monitor') > names.index('pybullet_bridge')
     assert 'separation_monitor' not in [n.name for n in graph.job_nodes()]
+    assert 'separation_monitor' not in [n.name for n in graph.job_nodes(people=True)]
     spec = graph.node('separation_monitor')
     assert spec.node_class() is SeparationMonitorNode and spec.configs == ('people',)
-    assert 'separation_monitor' in graph.lockstep_expect(graph.job_nodes(people=True))
-    assert graph.lockstep_guards(graph.job_nodes(people=True)) == [
-        'collision_monitor', 'separation_monitor']
+    assert 'separation_monitor' in graph.lockstep_expect(topics)
+    assert graph.lockstep_guards(topics) == ['collision_monitor', 'separation_monitor']
+    assert graph.lockstep_guards(graph.job_nodes(people=True)) == ['collision_monitor']
+    with pytest.raises(ValueError, match='monitor_link'):
+        graph.job_nodes(people=True, monitor_link='radio')
     assert graph.topic('separation_monitor/markers').type == 'visualization_msgs/msg/MarkerArray'
 
 

@@ -32,8 +32,13 @@ It publishes, on sim time:
   braking one at the speed it has). The monitor alone takes them; it takes no
   ``joint_states``.
 
-It takes each arm's speed factor from ``<robot>/speed_scaling`` (``std_msgs/Float64``,
-transient local: the separation monitor's) and runs the arm's trajectories at it
+With ``monitor_link`` ``wired`` (the default) it builds the separation monitor in the bridge's
+process (:func:`wired_monitor`) and hands it the safety state, the planned velocity and the
+scans instead of sending them to it (published only while another node subscribes), ticks it
+at every state step, and takes each factor from it directly (docs/people.md, *The safety
+link*). With ``topics`` it takes each arm's speed factor from ``<robot>/speed_scaling``
+(``std_msgs/Float64``, transient local: the separation monitor node's). Either way it runs the
+arm's trajectories at it
 (:meth:`scara_collab.sim.servo.Servo.scale`). With ``speed_scaling`` ``arm`` (the default)
 each arm runs at its own factor while the two arms' committed paths cannot meet, whatever the
 timing of one against the other, and both at the smaller factor, their clocks in step, while
@@ -53,6 +58,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseArray
 import numpy as np
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, LaserScan
 from std_msgs.msg import Float64
 from visualization_msgs.msg import MarkerArray
@@ -60,10 +66,13 @@ from visualization_msgs.msg import MarkerArray
 from scara_collab.core import ssm
 from scara_collab.core.model import CellModel
 from scara_collab.core.scan_tracking import scanners_from_config
+from scara_collab.graph import MONITOR_LINKS
 from scara_collab.nodes import conversions as conv
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.guarded import guarded
+from scara_collab.nodes.params import flatten
 from scara_collab.nodes.qos import EVENTS, LATCHED
+from scara_collab.nodes.separation_monitor import SeparationMonitorNode
 from scara_collab.sim.cell_sim import CellSim
 from scara_collab.sim.person import arm_link_names, BodyModel, PersonSim
 from scara_collab.sim.person_scenarios import Motion, PersonPath, scenario
@@ -101,14 +110,20 @@ class BridgePeople:
     :param rates: Hz of sim time: ``state``, ``markers``.
     :param hold: ``hold(robot, reason)`` brakes an arm and reports it held.
     :param mode: one of :data:`SCALING_MODES`; :param timeout: sim s a factor stays valid.
+    :param link: one of :data:`MONITOR_LINKS`; :param profile: the cell's profile (the wired
+        monitor's).
+    :ivar monitor: the wired separation monitor (None: a node of its own, over topics).
     """
 
     def __init__(self, node: Node, cell: CellModel, sim: CellSim, cfg: dict, spec: str,
                  seed: int, rates: Dict[str, float], hold: Callable[[str, str], None],
-                 mode: str = 'arm', timeout: float = 0.05):
+                 mode: str = 'arm', timeout: float = 0.05, link: str = 'wired',
+                 profile: str = ''):
         """Put the person and the scanners in the world; create the topics."""
         if mode not in SCALING_MODES:
             raise ValueError(f'speed_scaling must be one of {SCALING_MODES}, got {mode!r}')
+        if link not in MONITOR_LINKS:
+            raise ValueError(f'monitor_link must be one of {MONITOR_LINKS}, got {link!r}')
         self.node, self.cell, self.sim, self.hold = node, cell, sim, hold
         self.mode, self.timeout = mode, float(timeout)
         sim.servo.coupling = mode
@@ -142,20 +157,26 @@ class BridgePeople:
         #: each arm's factor as heard, and when (sim s; None: never)
         self.asked: Dict[str, float] = {a.name: 0.0 for a in cell.arms}
         self.heard: Dict[str, Optional[float]] = {a.name: None for a in cell.arms}
-        for a in cell.arms:
-            node.create_subscription(Float64, f'{a.name}/speed_scaling', guarded(
-                node, lambda msg, r=a.name: self._on_factor(r, msg)), LATCHED)
+        self.monitor: Optional[SeparationMonitorNode] = None
+        if link == 'wired':
+            self.monitor = wired_monitor(node, cfg, profile, self.take_factor)
+        else:
+            for a in cell.arms:
+                node.create_subscription(Float64, f'{a.name}/speed_scaling', guarded(
+                    node, lambda msg, r=a.name: self.take_factor(r, msg.data)), LATCHED)
         self.started = sim.time
         self._said: Dict[str, tuple] = {}  # the clock each arm was last said to run at
         self._truth_said: Optional[Tuple[float, bool]] = None  # (when, present) last said
         self._poses_said: Optional[Tuple[float, bool]] = None  # likewise the poses, markers
         node.get_logger().info(
             f'a person in the cell: {self.scenario.name}, {len(self.geometry)} safety scanners '
-            f'at {self.rate:g} Hz, speed scaling per {mode}')
+            f'at {self.rate:g} Hz, speed scaling per {mode}, the separation monitor '
+            f'{"in this process" if self.monitor else "a node of its own"}')
 
     # --- inputs -----------------------------------------------------------------------------
-    def _on_factor(self, robot: str, msg: Float64) -> None:
-        value = float(msg.data)
+    def take_factor(self, robot: str, value: float) -> None:
+        """Take the factor the separation monitor allows ``robot`` now (clipped to [0, 1])."""
+        value = float(value)
         if not math.isfinite(value):
             self.node.get_logger().warning(f'{robot}: speed_scaling {value}: taken as 0',
                                            throttle_duration_sec=5.0)
@@ -191,11 +212,29 @@ class BridgePeople:
             self.sim.servo.held_back = []
 
     def scan(self) -> None:
-        """Publish the arms' safety state, the clocks and the truth; then the scans."""
+        """Publish the arms' safety state, the clocks and the truth; then the scans.
+
+        Wired, the monitor is handed each scan and state, and they are published only while
+        a node subscribes to them (a viewer, a test: the monitor is no subscriber).
+        """
         t = self.sim.time
         self.state()  # the arms' state of the instant before its scans: observed with them
         for geometry, ranges in zip(self.geometry, self.scanner.scan()):
-            self.scan_pub.publish(conv.laser_scan(geometry, ranges, t, 1.0 / self.rate))
+            self._send(self.scan_pub, 'take_scan',
+                       lambda g=geometry, r=ranges: conv.laser_scan(g, r, t, 1.0 / self.rate))
+
+    def _send(self, pub, take: str, build: Callable[[], object]) -> None:
+        """Publish ``build()`` on ``pub`` (wired: only for a listener) and hand it over."""
+        msg = None
+        if self.monitor is None or pub.get_subscription_count():
+            msg = build()
+            pub.publish(msg)
+        if self.monitor is not None:
+            getattr(self.monitor, take)(msg if msg is not None else build())
+
+    def tick(self) -> None:
+        """Let the wired monitor decide at this instant (after the scans and states of it)."""
+        self.monitor.tick(int(round(self.sim.time * 1e9)))
 
     def ground_truth(self) -> None:
         """Publish the person's capsules as poses and markers (ground truth).
@@ -227,8 +266,10 @@ class BridgePeople:
             if said is None or not _close(self._clock_of(arm.name), said):
                 self._say_clock(arm.name)
             ahead.append(self.sim.servo.planned_ahead(arm.name, t, self.horizon))
-        self.safety_pub.publish(conv.joint_state(t, self.names, q.ravel(), qd.ravel(), ()))
-        self.planned_pub.publish(conv.joint_velocities(t, self.names, np.concatenate(ahead)))
+        self._send(self.safety_pub, 'take_state',
+                   lambda: conv.joint_state(t, self.names, q.ravel(), qd.ravel(), ()))
+        self._send(self.planned_pub, 'take_planned',
+                   lambda: conv.joint_velocities(t, self.names, np.concatenate(ahead)))
         truth = self._truth(t, q, qd)
         said = self._truth_said
         if truth.present or said is None or said[1] or t - said[0] >= HEARTBEAT - 1e-9:
@@ -272,3 +313,18 @@ class BridgePeople:
                 arm, q[k], qd[k], caps.start, caps.end, caps.radius, self.params)
         return proto.PersonTruth(round(t, 6), True, separation, margin, moving,
                                  {a.name: a.name in touching for a in arms})
+
+
+def wired_monitor(node: Node, cfg: dict, profile: str,
+                  on_factor: Callable[[str, float], None]) -> SeparationMonitorNode:
+    """Build the separation monitor in ``node``'s process, wired to the bridge.
+
+    It is a node of its own (``separation_monitor``, in the bridge's namespace: its status,
+    diagnostics, markers and factors on their topics, its parameters), configured with the
+    bridge's ``people`` config and profile, off sim time (the bridge hands it its time).
+    """
+    overrides = [Parameter(k, value=v) for k, v in flatten(cfg).items()]
+    overrides += [Parameter('profile', value=profile), Parameter('use_sim_time', value=False)]
+    return SeparationMonitorNode(wired=on_factor, context=node.context,
+                                 namespace=node.get_namespace(),
+                                 parameter_overrides=overrides)

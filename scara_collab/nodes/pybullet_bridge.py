@@ -41,7 +41,7 @@ frontier plus the transit between sections, together with its own lockstep gate.
 """
 import math
 import time
-from typing import Dict, Optional
+from typing import Dict, List, Optional
 
 from diagnostic_msgs.msg import DiagnosticStatus
 import numpy as np
@@ -56,6 +56,7 @@ from scara_collab.core.config import Rule
 from scara_collab.core.kinematics import within_limits
 from scara_collab.core.mirror import mirror_joints
 from scara_collab.core.model import load_cell
+from scara_collab.graph import MONITOR_LINKS
 from scara_collab.nodes import protocol as proto
 from scara_collab.nodes.bridge_outputs import BridgeOutputs
 from scara_collab.nodes.bridge_people import BridgePeople, SCALING_MODES
@@ -86,6 +87,7 @@ PARAMETERS = {
     'person_seed': -1,                    # its seed (random); -1: config/people.yaml's
     'speed_scaling': 'arm',               # each arm its own factor while apart, or one (cell)
     'scaling_timeout': 0.1,               # sim s a speed factor stays valid once heard
+    'monitor_link': 'wired',              # the separation monitor in this process, or topics
     'slip_at': '',                        # sim s at which a held item slips ('12.5,30')
     'slip_rate': 0.0,                     # slips per second of carrying (seeded)
 }
@@ -97,7 +99,10 @@ RULES = (Rule('profile', 'text'), Rule('markers_rate', 'positive'),
          Rule('person', 'text'), Rule('person_seed', 'int'),
          Rule('speed_scaling', 'str', lambda v: v in SCALING_MODES,
               f'must be one of {list(SCALING_MODES)}'),
-         Rule('scaling_timeout', 'positive'), Rule('slip_at', 'text'),
+         Rule('scaling_timeout', 'positive'),
+         Rule('monitor_link', 'str', lambda v: v in MONITOR_LINKS,
+              f'must be one of {list(MONITOR_LINKS)}'),
+         Rule('slip_at', 'text'),
          Rule('slip_rate', 'nonneg'))
 
 
@@ -169,6 +174,8 @@ class PyBulletBridge(Node):
         self.actions: Optional[TrajectoryActions] = None
         self.line: Optional[LineLink] = None
         self.people: Optional[BridgePeople] = None
+        #: the nodes this one built in its process, to be spun with it (a wired monitor)
+        self.companions: List[Node] = []
         try:
             self._setup()
         except BaseException:
@@ -263,9 +270,14 @@ class PyBulletBridge(Node):
         self.people = BridgePeople(
             self, self.cell, self.sim, cfg, params['person'], seed,
             {'state': 1.0 / self.outputs.periods['state']}, self.execution.hold,
-            params['speed_scaling'], params['scaling_timeout'])
+            params['speed_scaling'], params['scaling_timeout'], params['monitor_link'],
+            params['profile'])
         # what the separation monitor decides on comes before the clock of its instant
         self.outputs.add('scan', self.people.rate, self.people.scan, first=True)
+        if self.people.monitor is not None:  # wired: it decides there, at every state step
+            self.companions.append(self.people.monitor)
+            self.outputs.add('separation_monitor', 1.0 / self.outputs.periods['state'],
+                             guarded(self.people.monitor, self.people.tick), first=True)
         self.outputs.add('person', float(params['markers_rate']), self.people.ground_truth)
 
     def _build_slips(self, params: dict, seed: int) -> None:
@@ -483,6 +495,8 @@ class PyBulletBridge(Node):
             self.actions.destroy()  # an action server left alive keeps the node on the graph
         if self.sim is not None:
             self.sim.close()
+        for node in self.companions:
+            node.destroy_node()
         return super().destroy_node()
 
 

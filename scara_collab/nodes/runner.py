@@ -64,6 +64,15 @@ def _note_signals() -> list:
     return seen
 
 
+def companions(node: Node) -> List[Node]:
+    """Return the nodes ``node`` built in its process, to be spun with it.
+
+    The bridge's wired separation monitor (``node.companions``); the node destroys them with
+    itself.
+    """
+    return list(getattr(node, 'companions', ()))
+
+
 def run_node(factory: Callable[[], Node], args: Optional[list] = None) -> None:
     """Create the node with ``factory()`` and spin it until Ctrl-C or an external shutdown.
 
@@ -91,7 +100,8 @@ def run_nodes(factories: Sequence[Callable[[], Node]], args: Optional[list] = No
             nodes.append(factory())
         executor = make_executor()
         for node in nodes:
-            executor.add_node(node)
+            for each in (node, *companions(node)):
+                executor.add_node(each)
         # spin_once in a loop: the EventsExecutor's spin() ran no timers in our tests (7.1.6)
         stopping = _note_signals()
         while rclpy.ok() and not stopping:
@@ -138,8 +148,13 @@ class InProcess:
         self.nodes: List[Node] = []
 
     def add(self, node: Node) -> Node:
-        """Spin ``node`` (built in :attr:`context`) with the others; return it."""
+        """Spin ``node`` (built in :attr:`context`) and its companions with the others.
+
+        Return ``node``.
+        """
         self.executor.add_node(node)
+        for each in companions(node):
+            self.executor.add_node(each)
         self.nodes.append(node)
         return node
 

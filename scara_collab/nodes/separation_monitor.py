@@ -46,18 +46,29 @@ scan yet, a silent scanner, a ray that measured nothing: every arm ``s = 0`` wit
 and logs each stop's begin and end (throttled). It is a lockstep participant, and the bridge's
 guard: while it is silent the arms hold.
 
+**Wired** (the bridge's ``monitor_link`` ``wired``, the default of a run with a person) the
+bridge builds it in its own process (:func:`scara_collab.nodes.bridge_people.wired_monitor`),
+as a real cell wires its scanner, safety controller and robot: it subscribes nothing, keeps no
+sim timers and joins no lockstep; the bridge hands it the same messages (:meth:`take_state`,
+:meth:`take_planned`, :meth:`take_scan`) and then its sim time (:meth:`tick`, at every state
+step), and each factor goes back to the bridge at once as well as on its topic. Its clock is
+the bridge's sim time, so stamps and stale checks read as on sim time. Over topics (``topics``)
+it is the node described above, a process of its own.
+
 Parameters: every key of ``config/people.yaml`` (read only), and its own ``profile``,
 ``marker_rate`` (Hz of sim time, may change while it runs) and ``scan_sync``.
 ``docs/interface.md``, ``docs/people.md``.
 """
 from collections import deque
 from dataclasses import replace
-from typing import Deque, Dict, List, Optional, Tuple
+from typing import Callable, Deque, Dict, List, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Point
 import numpy as np
 from rclpy.node import Node
+from rclpy.time_source import TimeSource
+from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState, LaserScan
 from std_msgs.msg import ColorRGBA, Float64, Header
 from visualization_msgs.msg import Marker, MarkerArray
@@ -106,13 +117,20 @@ def _ns(stamp) -> int:
 class SeparationMonitorNode(Node):
     """The speed and separation monitor: scans and states in, each arm's speed factor out."""
 
-    def __init__(self, **kwargs):
+    def __init__(self, wired: Optional[Callable[[str, float], None]] = None, **kwargs):
         """Declare and check the parameters, load the cell, create the topics.
 
+        :param wired: the bridge's factor input, ``wired(robot, factor)``, when the monitor
+            runs in the bridge's process (the bridge's ``monitor_link`` ``wired``, module
+            docstring): it then subscribes nothing, keeps no timers of its own and joins no
+            lockstep; the bridge hands it each message (:meth:`take_scan`,
+            :meth:`take_state`, :meth:`take_planned`) and its sim time (:meth:`tick`), and it
+            hands each factor back at once. It must be built with ``use_sim_time`` false.
         :param kwargs: passed to :class:`rclpy.node.Node` (``context``, ``cli_args``, ...).
         :raises ConfigError: an invalid ``config/people.yaml`` value or own parameter.
         """
         super().__init__('separation_monitor', **kwargs)
+        self.wired = wired
         self.stamps = conv.StampGate()  # joint states must carry the sim clock's time
         cfg = declare_config(self, ('people',))['people']
         params = declare_checked(self, PARAMETERS, RULES, dynamic=DYNAMIC,
@@ -154,22 +172,31 @@ class SeparationMonitorNode(Node):
         self.status_pub = self.create_publisher(DiagnosticStatus, '~/status', DEFAULT)
         self.diagnostics = Diagnostics(self)
         self.marker_pub = self.create_publisher(MarkerArray, '~/markers', DEFAULT)
-        # every scan and every state, in turn (two scanners' scans come at each instant)
-        self.create_subscription(LaserScan, 'safety_scanner/scan',
-                                 guarded(self, self._on_scan), DEFAULT)
-        self.create_subscription(JointState, 'safety_joint_states',
-                                 guarded(self, self._on_state), DEFAULT)
-        self.create_subscription(JointState, 'planned_velocity',
-                                 guarded(self, self._on_planned), DEFAULT)
+        if wired is None:  # every scan and every state, in turn (two scanners' at an instant)
+            self.create_subscription(LaserScan, 'safety_scanner/scan',
+                                     guarded(self, self.take_scan), DEFAULT)
+            self.create_subscription(JointState, 'safety_joint_states',
+                                     guarded(self, self.take_state), DEFAULT)
+            self.create_subscription(JointState, 'planned_velocity',
+                                     guarded(self, self.take_planned), DEFAULT)
         for arm in self.cell.arms:  # held until the first decision
             self._publish_scale(arm.name, 0.0)
         # each decision on the sim clock, before the lockstep answer; at a scan instant on
         # that instant's scans and states, however the middleware ordered them and the clock
-        self.sync = ScanSync(self._decide, self.settings.scan_period, params['scan_sync'],
+        # (wired, the bridge hands them over before it ticks: nothing to wait for)
+        self.sync = ScanSync(self._decide, self.settings.scan_period,
+                             params['scan_sync'] and wired is None,
                              [g.name for g in self.scanners] + list(STATE_INPUTS))
-        every(self, 1.0 / rate, lambda: self.sync.on_tick(self.get_clock().now().nanoseconds))
-        every(self, 1.0, self._publish_diagnostics)
-        self.sync.lockstep = lockstep.join(self)  # sim time waits while this node decides
+        if wired is None:
+            every(self, 1.0 / rate,
+                  lambda: self.sync.on_tick(self.get_clock().now().nanoseconds))
+            every(self, 1.0, self._publish_diagnostics)
+            self.sync.lockstep = lockstep.join(self)  # sim time waits while this node decides
+        else:  # its clock is the bridge's sim time, set at each tick (no /clock to take)
+            self._time = TimeSource()
+            self._time.attach_clock(self.get_clock())
+            self._time.ros_time_is_active = True
+            self._next_diagnostics = 1.0
         self.get_logger().info(
             f'watching {", ".join(a.name for a in self.cell.arms)} with '
             f'{", ".join(g.name for g in self.scanners)}; teaching the empty cell from '
@@ -180,7 +207,21 @@ class SeparationMonitorNode(Node):
         self.marker_period = 1.0 / float(params['marker_rate'])
 
     # --- what the monitor observes -----------------------------------------------------------
-    def _on_scan(self, msg: LaserScan) -> None:
+    def tick(self, now_ns: int) -> None:
+        """Take the bridge's sim time ``now_ns`` (wired): decide on what it handed over.
+
+        The bridge calls it at every state step, after the scans and states of the instant:
+        the decision the node's own sim timers would run, and ``/diagnostics`` once a sim
+        second.
+        """
+        self._time.clock_callback(ClockMsg(clock=conv.to_time(now_ns * 1e-9)))
+        self.sync.on_tick(now_ns)
+        if now_ns * 1e-9 >= self._next_diagnostics - 1e-9:
+            self._next_diagnostics += 1.0
+            self._publish_diagnostics()
+
+    def take_scan(self, msg: LaserScan) -> None:
+        """Take a scanner's scan (a subscription's callback, or handed over when wired)."""
         index = self._index.get(msg.header.frame_id)
         if index is None:
             self.get_logger().warning(
@@ -241,7 +282,8 @@ class SeparationMonitorNode(Node):
                 break
         return {r: q for r, q in (chosen or {}).items() if q is not None}
 
-    def _on_state(self, msg: JointState) -> None:
+    def take_state(self, msg: JointState) -> None:
+        """Take the arms' safety joint state (subscribed, or handed over when wired)."""
         if not conv.admit_state(self, self.stamps, msg):
             self.sync.on_input(STATE_INPUTS[0], _ns(msg.header.stamp))  # refused: not awaited
             return
@@ -260,7 +302,8 @@ class SeparationMonitorNode(Node):
         self._observe_ready()
         self.sync.on_input(STATE_INPUTS[0], stamp)
 
-    def _on_planned(self, msg: JointState) -> None:
+    def take_planned(self, msg: JointState) -> None:
+        """Take the arms' planned velocity (subscribed, or handed over when wired)."""
         if not conv.admit_state(self, self.planned_stamps, msg):
             self.sync.on_input(STATE_INPUTS[1], _ns(msg.header.stamp))  # refused: not awaited
             return
@@ -322,6 +365,8 @@ class SeparationMonitorNode(Node):
         """Publish ``robot``'s factor (latched: the last one stands; the bridge times it out)."""
         self._scales[robot] = scale
         self.scale_pubs[robot].publish(Float64(data=float(scale)))
+        if self.wired is not None:
+            self.wired(robot, float(scale))
 
     def _log(self, decision: Decision) -> None:
         """Log each stop's begin and end (throttled while it stands)."""

@@ -57,6 +57,8 @@ class LaunchOptions:
     #                                  absolute path (None: no person, no scanner, no monitor)
     person_cell: Optional[int] = None  # with cells > 1: the one cell with the person (None: all)
     person_seed: Optional[int] = None  # the person's seed (--seed, else the item feed's)
+    monitor_link: str = 'wired'        # with a person: the monitor in the bridge's process, or
+    #                                  a node of its own over topics (graph.MONITOR_LINKS)
 
     @property
     def cell(self) -> int:
@@ -164,6 +166,11 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument('--person-cell', type=int, default=None, metavar='K',
                    help='with --cells N and --person: the person in cell K only (default: in '
                    'every cell)')
+    p.add_argument('--monitor-link', choices=graph.MONITOR_LINKS, default='wired',
+                   help="with --person: the separation monitor runs in the bridge's process, "
+                   'handed the scans and states and handing back the speed factors directly '
+                   'as a safety controller wired to its scanner and robot would (wired, the '
+                   'default), or as a node of its own that takes them over topics (topics)')
     p.add_argument('--fault', action='append', default=[], metavar='SPEC',
                    help='inject a fault, e.g. drop:/scara_left/gripper:2 (lose the first 2 '
                    'gripper responses), delay:/scara_right/planner_status:3:0.5, '
@@ -254,7 +261,7 @@ def parse_options(argv: Optional[Sequence[str]] = None) -> LaunchOptions:
         ready_timeout=a.ready_timeout, stall_timeout=a.stall_timeout,
         silent_timeout=a.silent_timeout, plots=not a.no_plots, record=a.record,
         animation=a.animation, person=person, person_cell=a.person_cell,
-        person_seed=person_seed)
+        person_seed=person_seed, monitor_link=a.monitor_link)
 
 
 def _person(p: argparse.ArgumentParser, a: argparse.Namespace

@@ -7,8 +7,9 @@ scara_collab.run.container --node ... --node ...``). With ``--namespace`` every 
 the cell's namespace with the cell's remaps (:func:`scara_collab.graph.ros_args`); a cell of a
 line of cells (``--line-cell K`` of ``--cells N``) also gets its bridge's line parameters and
 its upstream cell's handoff topic (:func:`scara_collab.graph.line_params`). With ``--person``
-(in this cell) the separation monitor runs after the bridge, and the bridge gets the person's
-scenario, its seed and the monitor among its guards (:func:`scara_collab.graph.person_params`).
+(in this cell) the bridge gets the person's scenario and its seed and runs the separation
+monitor in its process; with ``--monitor-link topics`` the monitor runs as a node of its own
+after the bridge, among the bridge's guards (:func:`scara_collab.graph.person_params`).
 
 With ``--fault`` each node process gets the entries the nodes apply (``--fault SPEC`` after
 the entry: :mod:`scara_collab.run.child`, :mod:`scara_collab.run.container`); a crash is the
@@ -48,7 +49,8 @@ def stages(opts: LaunchOptions, with_automation: bool) -> List[Stage]:
     port = opts.viewer
     person = opts.cell_person
     specs = graph.job_nodes(automation=with_automation, viewer=port is not None,
-                            transforms=opts.tf, people=person is not None)
+                            transforms=opts.tf, people=person is not None,
+                            monitor_link=opts.monitor_link)
     own: Dict[str, Dict[str, str]] = {
         # paused until the job has started (Launcher.start_job), so every run starts at sim
         # time 0 with every node there; the belt feeds from then on
@@ -68,7 +70,8 @@ def stages(opts: LaunchOptions, with_automation: bool) -> List[Stage]:
         bridge['item_seed'] = str(opts.seed)
     if port is not None:
         own['cell_viewer'] = {'port': str(port)}
-    for name, values in graph.person_params(person, opts.person_seed).items():
+    people = graph.person_params(person, opts.person_seed, opts.monitor_link)
+    for name, values in people.items():
         own.setdefault(name, {}).update(values)
     for name, values in graph.line_params(opts.cell, opts.cells).items():
         own.setdefault(name, {}).update(values)
