@@ -8,6 +8,7 @@ for with a timeout.
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
 import pytest
+from rclpy.parameter import Parameter
 from ros_harness import Graph, params_args
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, LaserScan
@@ -370,3 +371,46 @@ def test_in_lockstep_a_scan_instant_decides_on_its_scans_even_when_its_clock_com
         assert len(c.node.decision.persons) == 1 and c.node.decision.time == pytest.approx(t)
     finally:
         c.close()
+
+
+def test_a_wired_monitor_that_fails_stops_the_arms_and_the_bridge_lives_on():
+    """Wired into the bridge, a monitor whose decision raises is logged; its factors time out.
+
+    The bridge builds it (a node of its own, off sim time, its clock the bridge's), hands it
+    the scans, states its scan instants. Broken, every arm's factor falls to 0 within the
+    bridge's ``scaling_timeout`` while the simulation runs on; mended, the factors come back.
+    """
+    from scara_collab.nodes.runner import InProcess
+    params = dict(graph.person_params('nobody', 1)['pybullet_bridge'], real_time_factor='0.0',
+                  lockstep_window='0.0')
+    spec = graph.node('pybullet_bridge')
+    with InProcess() as g:
+        bridge = g.add(spec.build(context=g.context,
+                                  cli_args=graph.ros_args(spec.configs, params)))
+        people = bridge.people
+        monitor = people.monitor
+        assert isinstance(monitor, SeparationMonitorNode) and monitor.wired is not None
+        assert monitor.get_namespace() == bridge.get_namespace()
+        assert not monitor.get_parameter('use_sim_time').value
+        assert not monitor.get_subscriptions_info_by_topic('/safety_scanner/scan')
+
+        def run_until(t):
+            while bridge.sim.time < t:
+                g.spin_once(timeout_sec=0.01)
+        run_until(1.0)
+        assert monitor.get_clock().now().nanoseconds == pytest.approx(bridge.sim.time * 1e9,
+                                                                      abs=1e7)
+        assert {r: people.factor(r) for r in people.asked} == {LEFT: 1.0, RIGHT: 1.0}
+        decide = monitor.monitor.decide
+
+        def broken(*args, **kwargs):
+            raise RuntimeError('a bug in the decision')
+        monitor.monitor.decide = broken
+        run_until(1.2)
+        assert {r: people.factor(r) for r in people.asked} == {LEFT: 0.0, RIGHT: 0.0}
+        monitor.monitor.decide = decide
+        run_until(3.0)
+        assert {r: people.factor(r) for r in people.asked} == {LEFT: 1.0, RIGHT: 1.0}
+        with pytest.raises(ValueError, match='use_sim_time false'):  # two clocks: refused
+            SeparationMonitorNode(wired=lambda robot, factor: None, context=g.context,
+                                  parameter_overrides=[Parameter('use_sim_time', value=True)])

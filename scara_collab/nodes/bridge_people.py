@@ -158,8 +158,13 @@ class BridgePeople:
         self.asked: Dict[str, float] = {a.name: 0.0 for a in cell.arms}
         self.heard: Dict[str, Optional[float]] = {a.name: None for a in cell.arms}
         self.monitor: Optional[SeparationMonitorNode] = None
+        #: the wired monitor's inputs, each guarded as a subscription's callback is: a monitor
+        #: that raises is logged, its factors time out and the arms stop; the bridge lives on
+        self._hand: Dict[str, Callable[[object], None]] = {}
         if link == 'wired':
             self.monitor = wired_monitor(node, cfg, profile, self.take_factor)
+            self._hand = {k: guarded(self.monitor, getattr(self.monitor, f'take_{k}'))
+                          for k in ('scan', 'state', 'planned')}
         else:
             for a in cell.arms:
                 node.create_subscription(Float64, f'{a.name}/speed_scaling', guarded(
@@ -220,17 +225,17 @@ class BridgePeople:
         t = self.sim.time
         self.state()  # the arms' state of the instant before its scans: observed with them
         for geometry, ranges in zip(self.geometry, self.scanner.scan()):
-            self._send(self.scan_pub, 'take_scan',
+            self._send(self.scan_pub, 'scan',
                        lambda g=geometry, r=ranges: conv.laser_scan(g, r, t, 1.0 / self.rate))
 
-    def _send(self, pub, take: str, build: Callable[[], object]) -> None:
-        """Publish ``build()`` on ``pub`` (wired: only for a listener) and hand it over."""
+    def _send(self, pub, kind: str, build: Callable[[], object]) -> None:
+        """Publish ``build()`` on ``pub`` (wired: only for a listener); wired, hand it over."""
         msg = None
         if self.monitor is None or pub.get_subscription_count():
             msg = build()
             pub.publish(msg)
         if self.monitor is not None:
-            getattr(self.monitor, take)(msg if msg is not None else build())
+            self._hand[kind](msg if msg is not None else build())
 
     def tick(self) -> None:
         """Let the wired monitor decide at this instant (after the scans and states of it)."""
@@ -266,9 +271,9 @@ class BridgePeople:
             if said is None or not _close(self._clock_of(arm.name), said):
                 self._say_clock(arm.name)
             ahead.append(self.sim.servo.planned_ahead(arm.name, t, self.horizon))
-        self._send(self.safety_pub, 'take_state',
+        self._send(self.safety_pub, 'state',
                    lambda: conv.joint_state(t, self.names, q.ravel(), qd.ravel(), ()))
-        self._send(self.planned_pub, 'take_planned',
+        self._send(self.planned_pub, 'planned',
                    lambda: conv.joint_velocities(t, self.names, np.concatenate(ahead)))
         truth = self._truth(t, q, qd)
         said = self._truth_said

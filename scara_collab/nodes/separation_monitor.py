@@ -61,6 +61,7 @@ Parameters: every key of ``config/people.yaml`` (read only), and its own ``profi
 """
 from collections import deque
 from dataclasses import replace
+import math
 from typing import Callable, Deque, Dict, List, Optional, Tuple
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -193,6 +194,9 @@ class SeparationMonitorNode(Node):
             every(self, 1.0, self._publish_diagnostics)
             self.sync.lockstep = lockstep.join(self)  # sim time waits while this node decides
         else:  # its clock is the bridge's sim time, set at each tick (no /clock to take)
+            if self.get_parameter('use_sim_time').value:
+                raise ValueError('a wired separation monitor takes its time from the bridge: '
+                                 'build it with use_sim_time false')
             self._time = TimeSource()
             self._time.attach_clock(self.get_clock())
             self._time.ros_time_is_active = True
@@ -216,8 +220,9 @@ class SeparationMonitorNode(Node):
         """
         self._time.clock_callback(ClockMsg(clock=conv.to_time(now_ns * 1e-9)))
         self.sync.on_tick(now_ns)
-        if now_ns * 1e-9 >= self._next_diagnostics - 1e-9:
-            self._next_diagnostics += 1.0
+        now = now_ns * 1e-9
+        if now >= self._next_diagnostics - 1e-9:  # on the whole sim seconds
+            self._next_diagnostics = math.floor(now + 1e-9) + 1.0
             self._publish_diagnostics()
 
     def take_scan(self, msg: LaserScan) -> None:
