@@ -508,3 +508,45 @@ def test_a_participant_leaves_before_its_context_shuts_down():
     finally:
         rclpy.try_shutdown(context=ctx)
         g.close()
+
+
+def test_a_planner_answers_once_the_bridge_has_its_move():
+    """A planner that sent a move holds its answer until the bridge accepted (or refused) it.
+
+    The trajectory and the answer travel on two topics; an answer that overtook a large
+    trajectory let the bridge step on without it (0.47 s of sim time, once, under a heavy
+    load). Every move the planner sends is awaited, and the reply is the bridge's status of
+    it: when it comes, the bridge has the move.
+    """
+    from geometry_msgs.msg import PointStamped
+    from scara_collab.nodes.planner import Planner
+    g = make_graph(0.02)
+    try:
+        planner = g.add(Planner(robot='scara_left', node_name='left_planner', context=g.context,
+                                cli_args=params_args('controllers', overrides={
+                                    'use_sim_time': True})))
+        part = planner.lockstep
+        awaited, replied = [], []
+        await_reply, reply = part.await_reply, part.reply
+
+        def spy_await(key, *args):
+            awaited.append(key)
+            await_reply(key, *args)
+
+        def spy_reply(key):
+            if key in part.awaited:
+                latest = g.bridge.sim.motion['scara_left'].latest
+                replied.append((key, None if latest is None else latest.id))
+            reply(key)
+        part.await_reply, part.reply = spy_await, spy_reply
+        assert g.spin_until(lambda: planner.planner.joints is not None and
+                            g.bridge.sim.time > 0.2, 20.0)
+        pub = g.probe.create_publisher(PointStamped, 'scara_left/target', 10)
+        assert g.spin_until(lambda: pub.get_subscription_count() > 0)
+        pub.publish(conv.make_point_stamped([3.0, -1.0, 0.3], 'world', g.bridge.sim.time + 0.5))
+        assert g.spin_until(lambda: len(replied) == 1 and not part.awaited, 20.0)
+        (kind, move), = awaited
+        assert kind == 'move' and move.startswith('scara_left/')
+        assert replied == [(('move', move), move)] and part.late == 0
+    finally:
+        g.close()

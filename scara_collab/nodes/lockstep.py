@@ -19,7 +19,8 @@ namespace has its own lockstep):
   (within ``window``) until it is done, as if the whole graph ran in one thread;
 * a participant may hold its answer until another node has replied to what it sent (the
   automation manager, until a planner's status for the move it offered and the bridge's
-  answer to a gripper call: :meth:`LockstepParticipant.await_reply`), at most ``REPLY_WAIT``
+  answer to a gripper call; a planner, until the bridge's status of each move it sent:
+  :meth:`LockstepParticipant.await_reply`), at most ``REPLY_WAIT``
   wall seconds: sim time then waits for the reply too, and the next ``/clock`` finds it
   taken, however the processes were scheduled (docs/realtime.md, *Repeatable runs*). A reply
   delayed on sim time (a ``delay:`` or ``latency:`` fault) cannot come while sim time waits for it:

@@ -64,7 +64,10 @@ class Planner(Node):
                 (DiagnosticStatus, f'{r}/trajectory_clock', self._on_clock, EVENTS),
                 (DiagnosticStatus, f'{o}/trajectory_clock', self._on_clock, EVENTS)):
             self.create_subscription(kind, topic, guarded(self, callback), depth)
-        lockstep.join(self)  # sim time waits while this node computes
+        # sim time waits while this node computes, and for the bridge's word on each move it
+        # sent: a trajectory and the answer travel on two topics, and under a heavy load the
+        # large trajectory came 0.47 s of sim time after the answer that let the bridge step on
+        self.lockstep = lockstep.join(self)
         self.get_logger().info(f'{r} planner ready ({params["mode"]} moves, ' + (
             'leader)' if self.arm is self.cell.leader else f'follower, yields to {o})'))
 
@@ -77,7 +80,10 @@ class Planner(Node):
                     self.get_logger().warning(st.text())
                 self.status_pub.publish(st.to_msg())
                 continue
-            self.traj_pub.publish(conv.move_msg(self.arm.name, self.arm.joint_names, cmd))
+            msg = conv.move_msg(self.arm.name, self.arm.joint_names, cmd)
+            self.traj_pub.publish(msg)
+            if self.lockstep is not None:  # until the bridge accepts or refuses it
+                self.lockstep.await_reply(('move', msg.header.frame_id))
             if isinstance(cmd, SendMove):
                 self.path_pub.publish(conv.path_msg(cmd.plan.traj.p, cmd.plan.start))
 
@@ -106,6 +112,8 @@ class Planner(Node):
 
     def _on_own_execution(self, msg: DiagnosticStatus) -> None:
         st = proto.ExecutionStatus.from_msg(msg)
+        if self.lockstep is not None and st.state in ('accepted', 'refused'):
+            self.lockstep.reply(('move', st.move))  # the bridge has the move (or a hold)
         if (request := moves.request_of(self.arm.name, st.move)) is not None:  # not a hold
             self._send(self.planner.on_own_execution(st.state, request, st.start, st.stamp,
                                                      st.end))
