@@ -398,8 +398,9 @@ def test_a_wired_monitor_that_fails_stops_the_arms_and_the_bridge_lives_on():
             while bridge.sim.time < t:
                 g.spin_once(timeout_sec=0.01)
         run_until(1.0)
+        # its clock is the bridge's sim time at its last look: a scan instant at the latest
         assert monitor.get_clock().now().nanoseconds == pytest.approx(bridge.sim.time * 1e9,
-                                                                      abs=1e7)
+                                                                      abs=4e7)
         assert {r: people.factor(r) for r in people.asked} == {LEFT: 1.0, RIGHT: 1.0}
         decide = monitor.monitor.decide
 
@@ -414,3 +415,52 @@ def test_a_wired_monitor_that_fails_stops_the_arms_and_the_bridge_lives_on():
         with pytest.raises(ValueError, match='use_sim_time false'):  # two clocks: refused
             SeparationMonitorNode(wired=lambda robot, factor: None, context=g.context,
                                   parameter_overrides=[Parameter('use_sim_time', value=True)])
+
+
+def _wired_decisions(look_every_tick: bool, until: float = 11.0):
+    """Run the bridge alone with a person (``middle``) and return every factor it was handed.
+
+    Each as ``(sim s, robot, factor, cause)``. Scanner b says nothing from 9.0 to 9.3 s (a
+    silent scanner: every arm stops; its scans again: they resume). ``look_every_tick``: the
+    monitor looks at every tick, as it did before it skipped the ticks with nothing to look at.
+    """
+    from scara_collab.nodes.runner import InProcess
+    params = dict(graph.person_params('middle', 1)['pybullet_bridge'], real_time_factor='0.0',
+                  lockstep_window='0.0')
+    spec = graph.node('pybullet_bridge')
+    with InProcess() as g:
+        bridge = g.add(spec.build(context=g.context,
+                                  cli_args=graph.ros_args(spec.configs, params)))
+        people, monitor = bridge.people, bridge.people.monitor
+        handed = []
+        take = monitor.wired
+
+        def wired(robot, factor):
+            handed.append((round(bridge.sim.time, 6), robot, factor,
+                           monitor.decision.arm(robot).cause))
+            take(robot, factor)
+        monitor.wired = wired
+        if look_every_tick:
+            monitor._next_look = lambda now_ns: now_ns + 1
+        scan = people.scanner.scan
+
+        def silent_b():
+            ranges = scan()
+            return ranges[:1] if 9.0 <= bridge.sim.time < 9.3 else ranges
+        people.scanner.scan = silent_b
+        while bridge.sim.time < until:
+            g.spin_once(timeout_sec=0.01)
+    return handed
+
+
+def test_a_wired_monitor_skips_only_the_ticks_with_nothing_to_decide():
+    """Skipping the ticks at which nothing can change decides exactly as looking at every one.
+
+    A person comes near the (resting) arms and a scanner falls silent for 0.3 s: the factors,
+    their causes and the instants they are handed at are the same to the bit.
+    """
+    skipping, every_tick = _wired_decisions(False), _wired_decisions(True)
+    assert skipping == every_tick
+    causes = {cause for _, _, _, cause in skipping}
+    assert any('scanner_b: no scan for' in c for c in causes)  # the silence was decided on
+    assert any('protective stop' in c for c in causes)  # and the person near them

@@ -283,6 +283,11 @@ class SeparationMonitor:
         self.points = np.zeros((0, 2))  # the last foreground points (for viewers and tests)
 
     @property
+    def seen(self) -> Tuple[Optional[float], ...]:
+        """Per scanner the stamp of its last scan observed, s (None: none yet)."""
+        return tuple(self._seen)
+
+    @property
     def taught(self) -> bool:
         """True once every scanner has its contour."""
         return self.contours is not None
@@ -312,8 +317,7 @@ class SeparationMonitor:
         """
         if len(scans) != len(self.scanners):
             raise ValueError(f'observe needs {len(self.scanners)} scans, got {len(scans)}')
-        quills = np.array([fk(self.cell.arm(r), q)[:2] for r, q in arm_positions.items()
-                           if np.all(np.isfinite(q))]).reshape(-1, 2)
+        quills = None  # where the quills cross the plane: looked up once a return needs it
         found = []
         for i, (geometry, ranges) in enumerate(zip(self.scanners, scans)):
             if ranges is None:
@@ -326,6 +330,11 @@ class SeparationMonitor:
                 continue
             mask = foreground(ranges, self.contours[i], self.settings.foreground,
                               geometry.range_max)
+            if not mask.any():  # the empty cell: nothing to sort out
+                continue
+            if quills is None:
+                quills = np.array([fk(self.cell.arm(r), q)[:2] for r, q in arm_positions.items()
+                                   if np.all(np.isfinite(q))]).reshape(-1, 2)
             pts = geometry.points(ranges, mask)
             keep = ~(inside_boxes(pts, self._mute)
                      | near_points(pts, quills, self.settings.self_filter_radius))

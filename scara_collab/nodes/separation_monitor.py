@@ -165,6 +165,7 @@ class SeparationMonitorNode(Node):
         self._fault = ''
         self._decided: Optional[int] = None  # the newest instant decided on, ns
         self.checked: Optional[float] = None  # sim s of the last look (a decision or not)
+        self._look_at = 0  # wired: sim time (ns) of the next tick that looks (:meth:`tick`)
         self._next_marker = 0.0
         # one logger per arm, kept: a throttled message is throttled per logger and call site
         self._logs = {a.name: self.get_logger().get_child(a.name) for a in self.cell.arms}
@@ -216,17 +217,42 @@ class SeparationMonitorNode(Node):
 
         The bridge calls it at every state step, after the scans and states of the instant:
         the decision the node's own sim timers would run, and ``/diagnostics`` once a sim
-        second.
+        second. A tick at which nothing can have changed is skipped, its clock left at the last
+        look (:meth:`_next_look`): the same decisions, at the same instants, as looking at
+        every tick.
         """
+        if now_ns < self._look_at:
+            return
         self._time.clock_callback(ClockMsg(clock=conv.to_time(now_ns * 1e-9)))
         self.sync.on_tick(now_ns)
         now = now_ns * 1e-9
         if now >= self._next_diagnostics - 1e-9:  # on the whole sim seconds
             self._next_diagnostics = math.floor(now + 1e-9) + 1.0
             self._publish_diagnostics()
+        self._look_at = self._next_look(now_ns)
+
+    def _next_look(self, now_ns: int) -> int:
+        """Return the first sim time (ns) after ``now_ns`` at which a look can change anything.
+
+        Until inputs are handed over (each resets it), a decision stands while no instant waits
+        for a missing scan (observed half a period after it), no scanner's last scan comes to
+        ``stale_after`` (looked at from a millisecond before, the stale check itself deciding)
+        and no diagnostics are due; with no decision yet, or a scanner stale (its cause counts
+        the seconds), the next tick.
+        """
+        if self.decision is None:
+            return now_ns + 1
+        due = [int(math.floor(self._next_diagnostics * 1e9)) - 1_000_000]
+        due += [t + self._half_period for t in self._groups]
+        for seen in self.monitor.seen:
+            if seen is not None:
+                stale = int(math.floor((seen + self.settings.stale_after) * 1e9)) - 1_000_000
+                due.append(stale if stale > now_ns else now_ns + 1)
+        return min(due)
 
     def take_scan(self, msg: LaserScan) -> None:
         """Take a scanner's scan (a subscription's callback, or handed over when wired)."""
+        self._look_at = 0  # something new: the next tick looks
         index = self._index.get(msg.header.frame_id)
         if index is None:
             self.get_logger().warning(
@@ -289,6 +315,7 @@ class SeparationMonitorNode(Node):
 
     def take_state(self, msg: JointState) -> None:
         """Take the arms' safety joint state (subscribed, or handed over when wired)."""
+        self._look_at = 0  # something new: the next tick looks
         if not conv.admit_state(self, self.stamps, msg):
             self.sync.on_input(STATE_INPUTS[0], _ns(msg.header.stamp))  # refused: not awaited
             return
@@ -309,6 +336,7 @@ class SeparationMonitorNode(Node):
 
     def take_planned(self, msg: JointState) -> None:
         """Take the arms' planned velocity (subscribed, or handed over when wired)."""
+        self._look_at = 0  # something new: the next tick looks
         if not conv.admit_state(self, self.planned_stamps, msg):
             self.sync.on_input(STATE_INPUTS[1], _ns(msg.header.stamp))  # refused: not awaited
             return
