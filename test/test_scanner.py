@@ -13,7 +13,7 @@ from scara_collab.core.separation_monitor import MonitorSettings, SeparationMoni
 from scara_collab.sim.cell_sim import CellSim
 from scara_collab.sim.person import arm_distance, arm_link_names, BodyModel, PersonSim
 from scara_collab.sim.person_scenarios import Motion, PersonPath, scenario, scenario_from_dict
-from scara_collab.sim.scanner import SafetyScanner
+from scara_collab.sim.scanner import rays_towards, SafetyScanner
 
 
 @pytest.fixture(scope='module')
@@ -108,6 +108,41 @@ def test_noise_and_ghosts_are_seeded(sim, cfg):
     noisy, true = np.concatenate(a.scan()), np.concatenate(clean)
     both = np.isfinite(noisy) & np.isfinite(true)
     assert np.std(noisy[both] - true[both]) < 0.05
+
+
+def _crossing(g, box):
+    """Return which rays of ``g`` cross ``box`` (xmin, ymin, xmax, ymax) within range: exact."""
+    enter, leave = np.zeros(g.count), np.full(g.count, g.range_max)
+    for axis in (0, 1):
+        d = g.directions[:, axis]
+        lo, hi = box[axis] - g.origin[axis], box[axis + 2] - g.origin[axis]
+        with np.errstate(divide='ignore', invalid='ignore'):
+            near, far = lo / d, hi / d
+        inside = lo <= 0.0 <= hi
+        first = np.where(d != 0.0, np.minimum(near, far), -np.inf if inside else np.inf)
+        last = np.where(d != 0.0, np.maximum(near, far), np.inf if inside else -np.inf)
+        enter, leave = np.maximum(enter, first), np.minimum(leave, last)
+    return enter <= leave
+
+
+def test_the_rays_towards_a_box_are_every_ray_that_crosses_it_and_two_more(cfg):
+    """The culling's rays (by the box's bearings) hold every ray that crosses it (slab test).
+
+    Random boxes around each scanner, near and far, thin and wide, on every side (across the
+    bearing of its first ray too): no crossing ray is left out, at most one more on each side.
+    """
+    rng = np.random.default_rng(11)
+    for g in scanners_from_config(cfg):
+        for _ in range(3000):
+            centre = g.origin + rng.uniform(-8.0, 8.0, 2)
+            half = rng.uniform(0.005, 1.0, 2)
+            box = np.concatenate([centre - half, centre + half])
+            if np.hypot(*np.max(np.abs(np.reshape(box, (2, 2)) - g.origin), axis=0)) > g.range_max:
+                continue  # beyond the rays' length: the bearings do not look at it
+            mask, exact = rays_towards(g, box[None]), _crossing(g, box)
+            assert not np.any(exact & ~mask), box
+            if not exact.all():
+                assert mask.sum() <= exact.sum() + 2, box
 
 
 def test_culling_casts_fewer_rays_and_changes_no_range(cfg):

@@ -140,6 +140,9 @@ class Servo:
                 pos, vel, acc = move.ref.sample(at)
                 self.planned[a] = vel
                 s, rate = clock.scale, clock.rate
+                if s == 1.0 and rate == 0.0:  # coasting: the path as planned, only later
+                    self.ref_q[a], self.ref_qd[a], self.ref_qdd[a] = pos, vel, acc
+                    continue
                 self.ref_q[a], self.ref_qd[a] = pos, vel * s
                 self.ref_qdd[a] = acc * s * s + vel * rate
         if self.control_mode == 'pid':
