@@ -36,7 +36,8 @@ come after its clock (:class:`scara_collab.nodes.scan_sync.ScanSync`, parameter 
 on by default; the launcher turns it off in real time): the same seed, the same run.
 
 It publishes each arm's factor on ``<robot>/speed_scaling`` (``std_msgs/Float64``, latched: at
-start 0, then at every decision, so the bridge hears the monitor alive), the decision on
+start 0, then at every decision, so the bridge hears the monitor alive; wired, when it
+changes), the decision on
 ``~/status`` (:class:`~scara_collab.nodes.protocol.SeparationStatus`, at every decision that
 changes it, its time aside: with every scan while a person is seen; and at least once a sim
 second) and once a sim second on ``/diagnostics``, and, while something subscribes, RViz
@@ -386,18 +387,25 @@ class SeparationMonitorNode(Node):
             separation={a.robot: a.separation for a in decision.arms},
             margin={a.robot: a.margin for a in decision.arms},
             persons=tuple(PersonSeen.of(p) for p in decision.persons), fault=decision.fault)
+        timeless = replace(self.status, time=0.0)
         if self._said is None or now - self._said[0] >= HEARTBEAT - 1e-9 or (
-                replace(self.status, time=0.0) != self._said[1]):
-            self._said = (now, replace(self.status, time=0.0))
+                timeless != self._said[1]):
+            self._said = (now, timeless)
             self.status_pub.publish(self.status.to_msg())
         if now >= self._next_marker and self.marker_pub.get_subscription_count():
             self._next_marker = now + self.marker_period  # markers only for a listener
             self.marker_pub.publish(self._markers(decision))
 
     def _publish_scale(self, robot: str, scale: float) -> None:
-        """Publish ``robot``'s factor (latched: the last one stands; the bridge times it out)."""
+        """Publish ``robot``'s factor (latched: the last one stands; the bridge times it out).
+
+        Over topics at every decision (the bridge hears the monitor alive); wired, handed to the
+        bridge at every decision and published when it changes (the topic is for others).
+        """
+        said = self._scales.get(robot)
         self._scales[robot] = scale
-        self.scale_pubs[robot].publish(Float64(data=float(scale)))
+        if self.wired is None or said is None or scale != said:
+            self.scale_pubs[robot].publish(Float64(data=float(scale)))
         if self.wired is not None:
             self.wired(robot, float(scale))
 

@@ -151,20 +151,30 @@ class SafetyScanner:
                                 for lo, hi in changed if lo[2] - pad <= g.height <= hi[2] + pad])
 
     def scan(self) -> List[np.ndarray]:
-        """Cast the scanners' rays now; return their ranges, ``(count,)`` each, m."""
+        """Cast the scanners' rays now; return their ranges, ``(count,)`` each, m.
+
+        Every scanner's rays to cast go in one ``rayTestBatch`` (each call has a cost of its
+        own, several times a ray's).
+        """
         out = []
         changed = self._changed() if self.cull else []
-        self.cast = 0
-        for k, (g, (start, end)) in enumerate(zip(self.scanners, self._rays)):
-            cast = self._to_cast(k, changed)
+        casts = [self._to_cast(k, changed) for k in range(len(self.scanners))]
+        start = np.concatenate([s[c] for (s, _), c in zip(self._rays, casts)])
+        end = np.concatenate([e[c] for (_, e), c in zip(self._rays, casts)])
+        self.cast = len(start)
+        fraction = np.zeros(0)
+        if self.cast:
+            hits = self.pb.rayTestBatch(start.tolist(), end.tolist())
+            fraction = np.fromiter((h[2] if h[0] >= 0 else np.inf for h in hits), float,
+                                   len(hits))
+        first = 0
+        for k, (g, cast) in enumerate(zip(self.scanners, casts)):
             if self._ranges[k] is None:
                 self._ranges[k] = np.full(g.count, np.inf)
-            if cast.any():
-                hits = self.pb.rayTestBatch(start[cast].tolist(), end[cast].tolist())
-                fraction = np.fromiter((h[2] if h[0] >= 0 else np.inf for h in hits), float,
-                                       len(hits))
-                self._ranges[k][cast] = fraction * g.range_max
-                self.cast += len(hits)
+            n = int(np.count_nonzero(cast))
+            if n:
+                self._ranges[k][cast] = fraction[first:first + n] * g.range_max
+                first += n
             ranges = self._ranges[k].copy()
             hit = np.isfinite(ranges)
             if self.noise > 0.0:
