@@ -15,8 +15,9 @@ monitor's to sort out (:mod:`scara_collab.core.scan_tracking`).
 
 Only the rays that something may have changed are cast again (a physics engine's culling,
 exact): at each scan the scanner takes the bounding box of every link of every body in the
-world (``getAABB``); a ray that crosses, in a scan plane, the box of a link that moved, came
-or went since the last scan (where it was and where it is) is cast, every other ray's range is
+world (``getAABB``); every ray that crosses, in a scan plane, the box of a link that moved,
+came or went since the last scan (where it was and where it is) is cast, found by the box's
+bearings with a ray to spare on each side (:func:`rays_towards`); every other ray's range is
 the one it had, nothing on its way having changed. The first scan casts every ray. The ranges
 are identical to the bit to casting every ray every time (``test_scanner``): the culling makes
 the scanner cheaper, never different. A scan of a still cell costs a few hundredths of a
