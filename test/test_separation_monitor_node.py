@@ -5,6 +5,8 @@ In-process on sim time: the test publishes ``/clock``, and at each scan instant
 the empty cell (its pillars) and of a person's legs, one sim step at a time, each step waited
 for with a timeout.
 """
+from contextlib import contextmanager
+
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
 import pytest
@@ -373,6 +375,21 @@ def test_in_lockstep_a_scan_instant_decides_on_its_scans_even_when_its_clock_com
         c.close()
 
 
+@contextmanager
+def _bridge_alone(person: str):
+    """Yield ``(graph, bridge)``: the bridge alone in one process, ``person`` in its cell.
+
+    Unthrottled, no lockstep; the separation monitor wired into it (the default link).
+    """
+    from scara_collab.nodes.runner import InProcess
+    params = dict(graph.person_params(person, 1)['pybullet_bridge'], real_time_factor='0.0',
+                  lockstep_window='0.0')
+    spec = graph.node('pybullet_bridge')
+    with InProcess() as g:
+        yield g, g.add(spec.build(context=g.context,
+                                  cli_args=graph.ros_args(spec.configs, params)))
+
+
 def test_a_wired_monitor_that_fails_stops_the_arms_and_the_bridge_lives_on():
     """Wired into the bridge, a monitor whose decision raises is logged; its factors time out.
 
@@ -380,13 +397,7 @@ def test_a_wired_monitor_that_fails_stops_the_arms_and_the_bridge_lives_on():
     the scans, states its scan instants. Broken, every arm's factor falls to 0 within the
     bridge's ``scaling_timeout`` while the simulation runs on; mended, the factors come back.
     """
-    from scara_collab.nodes.runner import InProcess
-    params = dict(graph.person_params('nobody', 1)['pybullet_bridge'], real_time_factor='0.0',
-                  lockstep_window='0.0')
-    spec = graph.node('pybullet_bridge')
-    with InProcess() as g:
-        bridge = g.add(spec.build(context=g.context,
-                                  cli_args=graph.ros_args(spec.configs, params)))
+    with _bridge_alone('nobody') as (g, bridge):
         people = bridge.people
         monitor = people.monitor
         assert isinstance(monitor, SeparationMonitorNode) and monitor.wired is not None
@@ -424,13 +435,7 @@ def _wired_decisions(look_every_tick: bool, until: float = 11.0):
     silent scanner: every arm stops; its scans again: they resume). ``look_every_tick``: the
     monitor looks at every tick, as it did before it skipped the ticks with nothing to look at.
     """
-    from scara_collab.nodes.runner import InProcess
-    params = dict(graph.person_params('middle', 1)['pybullet_bridge'], real_time_factor='0.0',
-                  lockstep_window='0.0')
-    spec = graph.node('pybullet_bridge')
-    with InProcess() as g:
-        bridge = g.add(spec.build(context=g.context,
-                                  cli_args=graph.ros_args(spec.configs, params)))
+    with _bridge_alone('middle') as (g, bridge):
         people, monitor = bridge.people, bridge.people.monitor
         handed = []
         take = monitor.wired
